@@ -1,0 +1,1 @@
+"""Bundled bright-star catalog, sample TLE sets and loaders for user catalogs."""

@@ -1,0 +1,1 @@
+"""VirtualStar: astronomy, the VirtualStar Server, the recorder, the panel and the `vs` CLI."""

@@ -1,0 +1,1 @@
+"""Astronomy: from a target, a site and a time to where the mount must point."""

@@ -1,0 +1,1 @@
+"""The `vs` command line: thin Typer commands over the virtualstar library."""
