@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml | $(PY)
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m virtualstar.demo
+	$(PY) -m astcom_client.demo
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
