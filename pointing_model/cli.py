@@ -1,0 +1,229 @@
+"""The `pointing-model` command line: fit, plan, simulate, apply (thin over the library)."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from .constants import GEOMETRIC_TERMS
+from .exceptions import PointingModelError
+from .fitting import FitResult, fit_run, select_terms
+from .model import PointingModel, load_model, model_from_values
+from .run_files import load_run
+from .simulate import simulate_run
+from .terms import parse_term_list
+from .tpoint_format import write_tpoint
+
+app = typer.Typer(
+    name="pointing-model",
+    help="Fit, inspect and apply a TPOINT-style pointing model of an alt-az mount.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+
+EXIT_DATA = 1  # bad file contents, fit impossible
+EXIT_USAGE = 2  # bad arguments (Typer uses 2 for its own usage errors too)
+
+
+def main() -> None:
+    """Run the `pointing-model` command line."""
+    app()
+
+
+def _fail(message: str, code: int = EXIT_DATA) -> typer.Exit:
+    typer.echo(f"error: {message}", err=True)
+    return typer.Exit(code)
+
+
+@contextmanager
+def _errors_to_exit() -> Iterator[None]:
+    try:
+        yield
+    except PointingModelError as exc:
+        raise _fail(str(exc)) from None
+    except OSError as exc:
+        raise _fail(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
+    except ValueError as exc:
+        raise _fail(str(exc), EXIT_USAGE) from None
+
+
+# -- fit ----------------------------------------------------------------------------------
+@app.command()
+def fit(
+    data: Annotated[Path, typer.Argument(help="Pointing run: TPOINT format (.dat, any suffix) "
+                                         "or CSV (.csv).")],
+    terms: Annotated[str | None, typer.Option(
+        "--terms", help="Comma-separated TPOINT terms, e.g. IA,IE,CA,AN,AW,TX or harmonics "
+        f"like HASA2. Default: {','.join(GEOMETRIC_TERMS)}.")] = None,
+    auto: Annotated[bool, typer.Option(
+        "--auto", help="Choose terms by forward selection from IA,IE (partial F-test, "
+        "Bonferroni 1%).")] = False,
+    reject_sigma: Annotated[float | None, typer.Option(
+        "--reject-sigma", help="Drop observations, worst first, while one lies more than "
+        "K × sky RMS from the fit.", min=0.5)] = None,
+    output: Annotated[Path | None, typer.Option(
+        "-o", "--output", help="Write the fitted model as JSON here.")] = None,
+    plot: Annotated[Path | None, typer.Option(
+        "--plot", help="Write residual plots (PNG) here.")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the fit as JSON.")] = False,
+    site_lon_deg: Annotated[float | None, typer.Option(
+        "--site-lon-deg", help="Site east longitude; only for CSV rows given as RA/Dec.")] = None,
+    site_lat_deg: Annotated[float | None, typer.Option(
+        "--site-lat-deg", help="Site latitude; only for CSV rows given as RA/Dec.")] = None,
+    site_height_m: Annotated[float, typer.Option(
+        "--site-height-m", help="Site height; only for CSV rows given as RA/Dec.")] = 0.0,
+) -> None:
+    """Fit pointing terms to a pointing run and report values, σ, RMS, PSD and diagnostics."""
+    if auto and terms:
+        raise _fail("give either --terms or --auto, not both", EXIT_USAGE)
+    with _errors_to_exit():
+        names = None if auto else parse_term_list(terms or ",".join(GEOMETRIC_TERMS))
+        converter = _lazy_radec_converter(site_lon_deg, site_lat_deg, site_height_m)
+        run = load_run(data, radec_to_altaz=converter)
+        result = (select_terms(run, reject_sigma=reject_sigma) if names is None
+                  else fit_run(run, names, reject_sigma=reject_sigma))
+        if output is not None:
+            result.model.save(output)
+        if plot is not None:
+            from .plotting import plot_residuals
+
+            plot_residuals(run, result, plot)
+    if as_json:
+        typer.echo(json.dumps(result.to_json_dict(), indent=2))
+    else:
+        typer.echo(_format_fit(result))
+
+
+def _format_fit(result: FitResult) -> str:
+    lines = [f"{result.source}: {result.n_obs} observations used, {result.n_rejected} rejected",
+             f"{'term':>10} {'value″':>11} {'σ″':>8}"]
+    for name, v, s in zip(result.terms, result.values_arcsec, result.sigmas_arcsec, strict=True):
+        lines.append(f"{name:>10} {v:11.2f} {s:8.2f}")
+    lines += [
+        f"sky RMS {result.sky_rms_arcsec:.2f}″   PSD {result.psd_arcsec:.2f}″   "
+        f"leave-one-out RMS {result.loo_rms_arcsec:.2f}″   raw sky RMS "
+        f"{result.raw_sky_rms_arcsec:.2f}″",
+        f"condition number {result.condition_number:.3g}   "
+        "(σ as TPOINT: sky RMS × √diag (XᵀX)⁻¹)",
+    ]
+    for a, b, r in result.high_correlations:
+        lines.append(f"correlation {a}-{b} = {r:+.3f}")
+    if result.n_rejected:
+        lines.append("rejected lines: " + ", ".join(
+            str(v) for v in result.to_json_dict()["rejected_lines"]))
+    for step in result.selection:
+        verdict = "added" if step.accepted else "stopped"
+        lines.append(f"auto: {step.term:>8} F={step.f_statistic:10.2f} p={step.p_value:.2e} "
+                     f"among {step.candidates_tried} → {verdict}")
+    return "\n".join(lines)
+
+
+def _lazy_radec_converter(lon_deg: float | None, lat_deg: float | None, height_m: float
+                          ) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
+    def convert(utcs: Any, ra_deg: np.ndarray, dec_deg: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        if lon_deg is None or lat_deg is None:
+            raise ValueError("CSV rows given as RA/Dec need --site-lon-deg and --site-lat-deg")
+        from .sky import radec_to_observed_altaz
+
+        return radec_to_observed_altaz(list(utcs), ra_deg, dec_deg, lon_deg=lon_deg,
+                                       lat_deg=lat_deg, height_m=height_m)
+
+    return convert
+
+
+# -- simulate -----------------------------------------------------------------------------
+@app.command()
+def simulate(
+    model: Annotated[str, typer.Option(
+        "--model", help="Model JSON file, or inline values like 'IA=-30,IE=20,CA=12'.")],
+    stars: Annotated[int, typer.Option("--stars", help="Number of observations.", min=1)],
+    noise: Annotated[float, typer.Option(
+        "--noise", help="Gaussian noise per sky axis, arcsec.", min=0.0)],
+    output: Annotated[Path | None, typer.Option(
+        "-o", "--output", help="Write the TPOINT file here (default: standard output).")] = None,
+    seed: Annotated[int | None, typer.Option("--seed", help="Random seed (repeatable runs).")] = None,
+    min_el_deg: Annotated[float, typer.Option("--min-el", help="Lowest elevation, deg.")] = 20.0,
+    max_el_deg: Annotated[float, typer.Option("--max-el", help="Highest elevation, deg.")] = 85.0,
+    latitude_deg: Annotated[float, typer.Option(
+        "--latitude-deg", help="Site latitude written to the run-parameters line.")] = -30.2446,
+) -> None:
+    """Write a synthetic pointing run (TPOINT format) drawn from a model plus noise."""
+    with _errors_to_exit():
+        pm = _model_argument(model)
+        rng = np.random.default_rng(seed)
+        run = simulate_run(pm, stars, noise, rng=rng, min_el_deg=min_el_deg,
+                           max_el_deg=max_el_deg, latitude_deg=latitude_deg)
+        if output is None:
+            write_tpoint(run, sys.stdout)
+        else:
+            with open(output, "w", encoding="utf-8") as f:
+                write_tpoint(run, f)
+    if output is not None:
+        typer.echo(f"wrote {stars} observations to {output}", err=True)
+
+
+def _model_argument(text: str) -> PointingModel:
+    if "=" in text and not Path(text).exists():
+        values = []
+        for item in text.replace(" ", ",").split(","):
+            if not item:
+                continue
+            name, sep, value = item.partition("=")
+            try:
+                values.append((name, float(value)))
+            except ValueError:
+                raise ValueError(f"--model: {item!r} is not NAME=ARCSEC (e.g. IA=-30)") from None
+            if not sep:
+                raise ValueError(f"--model: {item!r} is not NAME=ARCSEC (e.g. IA=-30)")
+        return model_from_values(values)
+    return load_model(text)
+
+
+# -- apply --------------------------------------------------------------------------------
+@app.command()
+def apply(
+    model: Annotated[Path, typer.Argument(help="Model JSON file written by `fit -o`.")],
+    altaz: Annotated[str, typer.Option(
+        "--altaz", help="Observed position 'AZ EL' in degrees (azimuth N through E).")],
+    inverse: Annotated[bool, typer.Option(
+        "--inverse", help="Treat --altaz as encoder readings and print the observed "
+        "position.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Print the encoder demand for an observed position (or the reverse with --inverse)."""
+    az, el = _parse_altaz(altaz)
+    with _errors_to_exit():
+        pm = load_model(model)
+        if inverse:
+            out_az, out_el = pm.encoder_to_observed(az, el)
+        else:
+            out_az, out_el = pm.observed_to_encoder(az, el)
+    out_az, out_el = float(out_az), float(out_el)
+    key = "observed" if inverse else "encoder"
+    if as_json:
+        typer.echo(json.dumps({f"{key}_az_deg": out_az, f"{key}_el_deg": out_el,
+                               "input_az_deg": az, "input_el_deg": el}))
+    else:
+        typer.echo(f"{key} az {out_az:.7f} el {out_el:.7f} deg")
+
+
+def _parse_altaz(text: str) -> tuple[float, float]:
+    parts = text.replace(",", " ").split()
+    try:
+        az, el = (float(p) for p in parts)
+    except ValueError:
+        raise _fail(f"--altaz {text!r}: expected two numbers 'AZ EL' in degrees, "
+                    "e.g. --altaz '120.5 45'", EXIT_USAGE) from None
+    if not (math.isfinite(az) and -90.0 < el < 90.0):
+        raise _fail(f"--altaz {text!r}: elevation must lie strictly between -90 and 90 degrees",
+                    EXIT_USAGE)
+    return az, el
