@@ -1,0 +1,271 @@
+"""The device side of ASTCom: serve a Collection to many clients and feed their streams.
+
+The device loop and the Endpoint share one asyncio event loop (see docs/architecture.md,
+"Threading model"): the loop computes a block of ticks, calls `publish`, and awaits;
+requests are served between blocks.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import ssl
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .auth import Authenticator
+from .codec import Codec, CodecLimits
+from .exceptions import AstcomError, AuthTimeout, ConnectionClosed, DeviceError, TooMany
+from .protocol import (
+    RequestReceived,
+    ServerConnection,
+    ServerOptions,
+    ServerState,
+)
+from .registry import Collection
+from .service import EndpointService, PendingInvoke, ServiceLimits
+from .transports import (
+    MemoryTransport,
+    ServerHandle,
+    Transport,
+    memory_pair,
+    server_ssl_context,
+    start_server,
+)
+from .url import parse_url
+
+__all__ = ["Endpoint", "EndpointConfig"]
+
+log = logging.getLogger("astcom.endpoint")
+
+
+@dataclass(frozen=True)
+class EndpointConfig:
+    """Everything an Endpoint enforces; all limits are per endpoint unless said otherwise.
+
+    `passwords` maps role ("observer", "operator") to password; None turns
+    authentication off (every client is an operator: loopback tests and demos only).
+    """
+
+    loop_rate_hz: float = 1000.0
+    passwords: Mapping[str, str] | None = None
+    name: str = "astcom"
+    max_clients: int = 32
+    max_frame_bytes: int = 1 << 20
+    max_depth: int = 16
+    max_array_len: int = 100_000
+    max_str_bytes: int = 1 << 16
+    max_messages: int = 4096
+    max_names_per_message: int = 1024
+    max_streams_per_client: int = 64
+    auth_timeout_s: float = 10.0
+    queue_packets: int = 256  # per client; the oldest stream packet is dropped beyond it
+    flush_interval_s: float = 0.02  # a stream packet holds about this much time of samples
+    certfile: str | None = None
+    keyfile: str | None = None
+
+    def limits(self) -> dict[str, Any]:
+        """Return the limits announced in the HELLO reply."""
+        return {"max_frame_bytes": self.max_frame_bytes, "max_depth": self.max_depth,
+                "max_array_len": self.max_array_len, "max_str_bytes": self.max_str_bytes,
+                "max_messages": self.max_messages,
+                "max_names_per_message": self.max_names_per_message,
+                "max_streams_per_client": self.max_streams_per_client,
+                "auth_timeout_s": self.auth_timeout_s, "queue_packets": self.queue_packets}
+
+
+class Endpoint:
+    """Serve `collection` over any number of URLs; `publish` feeds the streams."""
+
+    def __init__(self, collection: Collection, config: EndpointConfig | None = None) -> None:
+        self.config = config or EndpointConfig()
+        cfg = self.config
+        self.collection = collection
+        collection.freeze()
+        self.codec = Codec(CodecLimits(cfg.max_frame_bytes, cfg.max_depth, cfg.max_array_len,
+                                       cfg.max_str_bytes))
+        self.service = EndpointService(
+            collection, self.codec, loop_rate_hz=cfg.loop_rate_hz,
+            limits=ServiceLimits(cfg.max_messages, cfg.max_names_per_message,
+                                 cfg.max_streams_per_client, cfg.max_array_len,
+                                 cfg.flush_interval_s))
+        self._options = ServerOptions(Authenticator(cfg.passwords), self.codec, cfg.name,
+                                      cfg.loop_rate_hz, cfg.queue_packets, cfg.limits())
+        self._ids = itertools.count(1)
+        self._wakers: dict[int, asyncio.Event] = {}
+        self._servers: list[ServerHandle] = []
+        self._sessions: set[asyncio.Task[None]] = set()
+        self.urls: list[str] = []
+
+    # -- device side ------------------------------------------------------------------------
+    def publish(self, first_tick: int, first_t_us: int, n_ticks: int,
+                trace: np.ndarray | None = None) -> None:
+        """Tell the endpoint ticks [first_tick, first_tick + n_ticks) are computed.
+
+        `trace` is a float64 array (n_ticks, collection.trace_width) of the traced
+        signals per tick, or None (then every signal is sampled at the block's end).
+        `first_t_us` is the mount time of `first_tick` in integer microseconds.
+        """
+        if trace is not None and trace.shape != (n_ticks, self.collection.trace_width):
+            raise ValueError(f"trace has shape {trace.shape}; expected "
+                             f"({n_ticks}, {self.collection.trace_width})")
+        self.service.publish(first_tick, first_t_us, n_ticks, trace)
+        if self.service.groups:
+            for conn in self.service.connections.values():
+                if conn.queue_depth:
+                    self._wakers[conn.client_id].set()
+
+    @property
+    def wanted_trace_columns(self) -> np.ndarray:
+        """Return the trace columns some active stream needs (a device may fill only these)."""
+        return self.service.wanted_trace_columns
+
+    def stats(self) -> dict[str, Any]:
+        """Return the same figures as the STATS command."""
+        return self.service.stats()
+
+    # -- serving ----------------------------------------------------------------------------
+    async def serve(self, url: str, *, ssl_context: ssl.SSLContext | None = None) -> str:
+        """Listen on `url` (port 0 picks a free port) and return the bound URL."""
+        where = parse_url(url)
+        if where.secure and ssl_context is None:
+            if not self.config.certfile:
+                raise ValueError(f"{where.scheme}:// needs EndpointConfig(certfile=..., keyfile=...) "
+                                 "or an ssl_context")
+            ssl_context = server_ssl_context(self.config.certfile, self.config.keyfile)
+        handle = await start_server(where, self.handle_connection,
+                                    max_frame_bytes=self.config.max_frame_bytes,
+                                    ssl_context=ssl_context)
+        self._servers.append(handle)
+        self.urls.append(handle.url)
+        log.info("ASTCom endpoint %s listening on %s", self.config.name, handle.url)
+        return handle.url
+
+    def connect_in_memory(self, maxsize: int = 64) -> MemoryTransport:
+        """Return the client end of an in-process connection served by this endpoint."""
+        client_end, server_end = memory_pair(maxsize)
+        task = asyncio.get_running_loop().create_task(self.handle_connection(server_end))
+        self._sessions.add(task)
+        task.add_done_callback(self._sessions.discard)
+        return client_end
+
+    async def close(self) -> None:
+        """Stop listening and close every connection."""
+        for handle in self._servers:
+            await handle.close()
+        self._servers.clear()
+        for conn in list(self.service.connections.values()):
+            conn.close(ConnectionClosed.code, "endpoint shutting down")
+            waker = self._wakers.get(conn.client_id)
+            if waker:
+                waker.set()
+        for task in list(self._sessions):
+            with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError, Exception):
+                await asyncio.wait_for(task, 2.0)
+
+    async def __aenter__(self) -> Endpoint:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def handle_connection(self, transport: Transport) -> None:
+        """Run one client's session until it ends; never raises."""
+        task = asyncio.current_task()
+        if task is not None:
+            self._sessions.add(task)
+        conn = ServerConnection(self._options, client_id=next(self._ids))
+        try:
+            if len(self.service.connections) >= self.config.max_clients:
+                conn.close(TooMany.code, f"too many clients: this endpoint accepts at most "
+                                         f"{self.config.max_clients}")
+                await self._send_pending(conn, transport)
+                return
+            await self._session(conn, transport)
+        except Exception:  # a bug must end one session, never the endpoint
+            log.exception("session %d with %s failed", conn.client_id, transport.peer)
+        finally:
+            with contextlib.suppress(Exception):
+                await transport.close(conn.close_code or 1000, conn.close_reason)
+            if task is not None:
+                self._sessions.discard(task)
+
+    async def _session(self, conn: ServerConnection, transport: Transport) -> None:
+        wake = asyncio.Event()
+        self.service.attach(conn)
+        self._wakers[conn.client_id] = wake
+        writer = asyncio.create_task(self._writer(conn, transport, wake))
+        loop = asyncio.get_running_loop()
+        timer = loop.call_later(self.config.auth_timeout_s, self._auth_expired, conn, wake)
+        try:
+            while conn.state is not ServerState.CLOSED and not writer.done():
+                try:
+                    data = await transport.recv()
+                except AstcomError as exc:  # e.g. a text frame, an oversized TCP frame
+                    conn.send_error(None, exc)
+                    conn.close(exc.code, exc.message, send_error=False)
+                    break
+                if data is None:
+                    break
+                for event in conn.receive_frame(data):
+                    if isinstance(event, RequestReceived):
+                        await self._execute(conn, event)
+                if conn.role:
+                    timer.cancel()
+                wake.set()
+        finally:
+            timer.cancel()
+            self.service.detach(conn)
+            if conn.state is not ServerState.CLOSED:
+                conn.close(1000, "")
+            wake.set()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer, 2.0)
+            self._wakers.pop(conn.client_id, None)
+
+    async def _execute(self, conn: ServerConnection, event: RequestReceived) -> None:
+        try:
+            result = self.service.execute(conn, event.command)
+            if isinstance(result, PendingInvoke):
+                try:
+                    value = await result.awaitable
+                except Exception as exc:
+                    raise DeviceError(f"{result.function.name} failed: "
+                                      f"{type(exc).__name__}: {exc}") from None
+                result = result.complete(value)
+        except AstcomError as exc:
+            conn.send_error(event.seq, exc)
+            return
+        conn.send_result(event.seq, result)
+
+    def _auth_expired(self, conn: ServerConnection, wake: asyncio.Event) -> None:
+        if conn.state is not ServerState.READY and conn.state is not ServerState.CLOSED:
+            conn.close(AuthTimeout.code, f"not authenticated within {self.config.auth_timeout_s:g} s")
+            wake.set()
+
+    async def _writer(self, conn: ServerConnection, transport: Transport, wake: asyncio.Event) -> None:
+        try:
+            while True:
+                await wake.wait()
+                wake.clear()
+                while (frame := conn.next_frame()) is not None:
+                    await transport.send(frame)
+                if conn.state is ServerState.CLOSED:
+                    break
+        except ConnectionClosed:
+            pass
+        finally:
+            if conn.state is not ServerState.CLOSED:
+                conn.close(ConnectionClosed.code, "")
+            with contextlib.suppress(Exception):
+                await transport.close(conn.close_code or 1000, conn.close_reason)
+
+    async def _send_pending(self, conn: ServerConnection, transport: Transport) -> None:
+        with contextlib.suppress(Exception):
+            while (frame := conn.next_frame()) is not None:
+                await asyncio.wait_for(transport.send(frame), 2.0)

@@ -1,0 +1,248 @@
+"""Thin asyncio byte pumps: each moves whole frames between a socket and the sans-I/O core.
+
+WebSocket (`websockets`): one binary WebSocket message per frame. TCP: length-prefixed
+frames (`framing`). TLS wraps either (`wss://`, `tls://`) through Python's `ssl`. A
+`memory_pair` joins a client and an endpoint in one process without sockets.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ssl
+from collections.abc import Awaitable, Callable
+from typing import Protocol
+
+import websockets
+from websockets.asyncio.client import connect as ws_connect
+from websockets.asyncio.server import ServerConnection as WsServerConnection
+from websockets.asyncio.server import serve as ws_serve
+
+from .exceptions import ConnectionClosed, MalformedFrame
+from .framing import FrameReader, frame_bytes
+from .url import EndpointUrl, parse_url
+
+__all__ = [
+    "MemoryTransport",
+    "ServerHandle",
+    "TcpTransport",
+    "Transport",
+    "WebSocketTransport",
+    "client_ssl_context",
+    "memory_pair",
+    "open_transport",
+    "server_ssl_context",
+    "start_server",
+]
+
+_READ_CHUNK = 1 << 16
+_WS_CLOSE_CODES = {1000: 1000, 413: 1009, 429: 1013, 503: 1001}
+
+
+class Transport(Protocol):
+    """What the Endpoint and the Client need from a connection."""
+
+    peer: str
+
+    async def recv(self) -> bytes | None:
+        """Return the next frame, or None once the peer has closed."""
+
+    async def send(self, frame: bytes) -> None:
+        """Send one frame (waits while the peer is not reading: back-pressure)."""
+
+    async def close(self, code: int = 1000, reason: str = "") -> None:
+        """Close, telling the peer why when the transport can."""
+
+
+class MemoryTransport:
+    """One end of an in-process pair; the peer's inbox is bounded to model a slow reader."""
+
+    def __init__(self, inbox: asyncio.Queue[bytes | None], outbox: asyncio.Queue[bytes | None],
+                 peer: str) -> None:
+        self._inbox, self._outbox = inbox, outbox
+        self.peer = peer
+        self.closed = False
+        self.close_code = 0
+        self.close_reason = ""
+
+    async def recv(self) -> bytes | None:
+        if self.closed and self._inbox.empty():
+            return None
+        frame = await self._inbox.get()
+        if frame is None:
+            self.closed = True
+        return frame
+
+    async def send(self, frame: bytes) -> None:
+        if self.closed:
+            raise ConnectionClosed("memory transport is closed")
+        await self._outbox.put(frame)
+
+    async def close(self, code: int = 1000, reason: str = "") -> None:
+        if not self.closed:
+            self.closed = True
+            self.close_code, self.close_reason = code, reason
+            with contextlib.suppress(asyncio.QueueFull):
+                self._outbox.put_nowait(None)
+            with contextlib.suppress(asyncio.QueueFull):
+                self._inbox.put_nowait(None)  # wake our own pending recv
+
+
+def memory_pair(maxsize: int = 64) -> tuple[MemoryTransport, MemoryTransport]:
+    """Return (client end, server end) joined by two bounded queues."""
+    to_server: asyncio.Queue[bytes | None] = asyncio.Queue(maxsize)
+    to_client: asyncio.Queue[bytes | None] = asyncio.Queue(maxsize)
+    return (MemoryTransport(to_client, to_server, "memory-server"),
+            MemoryTransport(to_server, to_client, "memory-client"))
+
+
+class WebSocketTransport:
+    """A websockets connection carrying one binary message per frame."""
+
+    def __init__(self, ws: websockets.asyncio.connection.Connection) -> None:
+        self._ws = ws
+        addr = ws.remote_address
+        self.peer = f"{addr[0]}:{addr[1]}" if addr else "websocket"
+
+    async def recv(self) -> bytes | None:
+        try:
+            message = await self._ws.recv()
+        except websockets.ConnectionClosed:
+            return None
+        if isinstance(message, str):
+            raise MalformedFrame("text WebSocket message received; ASTCom frames are binary")
+        return message
+
+    async def send(self, frame: bytes) -> None:
+        try:
+            await self._ws.send(frame)
+        except websockets.ConnectionClosed as exc:
+            raise ConnectionClosed(f"websocket closed: {exc}") from None
+
+    async def close(self, code: int = 1000, reason: str = "") -> None:
+        ws_code = _WS_CLOSE_CODES.get(code, 1008 if code else 1000)
+        text = f"{code} {reason}" if reason else ""
+        await self._ws.close(ws_code, text.encode()[:120].decode(errors="ignore"))
+
+
+class TcpTransport:
+    """An asyncio stream carrying length-prefixed frames."""
+
+    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
+                 max_frame_bytes: int) -> None:
+        self._reader, self._writer = reader, writer
+        self._frames = FrameReader(max_frame_bytes)
+        self._ready: list[bytes] = []
+        addr = writer.get_extra_info("peername")
+        self.peer = f"{addr[0]}:{addr[1]}" if addr else "tcp"
+
+    async def recv(self) -> bytes | None:
+        while not self._ready:
+            try:
+                data = await self._reader.read(_READ_CHUNK)
+            except (ConnectionError, ssl.SSLError):
+                return None
+            if not data:
+                return None
+            self._ready = self._frames.feed(data)
+            self._ready.reverse()
+        return self._ready.pop()
+
+    async def send(self, frame: bytes) -> None:
+        if self._writer.is_closing():
+            raise ConnectionClosed("tcp connection is closed")
+        self._writer.write(frame_bytes(frame))
+        try:
+            await self._writer.drain()
+        except (ConnectionError, ssl.SSLError) as exc:
+            raise ConnectionClosed(f"tcp connection lost: {exc}") from None
+
+    async def close(self, code: int = 1000, reason: str = "") -> None:
+        if not self._writer.is_closing():
+            self._writer.close()
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(self._writer.wait_closed(), 2.0)
+
+
+def server_ssl_context(certfile: str, keyfile: str | None = None) -> ssl.SSLContext:
+    """Return a TLS server context for `certfile`/`keyfile` (PEM)."""
+    ctx = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    ctx.load_cert_chain(certfile, keyfile)
+    return ctx
+
+
+def client_ssl_context(cafile: str | None = None) -> ssl.SSLContext:
+    """Return a TLS client context trusting `cafile` (or the system's authorities)."""
+    return ssl.create_default_context(cafile=cafile)
+
+
+class ServerHandle:
+    """A listening server; `url` is the bound address (the real port when 0 was asked)."""
+
+    def __init__(self, url: str, closer: Callable[[], Awaitable[None]]) -> None:
+        self.url = url
+        self._closer = closer
+
+    async def close(self) -> None:
+        await self._closer()
+
+
+async def start_server(url: str | EndpointUrl, on_connection: Callable[[Transport], Awaitable[None]],
+                       *, max_frame_bytes: int, ssl_context: ssl.SSLContext | None = None
+                       ) -> ServerHandle:
+    """Listen on `url` and run `on_connection(transport)` for every accepted connection."""
+    where = parse_url(url) if isinstance(url, str) else url
+    if where.secure and ssl_context is None:
+        raise ValueError(f"{where.scheme}:// needs a certificate and key (certfile/keyfile)")
+    ctx = ssl_context if where.secure else None
+    if where.websocket:
+        async def ws_handler(ws: WsServerConnection) -> None:
+            await on_connection(WebSocketTransport(ws))
+
+        server = await ws_serve(ws_handler, where.host, where.port, ssl=ctx,
+                                max_size=max_frame_bytes, compression=None)
+        port = server.sockets[0].getsockname()[1]
+
+        async def close_ws() -> None:
+            server.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(server.wait_closed(), 5.0)
+
+        bound = EndpointUrl(where.scheme, where.host, port, where.path)
+        return ServerHandle(str(bound), close_ws)
+
+    async def tcp_handler(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        transport = TcpTransport(reader, writer, max_frame_bytes)
+        try:
+            await on_connection(transport)
+        finally:
+            await transport.close()
+
+    tcp_server = await asyncio.start_server(tcp_handler, where.host, where.port, ssl=ctx)
+    port = tcp_server.sockets[0].getsockname()[1]
+
+    async def close_tcp() -> None:
+        tcp_server.close()
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(tcp_server.wait_closed(), 5.0)
+
+    return ServerHandle(str(EndpointUrl(where.scheme, where.host, port)), close_tcp)
+
+
+async def open_transport(url: str | EndpointUrl, *, max_frame_bytes: int,
+                         ssl_context: ssl.SSLContext | None = None,
+                         timeout_s: float = 10.0) -> Transport:
+    """Connect to `url`; raise ConnectionClosed (a ConnectionError) when it cannot."""
+    where = parse_url(url) if isinstance(url, str) else url
+    ctx = (ssl_context or client_ssl_context()) if where.secure else None
+    try:
+        if where.websocket:
+            ws = await ws_connect(str(where) if where.path == "/" else str(where), ssl=ctx,
+                                  max_size=max_frame_bytes, compression=None,
+                                  open_timeout=timeout_s, proxy=None)
+            return WebSocketTransport(ws)
+        reader, writer = await asyncio.wait_for(
+            asyncio.open_connection(where.host, where.port, ssl=ctx), timeout_s)
+        return TcpTransport(reader, writer, max_frame_bytes)
+    except (OSError, TimeoutError, websockets.InvalidHandshake, websockets.InvalidURI) as exc:
+        raise ConnectionClosed(f"cannot connect to {where}: {exc}") from None

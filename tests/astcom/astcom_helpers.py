@@ -1,0 +1,63 @@
+"""Helpers of the ASTCom tests: run a coroutine, serve the example device."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator, Coroutine
+from typing import Any
+
+from astcom_client import Client, Endpoint, EndpointConfig
+from astcom_client.example_device import ExampleDevice
+
+PASSWORDS = {"operator": "op-secret", "observer": "obs-secret"}
+
+
+def run(coro: Coroutine[Any, Any, Any], timeout_s: float = 20.0) -> Any:
+    """Run `coro` on a fresh event loop, failing after `timeout_s`."""
+    return asyncio.run(asyncio.wait_for(coro, timeout_s))
+
+
+@contextlib.asynccontextmanager
+async def served(url: str | None = None, *, loop_rate_hz: float = 1000.0, realtime: bool = False,
+                 n_extra_signals: int = 0, **config: Any
+                 ) -> AsyncIterator[tuple[ExampleDevice, Endpoint, str | None]]:
+    """Serve an ExampleDevice; with `realtime` its tick loop runs, else tests advance it."""
+    device = ExampleDevice(loop_rate_hz=loop_rate_hz, n_extra_signals=n_extra_signals)
+    config.setdefault("passwords", PASSWORDS)
+    endpoint = Endpoint(device.collection, EndpointConfig(loop_rate_hz=loop_rate_hz, **config))
+    bound = await endpoint.serve(url) if url else None
+    task = asyncio.create_task(device.run(endpoint)) if realtime else None
+    try:
+        yield device, endpoint, bound
+    finally:
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        await endpoint.close()
+
+
+async def memory_client(endpoint: Endpoint, password: str | None = PASSWORDS["operator"],
+                        **kwargs: Any) -> Client:
+    """Return a Client joined to `endpoint` in memory (no sockets)."""
+    return await Client.open(endpoint.connect_in_memory(), password=password, **kwargs)
+
+
+async def settle(rounds: int = 5) -> None:
+    """Let the endpoint's writer tasks and the client's reader run."""
+    for _ in range(rounds):
+        await asyncio.sleep(0)
+
+
+@contextlib.asynccontextmanager
+async def memory_session(password: str | None = PASSWORDS["operator"], *,
+                         client_options: dict[str, Any] | None = None, **serve_options: Any
+                         ) -> AsyncIterator[tuple[ExampleDevice, Endpoint, Client]]:
+    """Serve an ExampleDevice and join one in-memory Client to it."""
+    async with served(**serve_options) as (device, endpoint, _):
+        client = await memory_client(endpoint, password, **(client_options or {}))
+        try:
+            yield device, endpoint, client
+        finally:
+            await client.close()

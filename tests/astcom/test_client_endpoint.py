@@ -1,0 +1,142 @@
+"""A Client and an Endpoint agree on every command, in memory and over real sockets."""
+
+import asyncio
+
+import numpy as np
+import pytest
+from astcom_helpers import PASSWORDS, memory_client, memory_session, run, served, settle
+
+from astcom_client import (
+    AuthenticationFailed,
+    Client,
+    DeviceError,
+    Forbidden,
+    InvalidValue,
+    NotWritable,
+    UnknownName,
+)
+
+
+def test_list_describes_every_variable_and_function() -> None:
+    async def main() -> None:
+        async with memory_session() as (device, endpoint, client):
+            entries = {e.name: e for e in await client.list()}
+        expected = {e.name for e in device.collection}
+        assert set(entries) == expected
+        assert entries["wave.amplitude"].kind == "parameter"
+        assert entries["wave.amplitude"].access == "rw"
+        assert entries["wave.amplitude"].unit == "V"
+        assert entries["math.add"].type == "(a:f64,b:f64)->f64"
+        assert entries["gains"].type == "f64[3]"
+        assert entries["power.limits.current_a"].unit == "A"
+    run(main())
+
+
+def test_read_returns_the_values_of_one_tick() -> None:
+    async def main() -> None:
+        async with memory_session(password=PASSWORDS["observer"]) as (device, endpoint, client):
+            device.advance(endpoint, 37)
+            values, tick, t_us = await client.read_at(["counter", "wave.sine", "gains", "site"])
+            assert tick == 36 and values["counter"] == 36
+            assert t_us == device.t_us_of(36)
+            expected = np.sin(2 * np.pi * 5.0 * 36 / 1000.0)
+            assert values["wave.sine"] == pytest.approx(expected, abs=1e-12)
+            assert values["gains"].tolist() == [1.0, 0.1, 0.01]
+            assert values["site"] == {"lat_deg": 45.0, "lon_deg": 6.0}
+    run(main())
+
+
+def test_write_sets_every_value_of_the_message() -> None:
+    async def main() -> None:
+        async with memory_session() as (device, endpoint, client):
+            await client.write({"wave.amplitude": 3, "gains": [4, 5, 6], "label": "m1",
+                                "power.limits.enabled": False})
+            assert device.params[0] == 3.0
+            assert device.gains.tolist() == [4.0, 5.0, 6.0]
+            assert device.state.label == "m1"
+            assert device.power.limits.enabled is False
+    run(main())
+
+
+def test_a_write_with_one_bad_value_changes_nothing() -> None:
+    async def main() -> None:
+        async with memory_session() as (device, endpoint, client):
+            with pytest.raises(InvalidValue, match="gains"):
+                await client.write({"wave.amplitude": 7.0, "gains": [1.0, 2.0]})
+            assert device.params[0] == 1.0
+            with pytest.raises(NotWritable, match="counter"):
+                await client.write({"wave.amplitude": 7.0, "counter": 3})
+            assert device.params[0] == 1.0
+    run(main())
+
+
+def test_invoke_passes_typed_arguments_and_returns_the_value() -> None:
+    async def main() -> None:
+        async with memory_session() as (device, endpoint, client):
+            assert await client.invoke("math.add", 1.5, 2) == 3.5
+            assert await client.invoke("math.sum", np.arange(10.0)) == 45.0
+            assert await client.invoke("device.wait", 0.01) == 0.01
+            device.advance(endpoint, 12)
+            assert await client.invoke("counter.reset") == 12
+            with pytest.raises(DeviceError, match="always fails"):
+                await client.invoke("device.fail")
+            with pytest.raises(InvalidValue, match="takes 2 arguments"):
+                await client.invoke("math.add", 1.0)
+            with pytest.raises(UnknownName, match="math.ad"):
+                await client.invoke("math.ad", 1.0, 2.0)
+    run(main())
+
+
+def test_observers_may_read_but_not_write_or_invoke() -> None:
+    async def main() -> None:
+        async with memory_session(password=PASSWORDS["observer"]) as (device, endpoint, client):
+            assert client.role == "observer"
+            await client.read(["wave.amplitude"])
+            with pytest.raises(Forbidden, match="operator"):
+                await client.write({"wave.amplitude": 2.0})
+            with pytest.raises(Forbidden):
+                await client.invoke("math.add", 1.0, 2.0)
+            assert device.params[0] == 1.0
+    run(main())
+
+
+def test_a_wrong_password_is_refused_and_the_endpoint_serves_others() -> None:
+    async def main() -> None:
+        async with served() as (_, endpoint, _):
+            with pytest.raises(AuthenticationFailed):
+                await memory_client(endpoint, password="guess")
+            with pytest.raises(AuthenticationFailed, match="requires a password"):
+                await memory_client(endpoint, password=None)
+            async with await memory_client(endpoint) as client:
+                assert client.role == "operator"
+            await settle()
+            assert endpoint.stats()["clients"] == 0
+    run(main())
+
+
+def test_asking_for_the_observer_role_downgrades_an_operator_password() -> None:
+    async def main() -> None:
+        async with memory_session(client_options={"role": "observer"}) as (_, endpoint, client):
+            assert client.role == "observer"
+    run(main())
+
+
+@pytest.mark.parametrize("scheme", ["ws", "tcp"])
+def test_every_command_works_over_a_real_loopback_socket(scheme: str) -> None:
+    async def main() -> None:
+        async with served(f"{scheme}://127.0.0.1:0", realtime=True) as (device, endpoint, url):
+            assert url is not None and url.startswith(f"{scheme}://127.0.0.1:")
+            async with await Client.connect(url, password=PASSWORDS["operator"]) as client:
+                assert len(await client.list()) == len(device.collection)
+                await client.write({"wave.offset": 10.0})
+                values = await client.read(["wave.offset", "wave.sine"])
+                assert values["wave.offset"] == 10.0
+                assert await client.invoke("math.add", 2.0, 3.0) == 5.0
+                stream = await client.stream(["counter", "wave.sine"], rate_hz=500)
+                packet = await stream.get(timeout_s=5.0)
+                assert np.all(np.diff(packet.column("counter")) == 2)
+                await stream.stop()
+                assert (await client.stats())["clients"] == 1
+            await asyncio.sleep(0.05)
+            assert endpoint.stats()["clients"] == 0
+    run(main())
