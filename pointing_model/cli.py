@@ -84,8 +84,11 @@ def fit(
     """Fit pointing terms to a pointing run and report values, σ, RMS, PSD and diagnostics."""
     if auto and terms:
         raise _fail("give either --terms or --auto, not both", EXIT_USAGE)
-    with _errors_to_exit():
+    try:
         names = None if auto else parse_term_list(terms or ",".join(GEOMETRIC_TERMS))
+    except ValueError as exc:  # includes UnknownTermError
+        raise _fail(f"--terms: {exc}", EXIT_USAGE) from None
+    with _errors_to_exit():
         converter = _lazy_radec_converter(site_lon_deg, site_lat_deg, site_height_m)
         run = load_run(data, radec_to_altaz=converter)
         result = (select_terms(run, reject_sigma=reject_sigma) if names is None

@@ -70,8 +70,10 @@ class PointingModel:
 
     def _corrections_rad(self, az: np.ndarray, el: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ds, de = self.offsets_rad(az, el)
+        cos_el = np.cos(el)
+        # At the zenith azimuth is undefined; floating-point cos(90°) is 6e-17, not 0.
         with np.errstate(divide="ignore", invalid="ignore"):
-            da = ds / np.cos(el)
+            da = np.where(np.abs(cos_el) < 1e-12, np.where(ds == 0.0, 0.0, np.nan), ds / cos_el)
         return da, de
 
     def observed_to_encoder(self, az_deg: Any, el_deg: Any) -> tuple[np.ndarray, np.ndarray]:
