@@ -11,7 +11,7 @@ import contextlib
 import ssl
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -70,6 +70,8 @@ class StreamPacket:
     names: tuple[str, ...]
     values: np.ndarray
     lost: int = 0
+    arrays: tuple[np.ndarray, ...] = field(default=(), repr=False, compare=False)
+    where: Mapping[str, tuple[int, int]] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -86,7 +88,10 @@ class StreamPacket:
         return self.first_tick + np.arange(self.n, dtype=np.int64) * self.period_ticks
 
     def column(self, name: str) -> np.ndarray:
-        """Return the samples of one column by name."""
+        """Return the samples of one column by name, in the column's own dtype."""
+        if name in self.where:
+            group, j = self.where[name]
+            return self.arrays[group][:, j]
         return self.values[:, self.names.index(name)]
 
 
@@ -109,6 +114,8 @@ class Stream:
         self._groups = [np.asarray(g, dtype=np.intp) for g in reply["groups"]]
         self._identity = (len(self._groups) == 1
                           and np.array_equal(self._groups[0], np.arange(len(self.names))))
+        self._where = {} if self._identity else {
+            self.names[col]: (g, j) for g, cols in enumerate(self._groups) for j, col in enumerate(cols)}
         self._queue: deque[StreamPacket] = deque(maxlen=queue_packets)
         self._event = asyncio.Event()
         self._packet_callbacks: list[Callable[[StreamPacket], None]] = []
@@ -131,7 +138,7 @@ class Stream:
         self._sample_callbacks.append(callback)
 
     def _receive(self, data: DataFrame) -> None:
-        values = self._assemble(data)
+        values, arrays = self._assemble(data)
         lost = 0
         if self._next_tick is not None and data.first_tick > self._next_tick:
             lost = (data.first_tick - self._next_tick) // max(1, data.period_ticks)
@@ -140,7 +147,7 @@ class Stream:
         self._next_tick = data.first_tick + data.n * data.period_ticks
         self._next_seq = data.seq + 1
         packet = StreamPacket(data.msg, data.seq, data.first_tick, data.first_t_us, data.period_us,
-                              data.period_ticks, self.names, values, lost)
+                              data.period_ticks, self.names, values, lost, arrays, self._where)
         self.lost += lost
         self.samples += packet.n
         self.packets += 1
@@ -162,17 +169,18 @@ class Stream:
         self._queue.append(packet)
         self._event.set()
 
-    def _assemble(self, data: DataFrame) -> np.ndarray:
-        arrays = data.arrays
-        if len(arrays) != len(self._groups):
-            raise AstcomError(f"stream {self.msg}: packet has {len(arrays)} arrays, layout "
+    def _assemble(self, data: DataFrame) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+        if len(data.arrays) != len(self._groups):
+            raise AstcomError(f"stream {self.msg}: packet has {len(data.arrays)} arrays, layout "
                               f"{len(self._groups)}")
+        arrays = tuple(np.asarray(a).reshape(data.n, len(cols))
+                       for a, cols in zip(data.arrays, self._groups, strict=True))
         if self._identity:
-            return np.asarray(arrays[0]).reshape(data.n, len(self.names))
+            return arrays[0], arrays
         out = np.empty((data.n, len(self.names)), dtype=np.float64)
         for cols, arr in zip(self._groups, arrays, strict=True):
-            out[:, cols] = np.asarray(arr).reshape(data.n, len(cols))
-        return out
+            out[:, cols] = arr
+        return out, arrays
 
     def _end(self) -> None:
         self.stopped = True

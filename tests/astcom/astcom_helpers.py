@@ -61,3 +61,45 @@ async def memory_session(password: str | None = PASSWORDS["operator"], *,
             yield device, endpoint, client
         finally:
             await client.close()
+
+
+class RawPeer:
+    """A client that writes frames by hand, to send what a well-behaved Client never would."""
+
+    def __init__(self, transport: Any) -> None:
+        from astcom_client.codec import Codec
+
+        self.transport = transport
+        self.codec = Codec()
+        self.seq = 0
+
+    async def send(self, obj: Any) -> None:
+        await self.transport.send(self.codec.encode(obj))
+
+    async def send_raw(self, data: bytes) -> None:
+        await self.transport.send(data)
+
+    async def recv(self, timeout_s: float = 2.0) -> Any:
+        """Return the next decoded frame, or None when the endpoint closed."""
+        data = await asyncio.wait_for(self.transport.recv(), timeout_s)
+        return None if data is None else self.codec.decode(data)
+
+    async def request(self, op: str, args: dict[str, Any] | None = None) -> list[Any]:
+        """Send [op, seq, args] and return the reply frame (skipping stream packets)."""
+        self.seq += 1
+        await self.send([op, self.seq, args or {}])
+        while True:
+            frame = await self.recv()
+            if frame is None or frame[0] != "DATA":
+                return frame
+
+    async def login(self, password: str = PASSWORDS["operator"]) -> list[Any]:
+        """Say HELLO and AUTH; return the AUTH reply."""
+        import os
+
+        from astcom_client.auth import client_mac
+
+        hello = await self.request("HELLO", {"version": "1.0", "client": "raw"})
+        cnonce = os.urandom(16)
+        mac = client_mac(password, hello[2]["nonce"], cnonce)
+        return await self.request("AUTH", {"cnonce": cnonce, "mac": mac})

@@ -1,0 +1,178 @@
+"""Malformed, oversized, early or excessive requests get a reason; nothing else breaks."""
+
+import asyncio
+import struct
+
+import msgpack
+import pytest
+from astcom_helpers import PASSWORDS, RawPeer, memory_client, run, served, settle
+
+from astcom_client import Client, IncompatibleVersion, TooMany
+from astcom_client.protocol import MAX_PROTOCOL_ERRORS
+
+
+async def raw_peer(endpoint) -> RawPeer:
+    return RawPeer(endpoint.connect_in_memory())
+
+
+def error_code(frame) -> int:
+    assert frame is not None and frame[0] == "ERR", frame
+    return frame[2]["code"]
+
+
+def test_garbage_before_authentication_gets_an_error_then_the_connection_closes() -> None:
+    async def main() -> None:
+        async with served() as (_, endpoint, _):
+            peer = await raw_peer(endpoint)
+            await peer.send_raw(b"\xc1\xc1 not msgpack")
+            assert error_code(await peer.recv()) == 400
+            assert await peer.recv() is None
+            async with await memory_client(endpoint) as client:  # the endpoint still serves
+                assert await client.invoke("math.add", 1.0, 1.0) == 2.0
+    run(main())
+
+
+@pytest.mark.parametrize("op", ["LIST", "READ", "DEFINE", "WRITE", "INVOKE", "STREAM_START", "STATS"])
+def test_nothing_is_readable_before_authentication(op: str) -> None:
+    async def main() -> None:
+        async with served() as (_, endpoint, _):
+            peer = await raw_peer(endpoint)
+            reply = await peer.request("HELLO", {"version": "1.0"})
+            assert reply[0] == "OK" and reply[2]["auth"] == "hmac-sha256"
+            args = {"msg": 1, "names": ["counter"], "rate_hz": 1.0, "values": [1], "name": "math.add"}
+            reply = await peer.request(op, args)
+            assert error_code(reply) == 409 and "before AUTH" in reply[2]["message"]
+            assert await peer.recv() is None  # a protocol error closes an unauthenticated peer
+    run(main())
+
+
+def test_commands_before_hello_are_refused_with_a_state_error() -> None:
+    async def main() -> None:
+        async with served() as (_, endpoint, _):
+            peer = await raw_peer(endpoint)
+            reply = await peer.request("AUTH", {"cnonce": b"x" * 16, "mac": b"y" * 32})
+            assert error_code(reply) == 409 and "HELLO" in reply[2]["message"]
+    run(main())
+
+
+def test_an_incompatible_major_version_is_refused() -> None:
+    async def main() -> None:
+        async with served() as (_, endpoint, _):
+            peer = await raw_peer(endpoint)
+            reply = await peer.request("HELLO", {"version": "2.0"})
+            assert error_code(reply) == IncompatibleVersion.code
+            assert "1.0" in reply[2]["message"]
+            assert await peer.recv() is None
+    run(main())
+
+
+def test_an_authenticated_peer_gets_errors_and_is_cut_off_only_after_many() -> None:
+    async def main() -> None:
+        async with served() as (_, endpoint, _):
+            peer = await raw_peer(endpoint)
+            assert (await peer.login())[0] == "OK"
+            reply = await peer.request("READ", {"msg": "one"})
+            assert error_code(reply) == 400 and "'msg'" in reply[2]["message"]
+            assert error_code(await peer.request("NOPE")) == 400
+            assert (await peer.request("PING"))[0] == "OK"
+            for _ in range(MAX_PROTOCOL_ERRORS - 2):
+                await peer.send_raw(b"\xc1")
+                assert error_code(await peer.recv()) == 400
+            assert await peer.recv() is None
+    run(main())
+
+
+def test_deep_nesting_and_long_arrays_are_refused() -> None:
+    async def main() -> None:
+        async with served(max_depth=8, max_array_len=100) as (_, endpoint, _):
+            peer = await raw_peer(endpoint)
+            await peer.login()
+            nested: list = []
+            for _ in range(20):
+                nested = [nested]
+            await peer.send(["INVOKE", 9, {"name": "math.sum", "args": nested}])
+            assert error_code(await peer.recv()) == 413
+            peer = await raw_peer(endpoint)
+            await peer.login()
+            await peer.send(["INVOKE", 9, {"name": "math.sum", "args": [list(range(500))]}])
+            assert error_code(await peer.recv()) == 413
+    run(main())
+
+
+def test_unauthenticated_connections_time_out_with_a_reason() -> None:
+    async def main() -> None:
+        async with served(auth_timeout_s=0.2) as (_, endpoint, _):
+            peer = await raw_peer(endpoint)
+            await peer.request("HELLO", {"version": "1.0"})
+            frame = await peer.recv(timeout_s=3.0)
+            assert error_code(frame) == 408 and "authenticated" in frame[2]["message"]
+            assert await peer.recv() is None
+            async with await memory_client(endpoint) as client:  # authenticated in time
+                await asyncio.sleep(0.3)
+                assert (await client.ping())["tick"] == -1
+    run(main())
+
+
+def test_clients_beyond_the_maximum_are_refused_with_a_clear_error() -> None:
+    async def main() -> None:
+        async with served(max_clients=2) as (_, endpoint, _):
+            first = await memory_client(endpoint)
+            second = await memory_client(endpoint)
+            with pytest.raises(TooMany, match="at most 2"):
+                await memory_client(endpoint)
+            assert (await first.stats())["clients"] == 2
+            await second.close()
+            await settle()
+            third = await memory_client(endpoint)
+            assert third.connected
+            await first.close()
+            await third.close()
+    run(main())
+
+
+def test_register_and_stream_limits_answer_with_errors() -> None:
+    async def main() -> None:
+        async with served(max_messages=2, max_names_per_message=3,
+                          max_streams_per_client=1) as (_, endpoint, _):
+            client = await memory_client(endpoint)
+            await client.define(["counter"])
+            await client.stream(["wave.sine"], rate_hz=10)
+            with pytest.raises(TooMany, match="messages"):
+                await client.define(["wave.cosine"])
+            with pytest.raises(ValueError, match="at most 3"):
+                await client.define(["counter", "wave.sine", "wave.cosine", "pair.a"])
+            with pytest.raises(TooMany, match="streams"):
+                await client.stream(["counter"], rate_hz=10)
+            await client.close()
+    run(main())
+
+
+def test_oversized_tcp_frames_close_only_that_connection() -> None:
+    async def main() -> None:
+        async with served("tcp://127.0.0.1:0", max_frame_bytes=4096) as (_, _, url):
+            good = await Client.connect(url, password=PASSWORDS["observer"])
+            host, port = url.removeprefix("tcp://").split(":")
+            reader, writer = await asyncio.open_connection(host, int(port))
+            writer.write(struct.pack(">I", 10_000_000) + b"x" * 100)
+            size = struct.unpack(">I", await reader.readexactly(4))[0]
+            frame = msgpack.unpackb(await reader.readexactly(size))
+            assert frame[0] == "ERR" and frame[2]["code"] == 413
+            assert await reader.read() == b""  # closed by the endpoint
+            writer.close()
+            assert "counter" in await good.read(["counter"])
+            await good.close()
+    run(main())
+
+
+def test_text_websocket_messages_close_the_connection_with_a_reason() -> None:
+    async def main() -> None:
+        from websockets.asyncio.client import connect
+
+        async with served("ws://127.0.0.1:0") as (_, _, url):
+            ws = await connect(url, proxy=None)
+            await ws.send("HELLO")
+            frame = msgpack.unpackb(await ws.recv())
+            assert frame[0] == "ERR" and "binary" in frame[2]["message"]
+            await ws.wait_closed()
+            assert ws.close_code == 1008
+    run(main())
