@@ -164,3 +164,40 @@ class ExampleDevice:
                 self.advance(endpoint, n)
                 due -= n
             await asyncio.sleep(block_s)
+
+
+async def serve_example(urls: list[str], *, loop_rate_hz: float = 1000.0,
+                        passwords: dict[str, str] | None = None,
+                        duration_s: float | None = None, n_extra_signals: int = 0) -> None:
+    """Serve an ExampleDevice on `urls` and run its loop (for trying the `astcom` CLI)."""
+    from .endpoint import EndpointConfig
+
+    device = ExampleDevice(loop_rate_hz=loop_rate_hz, n_extra_signals=n_extra_signals)
+    endpoint = Endpoint(device.collection, EndpointConfig(loop_rate_hz=loop_rate_hz,
+                                                          passwords=passwords, name="example"))
+    for url in urls:
+        print(f"serving the example device on {await endpoint.serve(url)}", flush=True)
+    try:
+        await device.run(endpoint, duration_s=duration_s)
+    finally:
+        await endpoint.close()
+
+
+def main() -> None:
+    """Run `python -m astcom_client.example_device [URL...] [--password P] [--rate HZ]`."""
+    import typer
+
+    def serve(urls: list[str] = typer.Argument(None, help="ws://, tcp:// URLs to listen on."),  # noqa: B008
+              password: str = typer.Option(None, envvar="ASTCOM_PASSWORD",
+                                           help="Operator password (none: no authentication)."),
+              rate: float = typer.Option(1000.0, help="Loop rate in Hz."),
+              duration: float = typer.Option(None, help="Stop after this many seconds.")) -> None:
+        passwords = {"operator": password} if password else None
+        asyncio.run(serve_example(urls or ["ws://127.0.0.1:8765"], loop_rate_hz=rate,
+                                  passwords=passwords, duration_s=duration))
+
+    typer.run(serve)
+
+
+if __name__ == "__main__":
+    main()

@@ -103,3 +103,30 @@ class RawPeer:
         cnonce = os.urandom(16)
         mac = client_mac(password, hello[2]["nonce"], cnonce)
         return await self.request("AUTH", {"cnonce": cnonce, "mac": mac})
+
+
+@contextlib.contextmanager
+def device_in_thread(url: str = "ws://127.0.0.1:0", **options: Any) -> Any:
+    """Serve a real-time ExampleDevice from a background thread; yield {"url", "device", ...}."""
+    import threading
+
+    state: dict[str, Any] = {}
+    ready = threading.Event()
+    loop = asyncio.new_event_loop()
+
+    async def main() -> None:
+        async with served(url, realtime=True, **options) as (device, endpoint, bound):
+            state.update(device=device, endpoint=endpoint, url=bound, stop=asyncio.Event())
+            ready.set()
+            await state["stop"].wait()
+
+    thread = threading.Thread(target=loop.run_until_complete, args=(main(),), daemon=True)
+    thread.start()
+    if not ready.wait(10.0):
+        raise RuntimeError("the example device did not start")
+    try:
+        yield state
+    finally:
+        loop.call_soon_threadsafe(state["stop"].set)
+        thread.join(10.0)
+        loop.close()
