@@ -20,6 +20,7 @@ from .exceptions import (
     UnreachablePath,
 )
 from .observed import Observation, enu_to_azel, observe_enu
+from .satellites import Satellite, SatelliteState
 from .site import Site, load_site, parse_site_option
 from .stars import IcrsStar
 from .timescales import UtcTimes
@@ -31,7 +32,9 @@ __all__ = [
     "EarthOrientationWarning",
     "IcrsStar",
     "Observation",
+    "Satellite",
     "SatelliteError",
+    "SatelliteState",
     "Site",
     "SiteError",
     "TimeParseError",

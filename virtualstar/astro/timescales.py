@@ -9,6 +9,7 @@ not counted), convertible both ways without rounding beyond 1 µs.
 from __future__ import annotations
 
 import datetime as _dt
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -98,7 +99,10 @@ class UtcTimes:
     def iso(self, decimals: int = 3) -> list[str]:
         """Return ISO 8601 UTC strings ending in Z."""
         out = []
-        for y, mo, d, hmsf in zip(*erfa.d2dtf("UTC", decimals, self.jd1, self.jd2), strict=True):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", erfa.ErfaWarning)  # "dubious year": leap seconds
+            fields = erfa.d2dtf("UTC", decimals, self.jd1, self.jd2)  # unknown, still fine
+        for y, mo, d, hmsf in zip(*fields, strict=True):
             h, mi, s, f = (int(v) for v in hmsf)
             frac = f".{f:0{decimals}d}" if decimals else ""
             out.append(f"{y:04d}-{mo:02d}-{d:02d}T{h:02d}:{mi:02d}:{s:02d}{frac}Z")
@@ -121,7 +125,9 @@ def _parse_one_iso(text: str) -> tuple[float, float]:
         stamp = stamp.astimezone(_dt.UTC).replace(tzinfo=None)
     seconds = stamp.second + stamp.microsecond / 1e6
     try:
-        return erfa.dtf2d("UTC", stamp.year, stamp.month, stamp.day, stamp.hour,
-                          stamp.minute, seconds)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", erfa.ErfaWarning)  # "dubious year" (future)
+            return erfa.dtf2d("UTC", stamp.year, stamp.month, stamp.day, stamp.hour,
+                              stamp.minute, seconds)
     except (erfa.ErfaError, ValueError) as exc:
         raise TimeParseError(f"cannot convert UTC time {text!r}: {exc}") from None
