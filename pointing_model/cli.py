@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import sys
@@ -74,12 +75,12 @@ def fit(
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Write residual plots (PNG) here.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the fit as JSON.")] = False,
-    site_lon_deg: Annotated[float | None, typer.Option(
-        "--site-lon-deg", help="Site east longitude; only for CSV rows given as RA/Dec.")] = None,
-    site_lat_deg: Annotated[float | None, typer.Option(
-        "--site-lat-deg", help="Site latitude; only for CSV rows given as RA/Dec.")] = None,
-    site_height_m: Annotated[float, typer.Option(
-        "--site-height-m", help="Site height; only for CSV rows given as RA/Dec.")] = 0.0,
+    site: Annotated[str | None, typer.Option(
+        "--site", help="LAT,LON,HEIGHT_M (deg, deg east, m); only for CSV rows given as "
+        "RA/Dec.")] = None,
+    site_file: Annotated[str | None, typer.Option(
+        "--site-file", help="Site TOML (default $VIRTUALSTAR_SITE or the packaged site); "
+        "only for CSV rows given as RA/Dec.")] = None,
 ) -> None:
     """Fit pointing terms to a pointing run and report values, σ, RMS, PSD and diagnostics."""
     if auto and terms:
@@ -89,7 +90,7 @@ def fit(
     except ValueError as exc:  # includes UnknownTermError
         raise _fail(f"--terms: {exc}", EXIT_USAGE) from None
     with _errors_to_exit():
-        converter = _lazy_radec_converter(site_lon_deg, site_lat_deg, site_height_m)
+        converter = _lazy_radec_converter(site, site_file)
         run = load_run(data, radec_to_altaz=converter)
         result = (select_terms(run, reject_sigma=reject_sigma) if names is None
                   else fit_run(run, names, reject_sigma=reject_sigma))
@@ -129,18 +130,66 @@ def _format_fit(result: FitResult) -> str:
     return "\n".join(lines)
 
 
-def _lazy_radec_converter(lon_deg: float | None, lat_deg: float | None, height_m: float
+def _lazy_radec_converter(site: str | None, site_file: str | None
                           ) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
     def convert(utcs: Any, ra_deg: np.ndarray, dec_deg: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
-        if lon_deg is None or lat_deg is None:
-            raise ValueError("CSV rows given as RA/Dec need --site-lon-deg and --site-lat-deg")
-        from .sky import radec_to_observed_altaz
+        from .cli_sky import make_site, radec_to_observed_altaz
 
-        return radec_to_observed_altaz(list(utcs), ra_deg, dec_deg, lon_deg=lon_deg,
-                                       lat_deg=lat_deg, height_m=height_m)
+        return radec_to_observed_altaz(list(utcs), ra_deg, dec_deg, make_site(site, site_file))
 
     return convert
+
+
+# -- plan ---------------------------------------------------------------------------------
+@app.command()
+def plan(
+    stars: Annotated[int, typer.Option("--stars", help="Number of stars to pick.", min=1)],
+    at: Annotated[str | None, typer.Option(
+        "--at", help="UTC of the run, ISO 8601 (e.g. 2026-11-22T03:00:00Z). Default: now.")
+    ] = None,
+    min_el_deg: Annotated[float, typer.Option("--min-el", help="Lowest elevation, deg.")] = 20.0,
+    max_el_deg: Annotated[float, typer.Option("--max-el", help="Highest elevation, deg.")] = 85.0,
+    max_vmag: Annotated[float | None, typer.Option(
+        "--max-vmag", help="Faintest V magnitude to use.")] = None,
+    site: Annotated[str | None, typer.Option(
+        "--site", help="LAT,LON,HEIGHT_M (deg, deg east, m), overriding the site file.")] = None,
+    site_file: Annotated[str | None, typer.Option(
+        "--site-file", help="Site TOML (default $VIRTUALSTAR_SITE or the packaged site).")
+    ] = None,
+    output: Annotated[Path | None, typer.Option(
+        "-o", "--output", help="Also write the plan as CSV (name, utc, ra/dec, obs az/el).")
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the plan as JSON.")] = False,
+) -> None:
+    """Pick catalogue stars spread evenly over the sky visible at a time, for a pointing run."""
+    with _errors_to_exit():
+        from .cli_sky import make_site, plan_stars
+
+        chosen = plan_stars(stars, make_site(site, site_file), at_utc=at, min_el_deg=min_el_deg,
+                            max_el_deg=max_el_deg, max_vmag=max_vmag)
+        if output is not None:
+            _write_plan_csv(chosen, output)
+    if as_json:
+        typer.echo(json.dumps([star.__dict__ for star in chosen], indent=2))
+        return
+    typer.echo(f"{'#':>3} {'star':<16} {'HIP':>6} {'V':>5} {'RA°':>9} {'Dec°':>9} "
+               f"{'az°':>8} {'el°':>7}   UTC {chosen[0].utc if chosen else ''}")
+    for i, s in enumerate(chosen, start=1):
+        vmag = f"{s.vmag:5.2f}" if s.vmag is not None else "    -"
+        typer.echo(f"{i:3d} {s.name:<16.16} {s.hip or '':>6} {vmag} {s.ra_deg:9.4f} "
+                   f"{s.dec_deg:9.4f} {s.az_deg:8.3f} {s.el_deg:7.3f}")
+
+
+def _write_plan_csv(chosen: list[Any], path: Path) -> None:
+    with open(path, "w", encoding="utf-8", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["name", "hip", "vmag", "utc", "ra_deg", "dec_deg", "obs_az_deg",
+                         "obs_el_deg"])
+        for s in chosen:
+            writer.writerow([s.name, s.hip or "", "" if s.vmag is None else s.vmag, s.utc,
+                             f"{s.ra_deg:.8f}", f"{s.dec_deg:.8f}", f"{s.az_deg:.7f}",
+                             f"{s.el_deg:.7f}"])
 
 
 # -- simulate -----------------------------------------------------------------------------
