@@ -110,7 +110,6 @@ class Stream:
         self.period_ticks = int(reply["period_ticks"])
         self.samples_per_packet = int(reply["samples_per_packet"])
         self.names: tuple[str, ...] = tuple(reply["columns"])
-        self._dtypes = [np.dtype(d) for d in reply["dtypes"]]
         self._groups = [np.asarray(g, dtype=np.intp) for g in reply["groups"]]
         self._identity = (len(self._groups) == 1
                           and np.array_equal(self._groups[0], np.arange(len(self.names))))

@@ -72,6 +72,7 @@ class MessageDef:
 class _Group:
     """The buffer of one dtype group of a stream: columns of the same numeric dtype."""
 
+    type_name: str  # ASTCom element type of the group, e.g. "f64"
     dtype: np.dtype
     columns: list[int]  # column indices in the message's flat column list
     traced_pos: np.ndarray  # buffer columns filled from the trace
@@ -104,7 +105,7 @@ class StreamGroup:
             base, width = var.spec.base, var.spec.n_columns
             group = by_dtype.get(base)
             if group is None:
-                group = _Group(np.dtype(var.spec.dtype), [], np.empty(0, np.intp),
+                group = _Group(base, np.dtype(var.spec.dtype), [], np.empty(0, np.intp),
                                np.empty(0, np.intp), [])
                 by_dtype[base] = group
                 self.groups.append(group)
@@ -124,7 +125,7 @@ class StreamGroup:
 
     def layout(self) -> dict[str, Any]:
         """Return the column layout sent in the STREAM_START reply."""
-        return {"columns": self.columns, "dtypes": [g.dtype.name for g in self.groups],
+        return {"columns": self.columns, "dtypes": [g.type_name for g in self.groups],
                 "groups": [g.columns for g in self.groups]}
 
     @property
