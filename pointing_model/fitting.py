@@ -117,8 +117,19 @@ class FitResult:
                                  else [int(i) + 1 for i in rejected])
         doc["high_correlations"] = [{"terms": [a, b], "r": r} for a, b, r in self.high_correlations]
         if self.selection:
-            doc["selection"] = [step.__dict__ for step in self.selection]
-        return doc
+            doc["selection"] = [dict(step.__dict__) for step in self.selection]
+        return _json_safe(doc)
+
+
+def _json_safe(value: Any) -> Any:
+    """Return `value` with non-finite floats replaced by None (JSON has no inf or NaN)."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if np.isfinite(value) else None
+    return value
 
 
 @dataclass(frozen=True)
@@ -270,7 +281,8 @@ def select_terms(run: PointingRun, *, base: Sequence[str] = AUTO_BASE_TERMS,
     x_cur = design_matrix(chosen, az, el)
     rss_cur = _solve(x_cur, y).rss
     steps: list[SelectionStep] = []
-    while pool:
+    floor = 1e-16 * float(y @ y)  # residual 1e-8 of the signal: rounding, not pointing
+    while pool and rss_cur > floor:
         best: tuple[float, str, np.ndarray] | None = None
         tried = 0
         for term in pool:

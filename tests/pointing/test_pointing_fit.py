@@ -161,3 +161,22 @@ def test_too_few_observations_for_the_terms_is_a_fit_error():
     run = simulate_run(model_from_values({"IA": 1.0}), 3, 1.0, rng=np.random.default_rng(0))
     with pytest.raises(FitError, match="3 observations cannot determine 6 terms"):
         fit_run(run, "IA,IE,CA,NPAE,AN,AW")
+
+
+def test_noise_free_data_fit_exactly_and_json_stays_valid():
+    import json
+
+    run = simulate_run(model_from_values({"IA": 30.0, "IE": -20.0}), 7, 0.0,
+                       rng=np.random.default_rng(0))
+    result = fit_run(run, "IA,IE,CA,NPAE,AN,AW")  # N = M + 1: every star has leverage
+    np.testing.assert_allclose(result.values_arcsec, [30, -20, 0, 0, 0, 0], atol=1e-6)
+    assert result.sky_rms_arcsec < 1e-6
+    json.loads(json.dumps(result.to_json_dict(), allow_nan=False))
+    auto = select_terms(run)
+    json.loads(json.dumps(auto.to_json_dict(), allow_nan=False))
+
+
+def test_auto_selection_stops_when_noise_free_data_are_fitted_exactly():
+    run = simulate_run(model_from_values({"IA": 30.0, "IE": -20.0, "CA": 5.0}), 40, 0.0,
+                       rng=np.random.default_rng(0))
+    assert select_terms(run).terms == ("IA", "IE", "CA")
