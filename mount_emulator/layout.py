@@ -49,8 +49,7 @@ class Slot:
     unit: str
     doc: str
     default: float = 0.0
-    kind: str = "signal"  # signal | parameter | status
-    type: str = "f64"  # ASTCom type the slot is published as
+    kind: str = "signal"  # signal (f64) | status (i64) | parameter (f64, rw)
     traced: bool = False  # may be streamed per tick
 
 
@@ -237,9 +236,9 @@ def _axis_param_defaults(axis: str) -> dict[int, float]:
 
 
 _GLOBAL_STATE = [
-    (G_TICK, "mount.tick", "tick", "Controller ticks since the emulator started", "signal"),
-    (G_TRUE_US, "time.true_us", "us", "True UTC of the current tick (the PPS truth), µs since 1970", "signal"),
-    (G_MOUNT_US, "time.mount_us", "us", "Mount clock: integer µs since 1970 UTC, drifts between syncs", "signal"),
+    (G_TICK, "mount.tick", "tick", "Controller ticks since the emulator started", "status"),
+    (G_TRUE_US, "time.true_us", "us", "True UTC of the current tick (the PPS truth), µs since 1970", "status"),
+    (G_MOUNT_US, "time.mount_us", "us", "Mount clock: integer µs since 1970 UTC, drifts between syncs", "status"),
     (G_PENDING_UTC_S, "time.pending_utc_s", "s", "UTC second armed for the next PPS edge, -1 if none", "status"),
     (G_PPS_COUNT, "time.pps_count", "", "PPS edges seen", "status"),
     (G_PPS_ERR_US, "time.pps_error_us", "us", "Mount clock minus true second at the last PPS edge, before any sync", "signal"),
@@ -263,7 +262,7 @@ _GLOBAL_STATE = [
 _AXIS_STATE = [
     (A_ENC, "position", "rad", "Encoder position (quantised)", "signal"),
     (A_POS_DEG, "position_deg", "deg", "Encoder position in degrees", "signal"),
-    (A_ENC_COUNTS, "encoder_counts", "count", "Raw absolute encoder counts", "signal"),
+    (A_ENC_COUNTS, "encoder_counts", "count", "Raw absolute encoder counts", "status"),
     (A_VEL_EST, "velocity", "rad/s", "Velocity estimated from the encoder", "signal"),
     (A_VEL_DEG_S, "velocity_deg_s", "deg/s", "Velocity estimate in degrees per second", "signal"),
     (A_REF, "reference", "rad", "Position reference of the controller", "signal"),

@@ -467,19 +467,27 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
     t_grav = params[pb + P_GRAV] * math.cos(pl) if params[pb + P_GRAV] != 0.0 else 0.0
     jm = params[pb + P_JM]
     vm_free = vm + dt * (t_motor - t_spring - params[pb + P_VISC] * vm) / jm
-    # Coulomb friction (and the brake when the drive is off), solved implicitly:
-    # linear below the smoothing velocity, so no stick-slip hunting and stable at any step
     fc = params[pb + P_COULOMB]
     st = int(state[sb + A_STATE])
     if st in (OFF, FAULT):
-        fc += params[pb + P_BRAKE]
-    dv_c = dt * fc / jm
-    v_s = params[pb + P_FRIC_VS]
-    vm = vm_free / (1.0 + dv_c / v_s)
-    if vm > v_s:
-        vm = vm_free - dv_c
-    elif vm < -v_s:
-        vm = vm_free + dv_c
+        # holding brake: exact stiction (implicit clamp), it never creeps
+        dv_c = dt * (fc + params[pb + P_BRAKE]) / jm
+        if vm_free > dv_c:
+            vm = vm_free - dv_c
+        elif vm_free < -dv_c:
+            vm = vm_free + dv_c
+        else:
+            vm = 0.0
+    else:
+        # Coulomb friction solved implicitly, linear below the smoothing velocity:
+        # no stick-slip hunting under integral action, stable at any step
+        dv_c = dt * fc / jm
+        v_s = params[pb + P_FRIC_VS]
+        vm = vm_free / (1.0 + dv_c / v_s)
+        if vm > v_s:
+            vm = vm_free - dv_c
+        elif vm < -v_s:
+            vm = vm_free + dv_c
     vl = vl + dt * (t_spring - t_grav) / params[pb + P_JL]
     state[sb + A_VEL_M] = vm
     state[sb + A_VEL_L] = vl

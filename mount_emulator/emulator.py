@@ -1,0 +1,157 @@
+"""Serve a `MountModel` over ASTCom and run its 10 kHz loop in real or simulated time.
+
+The loop is an asyncio task on the Endpoint's event loop (docs/architecture.md,
+"Threading model"): it computes the ticks that are due in blocks with the
+compiled step, fills only the trace columns some stream wants, publishes the
+block, and yields. Requests are served between blocks, so writes land between
+two ticks. Real time and simulated time share this code; only the number of
+ticks due per wake-up differs (monotonic clock × speed, or a fixed block as
+fast as possible).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from datetime import UTC, datetime
+
+import numpy as np
+
+from astcom_client import Endpoint, EndpointConfig
+from mount_emulator import layout as L
+from mount_emulator.config import EmulatorConfig
+from mount_emulator.exceptions import ConfigError
+from mount_emulator.geometry import GuideCamera
+from mount_emulator.model import MountModel
+from mount_emulator.registry import build_collection
+
+__all__ = ["LOOP_RATE_HZ", "MountEmulator"]
+
+LOOP_RATE_HZ = 1_000_000 // L.TICK_US
+MAX_BLOCK_TICKS = 1000  # a late real-time loop catches up in blocks of at most 0.1 s
+FAST_BLOCK_TICKS = 2000  # --speed max computes this many ticks between yields
+
+
+class MountEmulator:
+    """The emulated mount behind an ASTCom Endpoint.
+
+    ``await MountEmulator(config).start("ws://127.0.0.1:0")`` returns the bound
+    URL and runs the loop until ``await stop()``. ``advance(n)`` computes ticks
+    directly (tests, embedding with an external clock).
+    """
+
+    def __init__(self, config: EmulatorConfig | None = None) -> None:
+        self.config = config = config or EmulatorConfig()
+        start_us = config.start_us if config.start_us is not None else time.time_ns() // 1000
+        params = L.default_params()
+        for name, value in config.params.items():
+            if name not in L.PARAM_INDEX:
+                raise ConfigError(f"unknown parameter {name!r}")
+            params[L.PARAM_INDEX[name]] = value
+        self.model = MountModel(start_us=start_us, params=params,
+                                az_rad=math.radians(config.az_deg),
+                                el_rad=math.radians(config.el_deg),
+                                traj_capacity=config.traj_capacity)
+        self.camera = GuideCamera(config.geometry, seeing_arcsec=config.seeing_arcsec,
+                                  seed=config.guide_seed)
+        self.speed = float(config.speed)
+        self.last_guide = (0.0, 0.0)
+        self.collection, col_to_state = build_collection(self)
+        self._col_to_state = np.zeros(self.collection.trace_width, dtype=np.int64)
+        for col, idx in col_to_state.items():
+            self._col_to_state[col] = idx
+        self.endpoint = Endpoint(self.collection, EndpointConfig(
+            loop_rate_hz=LOOP_RATE_HZ, passwords=config.passwords, name="mount-emulator"))
+        self._wanted_key: bytes | None = None
+        self._src = np.zeros(0, dtype=np.int64)
+        self._dst = np.zeros(0, dtype=np.int64)
+        self._task: asyncio.Task[None] | None = None
+        self.ticks_run = 0
+
+    # ------------------------------------------------------------ commands
+    def guide_measure(self, star_az_deg: float, star_el_deg: float) -> np.ndarray:
+        """Return the star's offset from the optical axis (arcsec) at the current encoders."""
+        dx, dy = self.camera.offset_arcsec(
+            self.model.axis_slot(0, L.A_ENC), self.model.axis_slot(1, L.A_ENC),
+            math.radians(star_az_deg), math.radians(star_el_deg))
+        self.last_guide = (dx, dy)
+        return np.array([dx, dy])
+
+    def set_seeing(self, value: float) -> None:
+        if not math.isfinite(value) or value < 0:
+            raise ValueError(f"guide.seeing_arcsec must be >= 0, got {value}")
+        self.camera.seeing_arcsec = float(value)
+
+    def mount_time_iso(self) -> str:
+        """Return the mount clock as ISO-8601 UTC text with microseconds."""
+        t_us = self.model.mount_time_us
+        return datetime.fromtimestamp(t_us // 1_000_000, UTC).replace(
+            microsecond=t_us % 1_000_000).isoformat().replace("+00:00", "Z")
+
+    # ------------------------------------------------------------ the loop
+    def _trace_columns(self) -> tuple[np.ndarray, np.ndarray]:
+        wanted = self.endpoint.wanted_trace_columns
+        key = wanted.tobytes()
+        if key != self._wanted_key:
+            self._wanted_key = key
+            self._dst = np.asarray(wanted, dtype=np.int64)
+            self._src = self._col_to_state[self._dst]
+        return self._src, self._dst
+
+    def advance(self, n_ticks: int) -> int:
+        """Compute ``n_ticks`` ticks, publish them to the streams; return the step's events."""
+        model = self.model
+        first_tick = int(model.state[L.G_TICK]) + 1
+        first_t_us = model.mount_time_us + L.TICK_US
+        src, dst = self._trace_columns()
+        if len(src):
+            trace = np.empty((n_ticks, self.collection.trace_width))
+            events = model.run(n_ticks, trace, src, dst)
+        else:
+            trace = None
+            events = model.run(n_ticks)
+        self.endpoint.publish(first_tick, first_t_us, n_ticks, trace)
+        self.ticks_run += n_ticks
+        return events
+
+    async def _run(self) -> None:
+        if self.speed <= 0:
+            while True:
+                self.advance(FAST_BLOCK_TICKS)
+                await asyncio.sleep(0)
+        rate = LOOP_RATE_HZ * self.speed
+        t0 = time.monotonic()
+        done = 0
+        while True:
+            due = int((time.monotonic() - t0) * rate) - done
+            while due > 0:
+                n = min(due, MAX_BLOCK_TICKS)
+                self.advance(n)
+                done += n
+                due -= n
+            await asyncio.sleep(self.config.block_s)
+
+    async def start(self, url: str = "ws://127.0.0.1:0", *more_urls: str) -> str:
+        """Listen on ``url`` (and ``more_urls``), start the loop; return the first bound URL."""
+        bound = await self.endpoint.serve(url)
+        for extra in more_urls:
+            await self.endpoint.serve(extra)
+        self._task = asyncio.get_running_loop().create_task(self._run(), name="mount-emulator-loop")
+        return bound
+
+    async def stop(self) -> None:
+        """Stop the loop and close every connection."""
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+        await self.endpoint.close()
+
+    async def __aenter__(self) -> MountEmulator:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()

@@ -1,0 +1,146 @@
+"""Publish every signal, parameter and command of the mount in an ASTCom Collection.
+
+Names are dotted (``axis.az.position``, ``traj.push``), units travel with them.
+Signals read slots of the state array (traced: streamable per tick); parameters
+are slots of the parameter array, written between two ticks and used by the
+very next tick; functions wrap `MountModel` commands with degree/radian
+conversions at the user interface.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from astcom_client import Collection
+from mount_emulator import layout as L
+from mount_emulator.states import fault_text
+
+if TYPE_CHECKING:
+    from mount_emulator.emulator import MountEmulator
+
+__all__ = ["POSITIVE_PARAMS", "build_collection"]
+
+# Parameters that must stay strictly positive (the step divides by them).
+POSITIVE_PARAMS = {
+    "inertia_motor", "inertia_load", "torque_constant", "current_tau", "thermal_resistance",
+    "thermal_tau", "friction_smoothing", "velocity_filter_tau", "rate_limit", "accel_limit",
+    "ctrl_rate_limit", "ctrl_accel_limit", "following_error_limit", "current_limit",
+    "supply_resistance", "bus_capacitance", "chopper_resistance", "heartbeat_timeout",
+}
+NONNEGATIVE_PARAMS = {"stiffness", "damping", "winding_resistance", "viscous_friction",
+                      "coulomb_friction", "cogging", "brake_torque", "friction_ff", "integral_zone"}
+
+
+def _param_setter(params: np.ndarray, slot: L.Slot) -> Callable[[float], None]:
+    short = slot.name.rsplit(".", 1)[-1]
+
+    def put(value: float) -> None:
+        v = float(value)
+        if not math.isfinite(v):
+            raise ValueError(f"{slot.name} must be finite, got {value!r}")
+        if short in POSITIVE_PARAMS and v <= 0:
+            raise ValueError(f"{slot.name} must be > 0 {slot.unit}, got {v}")
+        if short in NONNEGATIVE_PARAMS and v < 0:
+            raise ValueError(f"{slot.name} must be >= 0 {slot.unit}, got {v}")
+        if short == "encoder_bits" and not 8 <= v <= 40:
+            raise ValueError(f"{slot.name} must be between 8 and 40 bits, got {v}")
+        params[slot.index] = v
+
+    return put
+
+
+def build_collection(emu: MountEmulator) -> tuple[Collection, dict[int, int]]:
+    """Return the Collection of the emulator and the map trace column → state index."""
+    model = emu.model
+    state, params = model.state, model.params
+    coll = Collection()
+    column_to_state: dict[int, int] = {}
+    for slot in L.STATE_SLOTS:
+        if slot.kind == "status":
+            var = coll.add_variable(slot.name, "i64", unit=slot.unit, doc=slot.doc,
+                                    get=lambda i=slot.index: int(state[i]), traced=True)
+        else:
+            var = coll.add_slot(slot.name, state, slot.index, type="f64", unit=slot.unit,
+                                doc=slot.doc, traced=True)
+        column_to_state[var.trace_column] = slot.index
+    for slot in L.PARAM_SLOTS:
+        coll.add_variable(slot.name, "f64", kind="parameter", access="rw", unit=slot.unit,
+                          doc=f"{slot.doc} (default {slot.default:g})",
+                          get=lambda i=slot.index: float(params[i]), set=_param_setter(params, slot))
+    _add_text_signals(coll, emu)
+    _add_functions(coll, emu)
+    return coll, column_to_state
+
+
+def _add_text_signals(coll: Collection, emu: MountEmulator) -> None:
+    model = emu.model
+    coll.add_variable("mount.state_name", "str", doc="Mount state as text",
+                      get=lambda: model.mount_state.name)
+    for a, axis in enumerate(L.AXES):
+        coll.add_variable(f"axis.{axis}.state_name", "str", doc=f"{axis} axis state as text",
+                          get=lambda a=a: model.axis_state(a).name)
+        coll.add_variable(f"axis.{axis}.fault_text", "str", doc=f"{axis} latched faults as text",
+                          get=lambda a=a: fault_text(int(model.axis_slot(a, L.A_FAULTS))))
+    coll.add_variable("traj.free_points", "i64", doc="Free space in the trajectory buffer (points)",
+                      get=model.traj_free)
+    coll.add_variable("traj.count", "i64", doc="Points in the trajectory buffer",
+                      get=model.traj_count)
+    coll.add_variable("traj.capacity", "i64", doc="Trajectory buffer capacity (points)",
+                      get=lambda: model.traj_capacity)
+    coll.add_variable("guide.seeing_arcsec", "f64", kind="parameter", access="rw", unit="arcsec",
+                      doc="1-sigma seeing noise of the guide camera per axis",
+                      get=lambda: emu.camera.seeing_arcsec, set=emu.set_seeing)
+    coll.add_variable("guide.dx_arcsec", "f64", unit="arcsec",
+                      doc="Last guide measurement: star minus optical axis, azimuth x cos(el)",
+                      get=lambda: emu.last_guide[0])
+    coll.add_variable("guide.dy_arcsec", "f64", unit="arcsec",
+                      doc="Last guide measurement: star minus optical axis, elevation",
+                      get=lambda: emu.last_guide[1])
+    coll.add_variable("sim.speed", "f64", unit="x",
+                      doc="Simulated-time speed factor (0 = as fast as possible)",
+                      get=lambda: emu.speed)
+    coll.add_variable("time.utc_iso", "str", doc="Mount clock as ISO-8601 UTC text",
+                      get=emu.mount_time_iso)
+
+
+def _add_functions(coll: Collection, emu: MountEmulator) -> None:
+    m = emu.model
+    coll.add_function("mount.power_on", m.power_on, doc="Close the loops on both axes, holding")
+    coll.add_function("mount.power_off", m.power_off, doc="Cut both drives, brakes on")
+    coll.add_function("mount.stop", m.stop, doc="Ramp both axes to rest")
+    coll.add_function("mount.slew", lambda az, el: m.slew(math.radians(az), math.radians(el)),
+                      args=[("az_deg", "f64"), ("el_deg", "f64")],
+                      doc="Slew both axes to (az, el) encoder degrees under the rate/accel limits")
+    for a, axis in enumerate(L.AXES):
+        coll.add_function(f"axis.{axis}.move", lambda r, a=a: m.move(a, math.radians(r)),
+                          args=[("rate_deg_s", "f64")],
+                          doc=f"Move the {axis} axis at a constant rate (0 holds still)")
+    coll.add_function("traj.init", m.traj_init, doc="Empty the trajectory buffer, zero its counters")
+    coll.add_function("traj.start", m.traj_start, doc="Start following the trajectory buffer")
+    coll.add_function("traj.reset", m.traj_reset,
+                      doc="Abort the trajectory: ramp to rest, empty the buffer")
+    coll.add_function("traj.free", m.traj_free, returns="u32",
+                      doc="Return the free space of the trajectory buffer (points)")
+    coll.add_function("traj.push", m.traj_push,
+                      args=[("t_us", "i64[]"), ("az_rad", "f64[]"), ("el_rad", "f64[]")],
+                      returns="u32",
+                      doc="Append points (mount time µs, encoder rad); returns the accepted count")
+    coll.add_function("traj.push_rates", m.traj_push,
+                      args=[("t_us", "i64[]"), ("az_rad", "f64[]"), ("el_rad", "f64[]"),
+                            ("az_rate_rad_s", "f64[]"), ("el_rate_rad_s", "f64[]")],
+                      returns="u32", doc="Append points with their rates; returns the accepted count")
+    coll.add_function("time.set_utc", m.set_utc, args=[("utc_second", "i64")],
+                      doc="Arm a UTC second (since 1970): the mount clock takes it at the next PPS edge")
+    coll.add_function("time.now_us", lambda: m.mount_time_us, returns="i64",
+                      doc="Return the mount clock (µs since 1970 UTC)")
+    coll.add_function("safety.reset", m.safety_reset,
+                      doc="Clear latched faults; faulted axes go to OFF")
+    coll.add_function("guide.measure", emu.guide_measure,
+                      args=[("star_az_deg", "f64"), ("star_el_deg", "f64")], returns="f64[2]",
+                      doc="Offset (arcsec) of a star at observed (az, el) from the optical axis, "
+                          "from the current encoders, the hidden geometry and seeing")
+
