@@ -9,9 +9,12 @@ STAMP := $(VENV)/.installed
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
-$(STAMP): pyproject.toml | $(PY)
+SETUP_SCRIPTS := $(sort $(wildcard setup/*.sh))
+
+$(STAMP): pyproject.toml $(SETUP_SCRIPTS) | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
+	for s in $(SETUP_SCRIPTS); do echo "== $$s"; bash $$s || exit 1; done
 	touch $(STAMP)
 
 demo: $(STAMP)
