@@ -23,7 +23,7 @@ from .exceptions import EarthOrientationWarning
 _MJD_ZERO_JD = 2400000.5
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # identity equality: usable as a cache key
 class EarthOrientation:
     """Tabulated Earth orientation: daily UT1-UTC (s) and polar motion (arcsec).
 
