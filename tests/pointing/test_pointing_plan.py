@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+# Imported at collection: a later-collected tests/catalogs folder on sys.path must not shadow it.
+from catalogs import bright_stars
 from pointing_model import even_sky_positions, pick_spread
 from pointing_model.cli import app
 
@@ -68,8 +70,6 @@ def test_plan_picks_visible_stars_at_the_places_astropy_computes(tmp_path):
     assert len(plan) == 12 and len({p["name"] for p in plan}) == 12
     el = np.array([p["el_deg"] for p in plan])
     assert np.all((el >= 25.0) & (el <= 85.0))
-    from catalogs import bright_stars
-
     stars = [bright_stars().by_hip(p["hip"]) for p in plan]
     az_ref, el_ref = _astropy_altaz(np.array([s.ra_deg for s in stars]),
                                     np.array([s.dec_deg for s in stars]), AT, stars)
