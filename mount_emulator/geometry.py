@@ -9,8 +9,9 @@ the optical axis, ``A_enc = A + ΔA``, ``E_enc = E + ΔE``, with
     ΔE = +IE − AN·cosA + AW·sinA − TF·cosE
 
 (first-order, as in TPOINT's term list: IA azimuth index, IE elevation index,
-AN/AW azimuth-axis tilt toward north/west... east per TPOINT's naming, NPAE
-az/el non-perpendicularity, CA collimation, TF tube flexure). The emulator
+AN/AW azimuth-axis tilt toward north (A = 0) / west (A = 270°), NPAE az/el
+non-perpendicularity, CA collimation, TF tube flexure). IA > 0 means the
+azimuth encoder reads IA more than the true azimuth, as in TPOINT. The emulator
 implements them here on purpose and never imports the project's fitter.
 
 The guide camera inverts the model: from the encoder readings it finds where
@@ -95,7 +96,7 @@ class Geometry:
         return cls(**values)
 
     def corrections(self, az_rad, el_rad):
-        """Return (ΔA, ΔE) in radians at observed (A, E): encoder = observed + Δ."""
+        """Return (ΔA, ΔE) in radians at observed (A, E): observed − encoder = Δ (TPOINT)."""
         az = np.asarray(az_rad, dtype=float)
         el = np.asarray(el_rad, dtype=float)
         sa, ca_ = np.sin(az), np.cos(az)
@@ -108,7 +109,7 @@ class Geometry:
     def encoder_of_sky(self, az_rad, el_rad):
         """Return the encoder (raw) position that puts observed (A, E) on the optical axis."""
         d_az, d_el = self.corrections(az_rad, el_rad)
-        return np.asarray(az_rad) + d_az, np.asarray(el_rad) + d_el
+        return np.asarray(az_rad) - d_az, np.asarray(el_rad) - d_el
 
     def sky_of_encoder(self, enc_az_rad, enc_el_rad):
         """Return where the optical axis points (observed A, E) for given encoder readings."""
@@ -117,7 +118,7 @@ class Geometry:
         sky_az, sky_el = az, el
         for _ in range(4):  # fixed point: Δ varies slowly, converges to < 1e-9″
             d_az, d_el = self.corrections(sky_az, sky_el)
-            sky_az, sky_el = az - d_az, el - d_el
+            sky_az, sky_el = az + d_az, el + d_el
         return sky_az, sky_el
 
     def raw_rms_arcsec(self) -> float:

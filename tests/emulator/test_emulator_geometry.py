@@ -1,7 +1,7 @@
 """Hidden geometry: the guide camera sees what TPOINT's alt-az formulas predict.
 
 The formulas below are written here independently of mount_emulator.geometry:
-encoder = observed + Δ with (TPOINT, A from north through east)
+observed − encoder = Δ(observed) (TPOINT, A from north through east)
   ΔA = −IA − CA/cosE − NPAE·tanE − AN·sinA·tanE − AW·cosA·tanE
   ΔE = +IE − AN·cosA + AW·sinA − TF·cosE
 """
@@ -31,10 +31,10 @@ def tpoint_delta(t, az, el):
 
 
 def expected_offset(t, enc_az, enc_el, star_az, star_el):
-    """Where the star appears from the optical axis, solving encoder = axis + Δ(axis)."""
+    """Where the star appears from the optical axis, solving axis − encoder = Δ(axis)."""
     def eq(x):
         d_az, d_el = tpoint_delta(t, x[0], x[1])
-        return [x[0] + d_az - enc_az, x[1] + d_el - enc_el]
+        return [x[0] - d_az - enc_az, x[1] - d_el - enc_el]
     axis_az, axis_el = fsolve(eq, [enc_az, enc_el], xtol=1e-14)
     return (star_az - axis_az) * math.cos(star_el) / AS, (star_el - axis_el) / AS
 
@@ -55,8 +55,18 @@ def test_pointing_with_the_tpoint_model_centres_the_star(az_deg, el_deg):
     cam = GuideCamera(Geometry(**TERMS), seeing_arcsec=0.0)
     az, el = math.radians(az_deg), math.radians(el_deg)
     d_az, d_el = tpoint_delta(TERMS, az, el)
-    dx, dy = cam.offset_arcsec(az + d_az, el + d_el, az, el)
+    dx, dy = cam.offset_arcsec(az - d_az, el - d_el, az, el)
     assert abs(dx) < 1e-6 and abs(dy) < 1e-6
+
+
+def test_positive_index_errors_follow_tpoint_definitions():
+    # TPOINT: IA > 0 means the azimuth encoder reads IA more than the true azimuth;
+    # IE > 0 means the elevation encoder reads IE less than the true elevation.
+    az, el = math.radians(123.0), math.radians(40.0)
+    enc_az, enc_el = Geometry(ia=100.0).encoder_of_sky(az, el)
+    assert (enc_az - az) / AS == pytest.approx(100.0, abs=1e-9)
+    enc_az, enc_el = Geometry(ie=100.0).encoder_of_sky(az, el)
+    assert (enc_el - el) / AS == pytest.approx(-100.0, abs=1e-9)
 
 
 def test_guide_camera_sees_the_real_encoders_after_a_slew():
