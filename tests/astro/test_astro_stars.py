@@ -120,3 +120,25 @@ def test_stars_match_skyfield_within_10_mas_without_refraction(site, eop, skyfie
         obs = star.observe(times, site.without_refraction(), eop)
         err = sep_rad(az.radians, alt.radians, obs.az_rad, obs.el_rad)
         assert err.max() < 10 * ONE_MAS_RAD, (star.name, err / ONE_MAS_RAD)
+
+
+def test_topocentric_apparent_radec_matches_astropy_tete_within_1_mas(site, eop):
+    import astropy.units as u
+    from astropy.coordinates import TETE, Distance, EarthLocation, SkyCoord
+    from astropy.time import Time
+
+    from virtualstar.astro.observed import topocentric_apparent_radec
+
+    times = _night(4, hours=8.0)
+    t_ap = Time(times.jd1, times.jd2, format="jd", scale="utc")
+    loc = EarthLocation.from_geodetic(site.lon_deg, site.lat_deg, site.height_m)
+    obs = VEGA.observe(times, site.without_refraction(), eop)
+    ra, dec = topocentric_apparent_radec(obs.az_rad, obs.el_rad, times, site, eop)
+    coo = SkyCoord(ra=VEGA.ra_deg * u.deg, dec=VEGA.dec_deg * u.deg,
+                   pm_ra_cosdec=VEGA.pm_ra_cosdec_mas_yr * u.mas / u.yr,
+                   pm_dec=VEGA.pm_dec_mas_yr * u.mas / u.yr,
+                   distance=Distance(parallax=VEGA.parallax_mas * u.mas),
+                   radial_velocity=VEGA.rv_km_s * u.km / u.s,
+                   obstime=Time(VEGA.epoch_jyear, format="jyear", scale="tt"))
+    ref = coo.apply_space_motion(new_obstime=t_ap).transform_to(TETE(obstime=t_ap, location=loc))
+    assert sep_rad(ref.ra.rad, ref.dec.rad, ra, dec).max() < ONE_MAS_RAD

@@ -10,6 +10,7 @@ horizon-frame unit vector serves every requested time and its rates.
 
 from __future__ import annotations
 
+import atexit
 import functools
 import warnings
 from dataclasses import dataclass
@@ -64,6 +65,7 @@ def skyfield_context(eop: EarthOrientation) -> SkyfieldContext:
         # skyfield-data warns that *its* finals2000A.all expired: we do not use it.
         warnings.filterwarnings("ignore", message="The file finals2000A.all has expired")
         ephemeris = Loader(get_skyfield_data_path(), verbose=False)("de421.bsp")
+    atexit.register(ephemeris.close)  # the kernel keeps its file open while cached
     return SkyfieldContext(ts, ephemeris)
 
 

@@ -15,6 +15,7 @@ import math
 import warnings
 from dataclasses import dataclass
 
+import erfa
 import numpy as np
 
 from .constants import ARCSEC_PER_RAD
@@ -73,24 +74,30 @@ class EarthOrientation:
         return dut1, xp, yp
 
     def _warn_if_not_measured(self, mjd: np.ndarray, outside: np.ndarray) -> None:
+        # Messages depend on the table only, so Python shows each once per place.
         if outside.any():
-            bad = float(np.max(mjd) if np.max(mjd) > self.mjd[-1] else np.min(mjd))
             warnings.warn(
-                f"time MJD {bad:.3f} lies outside the IERS table of {self.source} "
-                f"(MJD {self.mjd[0]:.0f}..{self.mjd[-1]:.0f}): UT1-UTC and polar motion "
-                "are held at the edge value; LEO satellite positions may be off by "
+                f"a time lies outside the IERS table of {self.source} "
+                f"({_mjd_date(self.mjd[0])} .. {_mjd_date(self.mjd[-1])}): UT1-UTC and polar "
+                "motion are held at the edge value; LEO satellite positions may be off by "
                 "arcminutes. Update astropy-iers-data.",
                 EarthOrientationWarning,
                 stacklevel=3,
             )
         elif float(np.max(mjd)) > self.measured_until_mjd + 1.0:
             warnings.warn(
-                f"time MJD {float(np.max(mjd)):.3f} lies after the last measured IERS value "
-                f"(MJD {self.measured_until_mjd:.0f}): predicted UT1-UTC and polar motion "
-                "are used (typically good to a few ms / a few mas within weeks).",
+                f"a time lies after the last measured IERS value "
+                f"({_mjd_date(self.measured_until_mjd)}, {self.source}): predicted UT1-UTC and "
+                "polar motion are used (good to a few ms and mas for weeks, worse later; "
+                "a LEO satellite may be off by arcseconds). Update astropy-iers-data.",
                 EarthOrientationWarning,
                 stacklevel=3,
             )
+
+
+def _mjd_date(mjd: float) -> str:
+    y, m, d, _ = erfa.jd2cal(_MJD_ZERO_JD, float(mjd))
+    return f"{int(y):04d}-{int(m):02d}-{int(d):02d}"
 
 
 @functools.cache

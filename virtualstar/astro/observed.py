@@ -128,3 +128,26 @@ def refraction_table(pressure_hpa: float, temperature_c: float, humidity: float,
 
     return RefractionTable(low=spline(_EL_TABLE_MIN_RAD, _EL_KINK_RAD),
                            high=spline(_EL_KINK_RAD, np.pi / 2))
+
+
+def topocentric_apparent_radec(az_rad: np.ndarray, el_rad: np.ndarray, times, site: Site,
+                               eop) -> tuple[np.ndarray, np.ndarray]:
+    """Return topocentric apparent RA/Dec (true equator and equinox of date), radians.
+
+    az_rad/el_rad: the *unrefracted* observed direction. The horizon vector is
+    taken to the ITRS, then to the GCRS with ERFA's IAU 2006/2000A
+    celestial-to-terrestrial matrix (UT1, polar motion from `eop`), then to
+    the true equator and equinox of date.
+    """
+    dut1, xp, yp = eop.interpolate(times.jd1, times.jd2)
+    tt1, tt2 = times.tt()
+    ut11, ut12 = times.ut1(dut1)
+    ce = np.cos(el_rad)
+    enu = np.stack([ce * np.cos(az_rad), ce * np.sin(az_rad), np.sin(el_rad)], axis=-1)
+    itrs = enu @ site.enu_matrix()  # rows: ENU → ITRS (transpose of the ITRS→ENU matrix)
+    gcrs_to_itrs = erfa.c2t06a(tt1, tt2, ut11, ut12, xp, yp)
+    gcrs_to_true = erfa.pnm06a(tt1, tt2)
+    gcrs = np.einsum("nji,nj->ni", gcrs_to_itrs, itrs)
+    true = np.einsum("nij,nj->ni", gcrs_to_true, gcrs)
+    ra, dec = erfa.c2s(true)
+    return erfa.anp(ra), dec

@@ -152,3 +152,22 @@ def load_site(path: str | os.PathLike[str] | None = None) -> Site:
     except OSError as exc:
         raise SiteError(f"cannot read site file {str(path)!r}: {exc.strerror}") from None
     return _read_site_toml(text, str(path))
+
+
+def site_from_options(*, site_file: str | os.PathLike[str] | None = None,
+                      site_text: str | None = None, pressure_hpa: float | None = None,
+                      temperature_c: float | None = None, humidity: float | None = None,
+                      no_refraction: bool = False) -> Site:
+    """Return the configured site with command-line overrides applied (None = keep).
+
+    site_text is "LAT,LON,HEIGHT_M"; no_refraction sets the pressure to 0.
+    Raises SiteError.
+    """
+    site = load_site(site_file)
+    if site_text is not None:
+        lat, lon, height = parse_site_option(site_text)
+        site = site.with_overrides(lat_deg=lat, lon_deg=lon, height_m=height,
+                                   name=f"{lat:g},{lon:g},{height:g}")
+    site = site.with_overrides(pressure_hpa=pressure_hpa, temperature_c=temperature_c,
+                               humidity=humidity)
+    return site.without_refraction() if no_refraction else site

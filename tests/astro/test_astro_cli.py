@@ -1,0 +1,105 @@
+"""`vs where` and `vs passes` through Typer's CliRunner."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from astro_satdata import TLE_PATH, load_test_satellites
+from typer.testing import CliRunner
+
+from virtualstar.astro import UtcTimes, resolve_target, satellite_passes
+from virtualstar.astro.site import Site
+from virtualstar.cli.main import app
+
+runner = CliRunner()
+SITE_ARGS = ["--site", "52.4,16.9,85", "--pressure-hpa", "1000", "--temperature-c", "5",
+             "--humidity", "0.5"]
+SITE = Site(lat_deg=52.4, lon_deg=16.9, height_m=85, pressure_hpa=1000, temperature_c=5,
+            humidity=0.5)
+JSON_FIELDS = {"utc", "az_deg", "el_deg", "ra_deg", "dec_deg", "az_rate_deg_s", "el_rate_deg_s"}
+
+
+def _run(*args: str):
+    return runner.invoke(app, list(args))
+
+
+def test_where_star_json_has_one_object_per_time_with_the_library_values(eop):
+    at = ["2024-05-18T21:00:00Z", "2024-05-18T23:30:00Z"]
+    result = _run("where", "Vega", "--at", at[0], "--at", at[1], *SITE_ARGS, "--json")
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.stdout)
+    assert len(rows) == 2 and all(set(r) >= JSON_FIELDS for r in rows)
+    obs = resolve_target("Vega").observe(UtcTimes.from_iso(at), SITE, eop)
+    np.testing.assert_allclose([r["az_deg"] for r in rows], np.degrees(obs.az_rad), atol=1e-9)
+    np.testing.assert_allclose([r["el_deg"] for r in rows], np.degrees(obs.el_rad), atol=1e-9)
+    np.testing.assert_allclose([r["el_rate_deg_s"] for r in rows],
+                               np.degrees(obs.el_rate_rad_s), atol=1e-12)
+    assert rows[0]["culmination_utc"].startswith("2024-05-19T01:")  # Vega transits ~01:41
+
+
+def test_where_no_refraction_lowers_the_elevation():
+    args = ["where", "83.633 22.0145", "--at", "2024-01-10T20:00:00", *SITE_ARGS, "--json"]
+    wet = json.loads(_run(*args).stdout)[0]
+    dry = json.loads(_run(*args, "--no-refraction").stdout)[0]
+    assert wet["el_deg"] - dry["el_deg"] == pytest.approx(0.01, abs=0.01)
+    assert wet["az_deg"] == pytest.approx(dry["az_deg"], abs=1e-9)
+    assert wet["ra_deg"] == pytest.approx(dry["ra_deg"], abs=1e-9)
+
+
+def test_where_planet_prints_a_table_with_events():
+    result = _run("where", "moon", "--at", "2024-03-15T20:00:00", *SITE_ARGS)
+    assert result.exit_code == 0, result.output
+    assert "moon" in result.stdout and "az_deg" in result.stdout and "rise" in result.stdout
+
+
+def test_where_satellite_from_a_tle_file():
+    result = _run("where", "--tle", str(TLE_PATH), "--sat", "CSS (TIANHE)", "--at",
+                  "2024-05-18T19:55:00", *SITE_ARGS, "--json")
+    assert result.exit_code == 0, result.output
+    row = json.loads(result.stdout)[0]
+    assert row["target"] == "CSS (TIANHE)" and set(row) >= JSON_FIELDS
+    assert row["rise_utc"] is not None
+
+
+def test_passes_json_lists_the_library_passes(eop):
+    result = _run("passes", "--tle", str(TLE_PATH), "--from", "2024-05-18T00:00:00",
+                  "--to", "2024-05-19T00:00:00", "--min-el", "10", *SITE_ARGS, "--json")
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.stdout)
+    ref = satellite_passes(load_test_satellites()["ISS (ZARYA)"], SITE,
+                           UtcTimes.from_iso(["2024-05-18"]), UtcTimes.from_iso(["2024-05-19"]),
+                           min_el_deg=10, eop=eop)
+    assert [r["culmination_el_deg"] for r in rows] == [round(p.culmination.el_deg, 3)
+                                                       for p in ref]
+    assert all(r["culmination_el_deg"] >= 10 for r in rows) and len(rows) >= 2
+    assert not math.isnan(rows[0]["rise_az_deg"])
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [(["where", "Vegaa"], "did you mean: Vega"),
+     (["where", "25h00m00s +10d"], "bad RA"),
+     (["where"], "give a TARGET"),
+     (["where", "Vega", "--at", "yesterday"], "ISO 8601"),
+     (["where", "Vega", "--site", "95,0,0"], "lat_deg"),
+     (["where", "Vega", "--site", "52;16"], "LAT,LON,HEIGHT_M"),
+     (["where", "Vega", "--humidity", "60"], "humidity"),
+     (["where", "--tle", "/nonexistent.tle"], "cannot read"),
+     (["where", "--tle", str(TLE_PATH), "--sat", "Hubble"], "Hubble"),
+     (["passes", "--tle", str(TLE_PATH), "--from", "2024-05-18", "--to", "2024-05-17"],
+      "not after"),
+     (["passes", "--tle", str(TLE_PATH), "--from", "2024-05-18", "--to", "2024-05-19",
+       "--min-el", "95"], "--min-el")],
+)
+def test_bad_arguments_fail_with_a_clear_message(args, fragment):
+    result = _run(*args)
+    assert result.exit_code != 0
+    assert fragment in result.stderr
+
+
+def test_help_texts_tell_what_to_type():
+    assert "05h34m31.94s" in _run("where", "--help").stdout
+    assert "--min-el" in _run("passes", "--help").stdout

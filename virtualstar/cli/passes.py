@@ -1,0 +1,95 @@
+"""`vs passes`: list the passes of a satellite over the site between two UTC times."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from virtualstar.astro import AstroError, EarthOrientation, satellite_passes
+from virtualstar.cli.where import (
+    HumidityOpt,
+    JsonOpt,
+    NoRefractionOpt,
+    PressureOpt,
+    SatOpt,
+    SiteFileOpt,
+    SiteOpt,
+    TemperatureOpt,
+    build_site,
+    echo_warnings,
+    fail,
+    load_satellite,
+    parse_times,
+)
+
+
+def passes(
+    tle: Annotated[Path, typer.Option("--tle", help="TLE (2/3-line) or OMM JSON file.")],
+    start: Annotated[str, typer.Option("--from", help="Start of the search, UTC ISO 8601.")],
+    end: Annotated[str, typer.Option("--to", help="End of the search, UTC ISO 8601.")],
+    sat: SatOpt = None,
+    min_el: Annotated[float, typer.Option(
+        "--min-el", help="Lowest culmination counted as a pass, and the rise/set "
+                         "elevation, degrees.")] = 0.0,
+    site: SiteOpt = None,
+    site_file: SiteFileOpt = None,
+    pressure_hpa: PressureOpt = None,
+    temperature_c: TemperatureOpt = None,
+    humidity: HumidityOpt = None,
+    no_refraction: NoRefractionOpt = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """List satellite passes: rise, culmination (time, elevation) and set."""
+    the_site = build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction)
+    t0, t1 = parse_times([start]), parse_times([end])
+    if not -90.0 < min_el < 90.0:
+        raise fail(f"--min-el {min_el}: expected degrees between -90 and 90")
+    span_s = float(t1.seconds_since(t0.jd1[0], t0.jd2[0])[0])
+    if span_s <= 0:
+        raise fail(f"--to {end} is not after --from {start}")
+    if span_s > 31 * 86400:
+        raise fail(f"--from/--to span {span_s / 86400:.1f} days; at most 31 days per search")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        satellite = load_satellite(tle, sat)
+        try:
+            found = satellite_passes(satellite, the_site, t0, t1, min_el_deg=min_el,
+                                     eop=EarthOrientation.from_astropy_iers_data())
+        except AstroError as exc:
+            raise fail(str(exc)) from None
+    echo_warnings(caught)
+    rows = [_pass_fields(p) for p in found]
+    if as_json:
+        typer.echo(json.dumps(rows, indent=1))
+        return
+    typer.echo(f"{satellite.name}: {len(rows)} passes above {min_el:g} deg from {the_site.name}")
+    typer.echo(f"{'rise UTC':24} {'az':>6}   {'culmination UTC':24} {'el':>5} {'az':>6}   "
+               f"{'set UTC':24} {'az':>6}")
+    for r in rows:
+        typer.echo(f"{r['rise_utc'] or '(before start)':24} {_num(r['rise_az_deg'])}   "
+                   f"{r['culmination_utc']:24} {r['culmination_el_deg']:5.1f} "
+                   f"{r['culmination_az_deg']:6.1f}   {r['set_utc'] or '(after end)':24} "
+                   f"{_num(r['set_az_deg'])}")
+
+
+def _num(value: float | None) -> str:
+    return f"{value:6.1f}" if value is not None else f"{'-':>6}"
+
+
+def _pass_fields(p) -> dict:
+    return {
+        "rise_utc": p.rise.utc.iso()[0] if p.rise else None,
+        "rise_az_deg": round(p.rise.az_deg, 3) if p.rise else None,
+        "culmination_utc": p.culmination.utc.iso()[0],
+        "culmination_el_deg": round(p.culmination.el_deg, 3),
+        "culmination_az_deg": round(p.culmination.az_deg, 3),
+        "set_utc": p.set.utc.iso()[0] if p.set else None,
+        "set_az_deg": round(p.set.az_deg, 3) if p.set else None,
+    }
+
+
+__all__ = ["passes"]

@@ -1,0 +1,219 @@
+"""`vs where`: where a star, planet, RA/Dec or satellite is, for one or more UTC times."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from virtualstar.astro import (
+    AstroError,
+    EarthOrientation,
+    Satellite,
+    Site,
+    UtcTimes,
+    find_events,
+    resolve_target,
+)
+from virtualstar.astro.observed import topocentric_apparent_radec
+from virtualstar.astro.site import site_from_options
+
+SiteOpt = Annotated[str | None, typer.Option(
+    "--site", help="Site as LAT,LON,HEIGHT_M (degrees, degrees east, metres); "
+                   "default: the site TOML ($VIRTUALSTAR_SITE or the packaged default).")]
+SiteFileOpt = Annotated[Path | None, typer.Option(
+    "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a [site] table.")]
+PressureOpt = Annotated[float | None, typer.Option(
+    "--pressure-hpa", help="Air pressure for refraction, hPa (0 switches refraction off).")]
+TemperatureOpt = Annotated[float | None, typer.Option(
+    "--temperature-c", help="Air temperature for refraction, degrees Celsius.")]
+HumidityOpt = Annotated[float | None, typer.Option(
+    "--humidity", help="Relative humidity for refraction, 0..1.")]
+NoRefractionOpt = Annotated[bool, typer.Option(
+    "--no-refraction", help="Give geometric (unrefracted) elevations.")]
+TleOpt = Annotated[Path | None, typer.Option(
+    "--tle", help="TLE (2/3-line) or OMM JSON file with satellite elements.")]
+SatOpt = Annotated[str | None, typer.Option(
+    "--sat", help="Satellite name or NORAD number in the --tle file (default: the first).")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
+
+
+def fail(message: str, code: int = 2) -> typer.Exit:
+    """Print an error to stderr and return the Exit to raise."""
+    typer.echo(f"error: {message}", err=True)
+    return typer.Exit(code)
+
+
+def build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction) -> Site:
+    """Return the site from the shared options, or raise typer.Exit with a clear error."""
+    try:
+        return site_from_options(site_file=site_file, site_text=site, pressure_hpa=pressure_hpa,
+                                 temperature_c=temperature_c, humidity=humidity,
+                                 no_refraction=no_refraction)
+    except AstroError as exc:
+        raise fail(str(exc)) from None
+
+
+def load_satellite(tle: Path, sat: str | None) -> Satellite:
+    """Return the satellite chosen from a TLE/OMM file, or raise typer.Exit."""
+    from catalogs import CatalogError, load_tle_file, select_satellite
+
+    try:
+        records = load_tle_file(tle)
+        if not records:
+            raise fail(f"{tle}: no element sets found")
+        record = select_satellite(records, sat) if sat else records[0]
+        return Satellite.from_record(record)
+    except OSError as exc:
+        raise fail(f"cannot read {tle}: {exc.strerror}") from None
+    except (CatalogError, AstroError, KeyError, ValueError) as exc:
+        raise fail(str(exc).strip('"')) from None
+
+
+def parse_times(at: list[str] | None) -> UtcTimes:
+    """Return the --at times (default: now), or raise typer.Exit."""
+    try:
+        return UtcTimes.from_iso(at) if at else UtcTimes.now()
+    except AstroError as exc:
+        raise fail(str(exc)) from None
+
+
+def echo_warnings(caught: list[warnings.WarningMessage]) -> None:
+    """Show each distinct warning once on stderr, without Python's file/line noise."""
+    seen = set()
+    for w in caught:
+        text = str(w.message)
+        if text not in seen:
+            seen.add(text)
+            typer.echo(f"warning: {text}", err=True)
+
+
+@dataclass(frozen=True)
+class _Row:
+    utc: str
+    az_deg: float
+    el_deg: float
+    ra_deg: float
+    dec_deg: float
+    az_rate_deg_s: float
+    el_rate_deg_s: float
+
+
+def where(
+    target: Annotated[str | None, typer.Argument(
+        help="Star name ('Vega', 'HIP 91262', 'alf Lyr'), planet ('mars', 'moon', 'sun') or "
+             "ICRS RA/Dec ('05h34m31.94s +22d00m52.2s', '83.633 22.0145'). "
+             "With --tle: a satellite name (same as --sat) or nothing.")] = None,
+    tle: TleOpt = None,
+    sat: SatOpt = None,
+    at: Annotated[list[str] | None, typer.Option(
+        "--at", help="UTC time, ISO 8601 (2024-05-18T21:30:00Z); repeat for more. "
+                     "Default: now.")] = None,
+    site: SiteOpt = None,
+    site_file: SiteFileOpt = None,
+    pressure_hpa: PressureOpt = None,
+    temperature_c: TemperatureOpt = None,
+    humidity: HumidityOpt = None,
+    no_refraction: NoRefractionOpt = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Show where a target is: apparent RA/Dec, observed az/el and rates, rise/culmination/set."""
+    the_site = build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction)
+    times = parse_times(at)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if tle is not None:
+            obj: Any = load_satellite(tle, sat or target)
+            _check_tle_epoch(tle, sat or target, times)
+        elif target is None:
+            raise fail("give a TARGET (star, planet or RA/Dec) or --tle FILE; see vs where --help")
+        else:
+            try:
+                obj = resolve_target(target)
+            except (AstroError, KeyError) as exc:
+                raise fail(str(exc).strip('"')) from None
+        try:
+            rows, events = _compute(obj, times, the_site)
+        except AstroError as exc:
+            raise fail(str(exc)) from None
+    echo_warnings(caught)
+    if as_json:
+        out = [{**row.__dict__, **ev, "target": obj.name, "refraction": the_site.refraction}
+               for row, ev in zip(rows, events, strict=True)]
+        typer.echo(json.dumps(out, indent=1))
+        return
+    _print_table(obj, the_site, rows, events)
+
+
+def _check_tle_epoch(tle: Path, sat: str | None, times: UtcTimes) -> None:
+    import datetime as dt
+
+    from catalogs import check_epoch, load_tle_file, select_satellite
+
+    records = load_tle_file(tle)
+    record = select_satellite(records, sat) if sat else records[0]
+    when = dt.datetime.fromtimestamp(int(times.to_unix_us()[0]) / 1e6, dt.UTC)
+    check_epoch(record, when)
+
+
+def _compute(obj: Any, times: UtcTimes, site: Site) -> tuple[list[_Row], list[dict]]:
+    eop = EarthOrientation.from_astropy_iers_data()
+    obs = obj.observe(times, site, eop)
+    geometric = obj.observe(times, site.without_refraction(), eop)
+    ra, dec = topocentric_apparent_radec(geometric.az_rad, geometric.el_rad, times, site, eop)
+    iso = times.iso()
+    rows = [_Row(iso[i], math.degrees(obs.az_rad[i]), math.degrees(obs.el_rad[i]),
+                 math.degrees(ra[i]), math.degrees(dec[i]), math.degrees(obs.az_rate_rad_s[i]),
+                 math.degrees(obs.el_rate_rad_s[i])) for i in range(len(times))]
+    events = []
+    for i in range(len(times)):
+        found = find_events(obj, site, times[i], 86400.0, eop=eop)
+        events.append(_event_fields(found))
+    return rows, events
+
+
+def _event_fields(found) -> dict:
+    fields: dict[str, Any] = {"rise_utc": None, "culmination_utc": None,
+                              "culmination_el_deg": None, "set_utc": None}
+    for ev in found:
+        key = f"{ev.kind}_utc"
+        if fields[key] is None:
+            fields[key] = ev.utc.iso()[0]
+            if ev.kind == "culmination":
+                fields["culmination_el_deg"] = round(ev.el_deg, 4)
+    return fields
+
+
+def _hms(deg: float, hours: bool) -> str:
+    value = deg / 15.0 if hours else abs(deg)
+    d = int(value)
+    m = int((value - d) * 60)
+    s = ((value - d) * 60 - m) * 60
+    if hours:
+        return f"{d:02d}h{m:02d}m{s:05.2f}s"
+    return f"{'-' if deg < 0 else '+'}{d:02d}d{m:02d}m{s:04.1f}s"
+
+
+def _print_table(obj: Any, site: Site, rows: list[_Row], events: list[dict]) -> None:
+    refr = (f"refraction on ({site.pressure_hpa:g} hPa, {site.temperature_c:g} C, "
+            f"humidity {site.humidity:g})" if site.refraction else "refraction off")
+    typer.echo(f"{obj.name} from {site.name} (lat {site.lat_deg:.4f}, lon {site.lon_deg:.4f}, "
+               f"{site.height_m:g} m), {refr}")
+    typer.echo(f"{'UTC':24} {'az_deg':>10} {'el_deg':>9} {'az_rate_deg_s':>14} "
+               f"{'el_rate_deg_s':>14}  {'RA (apparent)':>13} {'Dec':>12}")
+    for row, ev in zip(rows, events, strict=True):
+        typer.echo(f"{row.utc:24} {row.az_deg:10.5f} {row.el_deg:9.5f} "
+                   f"{row.az_rate_deg_s:14.7f} {row.el_rate_deg_s:14.7f}  "
+                   f"{_hms(row.ra_deg, True):>13} {_hms(row.dec_deg, False):>12}")
+        culm = (f"{ev['culmination_utc']} (el {ev['culmination_el_deg']:.2f})"
+                if ev["culmination_utc"] else "-")
+        typer.echo(f"{'':24} next 24 h: rise {ev['rise_utc'] or '-'}, culmination {culm}, "
+                   f"set {ev['set_utc'] or '-'}")
+
+
+__all__ = ["where"]
