@@ -81,7 +81,13 @@ G_SYNC_COUNT = 23
 G_TRAJ_REF_AZ = 24
 G_TRAJ_REF_EL = 25
 G_TRAJ_BASE = 26  # index counter of the first point since traj.init (tangent estimates)
-STATE_AXIS0 = 32
+G_PPS_COUNTDOWN = 27  # ticks until the next PPS edge (true time on a whole second)
+G_SEG_HEAD = 28  # trajectory segment whose Hermite coefficients are cached (-1: none)
+G_SEG_TAIL = 29  # buffer tail when they were computed (a new point may change the end tangent)
+G_SEG_T0_US = 30
+G_SEG_SPAN_US = 31
+G_SEG_COEF = 32  # 8 slots: per axis c0..c3 of p(s) = c0 + c1·s + c2·s² + c3·s³, s in [0, 1)
+STATE_AXIS0 = 64
 
 # ----------------------------------------------------------- per-axis state
 A_POS_M = 0  # motor/axis angle (true), rad — where the encoder sits

@@ -199,6 +199,7 @@ class MountModel:
         self.state[L.G_TRAJ_HEAD] = tail
         self.state[L.G_TRAJ_BASE] = tail
         self.state[L.G_TRAJ_LAST_US] = 0
+        self.state[L.G_SEG_HEAD] = -1  # drop the cached Hermite segment
 
     def traj_start(self) -> None:
         """Start following the buffer on both axes (they must be holding)."""

@@ -77,8 +77,14 @@ from mount_emulator.layout import (
     G_MOUNT_US,
     G_PENDING_UTC_S,
     G_PPS_COUNT,
+    G_PPS_COUNTDOWN,
     G_PPS_ERR_US,
     G_REGEN_J,
+    G_SEG_COEF,
+    G_SEG_HEAD,
+    G_SEG_SPAN_US,
+    G_SEG_T0_US,
+    G_SEG_TAIL,
     G_STATUS,
     G_SUPPLY_W,
     G_SYNC_COUNT,
@@ -171,6 +177,9 @@ from mount_emulator.states import (
 
 __all__ = ["initial_state", "step", "hermite_sample"]
 
+# Compiled, cached, GIL released; fast-math without "nnan"/"ninf" (NaN marks missing rates)
+_jit = njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
+
 # Plain ints for the compiled code (numba freezes module globals).
 OFF = int(AxisState.OFF)
 HOLDING = int(AxisState.HOLDING)
@@ -188,10 +197,11 @@ SAMPLE_OK = 0
 SAMPLE_BEFORE = 1  # the mount time is before the first point: hold
 SAMPLE_UNDERRUN = 2  # no point after the mount time
 TWO_PI = 2.0 * math.pi
+TICKS_PER_SECOND = 1_000_000 // TICK_US
 RAD_TO_DEG = 180.0 / math.pi
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _apply(state, sb, event):
     """Apply an event to the axis at state block ``sb``; return True if the state changed."""
     cur = int(state[sb + A_STATE])
@@ -202,7 +212,7 @@ def _apply(state, sb, event):
     return False
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _tangent(traj_t, traj_p, traj_v, k, base, tail, ax):
     """Return the rate at point counter ``k``: given, else from its neighbours (rad/s)."""
     cap = traj_t.shape[0]
@@ -230,7 +240,30 @@ def _tangent(traj_t, traj_p, traj_v, k, base, tail, ax):
     return 0.0
 
 
-@njit(cache=True, nogil=True)
+@_jit
+def _segment_coefficients(traj_t, traj_p, traj_v, state, head, base, tail):
+    """Cache the cubic Hermite polynomial of segment [head, head + 1] in the state."""
+    cap = traj_t.shape[0]
+    i0 = head % cap
+    i1 = (head + 1) % cap
+    span_us = float(traj_t[i1] - traj_t[i0])
+    h = span_us * 1e-6
+    for ax in range(2):
+        p0 = traj_p[i0, ax]
+        p1 = traj_p[i1, ax]
+        m0 = _tangent(traj_t, traj_p, traj_v, head, base, tail, ax) * h
+        m1 = _tangent(traj_t, traj_p, traj_v, head + 1, base, tail, ax) * h
+        state[G_SEG_COEF + 4 * ax] = p0
+        state[G_SEG_COEF + 4 * ax + 1] = m0
+        state[G_SEG_COEF + 4 * ax + 2] = -3.0 * p0 - 2.0 * m0 + 3.0 * p1 - m1
+        state[G_SEG_COEF + 4 * ax + 3] = 2.0 * p0 + m0 - 2.0 * p1 + m1
+    state[G_SEG_T0_US] = float(traj_t[i0])
+    state[G_SEG_SPAN_US] = span_us
+    state[G_SEG_HEAD] = head
+    state[G_SEG_TAIL] = tail
+
+
+@_jit
 def hermite_sample(traj_t, traj_p, traj_v, state, t_us, out):
     """Sample the trajectory at mount time ``t_us`` into ``out`` (pos[2], vel[2], acc[2]).
 
@@ -251,37 +284,23 @@ def hermite_sample(traj_t, traj_p, traj_v, state, t_us, out):
     state[G_TRAJ_HEAD] = head
     if head + 1 >= tail:
         return SAMPLE_UNDERRUN
-    i0 = head % cap
-    i1 = (head + 1) % cap
-    span_us = float(traj_t[i1] - traj_t[i0])
+    if state[G_SEG_HEAD] != head or state[G_SEG_TAIL] != tail:
+        _segment_coefficients(traj_t, traj_p, traj_v, state, head, base, tail)
+    span_us = state[G_SEG_SPAN_US]
     h = span_us * 1e-6
-    s = (t_us - traj_t[i0]) / span_us
-    s2 = s * s
-    s3 = s2 * s
-    h00 = 2 * s3 - 3 * s2 + 1
-    h10 = s3 - 2 * s2 + s
-    h01 = -2 * s3 + 3 * s2
-    h11 = s3 - s2
-    d00 = 6 * s2 - 6 * s
-    d10 = 3 * s2 - 4 * s + 1
-    d01 = -6 * s2 + 6 * s
-    d11 = 3 * s2 - 2 * s
-    a00 = 12 * s - 6
-    a10 = 6 * s - 4
-    a01 = -12 * s + 6
-    a11 = 6 * s - 2
+    s = (t_us - state[G_SEG_T0_US]) / span_us
     for ax in range(2):
-        p0 = traj_p[i0, ax]
-        p1 = traj_p[i1, ax]
-        m0 = _tangent(traj_t, traj_p, traj_v, head, base, tail, ax) * h
-        m1 = _tangent(traj_t, traj_p, traj_v, head + 1, base, tail, ax) * h
-        out[ax] = h00 * p0 + h10 * m0 + h01 * p1 + h11 * m1
-        out[2 + ax] = (d00 * p0 + d10 * m0 + d01 * p1 + d11 * m1) / h
-        out[4 + ax] = (a00 * p0 + a10 * m0 + a01 * p1 + a11 * m1) / (h * h)
+        c0 = state[G_SEG_COEF + 4 * ax]
+        c1 = state[G_SEG_COEF + 4 * ax + 1]
+        c2 = state[G_SEG_COEF + 4 * ax + 2]
+        c3 = state[G_SEG_COEF + 4 * ax + 3]
+        out[ax] = c0 + s * (c1 + s * (c2 + s * c3))
+        out[2 + ax] = (c1 + s * (2.0 * c2 + 3.0 * s * c3)) / h
+        out[4 + ax] = (2.0 * c2 + 6.0 * s * c3) / (h * h)
     return SAMPLE_OK
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _ramp_velocity(state, sb, v_goal, amax, dt):
     """Move the reference velocity toward ``v_goal`` under ``amax``; integrate the reference."""
     v = state[sb + A_REF_VEL]
@@ -297,7 +316,7 @@ def _ramp_velocity(state, sb, v_goal, amax, dt):
     return v + dv
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _slew_profile(state, sb, vmax, amax, dt):
     """Advance the time-optimal profile toward the target; return True once on it."""
     d = state[sb + A_TARGET] - state[sb + A_REF]
@@ -325,7 +344,7 @@ def _slew_profile(state, sb, vmax, amax, dt):
     return False
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _reference(state, params, sb, pb, a, sample_code, sample, dt):
     """Update the reference of one axis for this tick; return event bits."""
     ev = 0
@@ -340,7 +359,7 @@ def _reference(state, params, sb, pb, a, sample_code, sample, dt):
         state[sb + A_REF_ACC] = 0.0
     elif st == SLEWING:
         done = _slew_profile(state, sb, params[pb + P_VMAX], params[pb + P_AMAX], dt)
-        if done and abs(state[sb + A_ERR_AS]) < params[pb + P_SETTLE_AS]:
+        if done and abs(state[sb + A_ERR]) < params[pb + P_SETTLE_AS] * ARCSEC:
             _apply(state, sb, EVT_ARRIVED)
             ev |= EV_ARRIVED
     elif st == TRACKING:
@@ -364,7 +383,7 @@ def _reference(state, params, sb, pb, a, sample_code, sample, dt):
     return ev
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _control(state, params, sb, pb, dt):
     """Run the cascaded position/velocity loops; return the current command (A)."""
     e = state[sb + A_REF] - state[sb + A_ENC]
@@ -413,7 +432,7 @@ def _control(state, params, sb, pb, dt):
     return i_cmd
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _watchdog(state, params, sb, pb, mount_faults):
     """Return the fault bits that trip on this axis now (0 when healthy)."""
     f = mount_faults
@@ -435,10 +454,10 @@ def _watchdog(state, params, sb, pb, mount_faults):
     return f
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _sense(state, params, sb, pb, dt):
     """Read the absolute encoder (unless faulted) and update the velocity estimate."""
-    counts_per_rad = (2.0 ** params[pb + P_ENC_BITS]) / TWO_PI
+    counts_per_rad = math.ldexp(1.0, int(params[pb + P_ENC_BITS])) / TWO_PI
     if params[pb + P_INJ_ENC] == 0.0:
         counts = math.floor(state[sb + A_POS_M] * counts_per_rad + 0.5)
         state[sb + A_ENC_COUNTS] = counts
@@ -450,7 +469,7 @@ def _sense(state, params, sb, pb, dt):
     state[sb + A_VEL_EST] += beta * (raw_v - state[sb + A_VEL_EST])
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
     """Integrate one axis over one tick; return the electrical power drawn (W)."""
     cur = state[sb + A_CUR]
@@ -504,20 +523,29 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
     return power
 
 
-@njit(cache=True, nogil=True)
+@_jit
+def _peak(state, sb):
+    """Track the peak |following error| (every tick: a peak must not be missed)."""
+    err_as = abs(state[sb + A_ERR]) / ARCSEC
+    if err_as > state[sb + A_ERR_PEAK_AS]:
+        state[sb + A_ERR_PEAK_AS] = err_as
+
+
+@_jit
 def _derived(state, sb):
-    """Refresh the human-facing copies (degrees, arcseconds) of one axis."""
-    err_as = state[sb + A_ERR] / ARCSEC
-    state[sb + A_ERR_AS] = err_as
-    if abs(err_as) > state[sb + A_ERR_PEAK_AS]:
-        state[sb + A_ERR_PEAK_AS] = abs(err_as)
+    """Refresh the human-facing copies (degrees, arcseconds) of one axis.
+
+    Done per tick only while a stream wants per-tick values, else once per block,
+    so simulated time does not pay for conversions nobody reads.
+    """
+    state[sb + A_ERR_AS] = state[sb + A_ERR] / ARCSEC
     state[sb + A_POS_DEG] = state[sb + A_ENC] * RAD_TO_DEG
     state[sb + A_VEL_DEG_S] = state[sb + A_VEL_EST] * RAD_TO_DEG
     state[sb + A_LOAD_ERR_AS] = (state[sb + A_REF] - state[sb + A_POS_L]) / ARCSEC
     state[sb + A_TWIST_AS] = (state[sb + A_POS_M] - state[sb + A_POS_L]) / ARCSEC
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _clock(state, params):
     """Advance true and mount time by one tick, handling the PPS edge; return event bits."""
     ev = 0
@@ -527,7 +555,9 @@ def _clock(state, params):
     whole = math.floor(frac)
     state[G_MOUNT_US] += whole
     state[G_MOUNT_FRAC_US] = frac - whole
-    if state[G_TRUE_US] % 1_000_000.0 == 0.0:
+    state[G_PPS_COUNTDOWN] -= 1.0
+    if state[G_PPS_COUNTDOWN] <= 0.0:
+        state[G_PPS_COUNTDOWN] = TICKS_PER_SECOND
         ev |= EV_PPS
         state[G_PPS_COUNT] += 1.0
         state[G_PPS_ERR_US] = state[G_MOUNT_US] + state[G_MOUNT_FRAC_US] - state[G_TRUE_US]
@@ -543,7 +573,7 @@ def _clock(state, params):
     return ev
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _mount_state(state):
     """Derive the mount state from its axes (see states module docstring)."""
     s0 = int(state[STATE_AXIS0 + A_STATE])
@@ -556,7 +586,7 @@ def _mount_state(state):
     return OFF
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def step(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace_dst):
     """Advance the mount by ``n_ticks`` ticks of 100 µs; return the events seen (EV_* bits).
 
@@ -610,7 +640,9 @@ def step(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace
             if int(state[sb + A_STATE]) == FAULT:
                 i_cmd = 0.0
             p_total += _plant(state, params, sb, pb, i_cmd, dt, ambient)
-            _derived(state, sb)
+            _peak(state, sb)
+            if n_trace > 0:
+                _derived(state, sb)
         # DC bus: supply through its resistance (a diode: it only sources), chopper above its threshold
         v_bus = state[G_BUS_V]
         i_sup = (params[Q_SUPPLY_V] - v_bus) / params[Q_SUPPLY_R]
@@ -637,6 +669,8 @@ def step(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace
         state[G_STATUS] = status
         for j in range(n_trace):
             trace[n, trace_dst[j]] = state[trace_src[j]]
+    for a in range(2):
+        _derived(state, STATE_AXIS0 + a * AXIS_STRIDE)
     state[G_EVENTS] = events
     return events
 
@@ -653,6 +687,8 @@ def initial_state(params: np.ndarray, *, start_us: int, az_rad: float = 0.0,
     state[G_TRUE_US] = float(start_us)
     state[G_MOUNT_US] = float(start_us)
     state[G_PENDING_UTC_S] = -1.0
+    state[G_PPS_COUNTDOWN] = (1_000_000 - start_us % 1_000_000) // TICK_US
+    state[G_SEG_HEAD] = -1.0
     state[G_BUS_V] = params[Q_SUPPLY_V]
     for a, pos in enumerate((az_rad, el_rad)):
         sb = STATE_AXIS0 + a * AXIS_STRIDE
@@ -660,7 +696,7 @@ def initial_state(params: np.ndarray, *, start_us: int, az_rad: float = 0.0,
         state[sb + A_POS_M] = pos
         twist = params[pb + P_GRAV] * math.cos(pos) / params[pb + P_K]
         state[sb + A_POS_L] = pos - twist
-        counts_per_rad = (2.0 ** params[pb + P_ENC_BITS]) / TWO_PI
+        counts_per_rad = math.ldexp(1.0, int(params[pb + P_ENC_BITS])) / TWO_PI
         enc = math.floor(pos * counts_per_rad + 0.5) / counts_per_rad
         state[sb + A_ENC] = enc
         state[sb + A_PREV_ENC] = enc
