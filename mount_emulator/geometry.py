@@ -1,9 +1,9 @@
 """Give the emulated mount a true, hidden geometry and a guide camera that sees it.
 
 The seven TPOINT alt-azimuth terms, in arcseconds, with TPOINT's sign
-conventions: azimuth A from north through east, elevation E; the model gives
-the raw (encoder) position that puts a star at observed position (A, E) on
-the optical axis, ``A_enc = A + ΔA``, ``E_enc = E + ΔE``, with
+conventions: azimuth A from north through east, elevation E; the residual
+observed − raw (encoder) at observed position (A, E) is ``A − A_enc = ΔA``,
+``E − E_enc = ΔE`` (so ``A_enc = A − ΔA`` puts the star on the optical axis), with
 
     ΔA = −IA − CA·secE − NPAE·tanE − AN·sinA·tanE − AW·cosA·tanE
     ΔE = +IE − AN·cosA + AW·sinA − TF·cosE

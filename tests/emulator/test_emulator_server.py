@@ -119,10 +119,10 @@ def test_client_tracks_a_pushed_trajectory_and_gain_writes_apply():
 def test_guide_measure_reports_the_hidden_index_errors():
     async def body(emu, c):
         dx, dy = await c.invoke("guide.measure", 0.0, 20.0)  # encoders at az 0°, el 20°
-        # pure index terms: encoder = sky + ΔA, ΔA = −IA, ΔE = +IE, so with the encoders on the
-        # star's place the optical axis is at (A + IA, E − IE): star − axis = (−IA·cosE, +IE)
-        assert dx == pytest.approx(-120.0 * math.cos(math.radians(20.0)), abs=0.01)
-        assert dy == pytest.approx(-60.0, abs=0.01)
+        # pure index terms, TPOINT: sky − encoder = Δ with ΔA = −IA, ΔE = +IE; with the
+        # encoders on the star's place the axis is at (A − IA, E + IE): star − axis = (IA·cosE, −IE)
+        assert dx == pytest.approx(120.0 * math.cos(math.radians(20.0)), abs=0.01)
+        assert dy == pytest.approx(60.0, abs=0.01)
     asyncio.run(_with_client(_config(speed=0.0), body))
 
 
