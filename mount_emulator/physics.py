@@ -178,7 +178,9 @@ from mount_emulator.states import (
 __all__ = ["initial_state", "step", "hermite_sample"]
 
 # Compiled, cached, GIL released; fast-math without "nnan"/"ninf" (NaN marks missing rates)
-_jit = njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
+_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+_jit = njit(cache=True, nogil=True, fastmath=_FASTMATH)
+_inline = njit(cache=True, nogil=True, fastmath=_FASTMATH, inline="always")
 
 # Plain ints for the compiled code (numba freezes module globals).
 OFF = int(AxisState.OFF)
@@ -201,7 +203,7 @@ TICKS_PER_SECOND = 1_000_000 // TICK_US
 RAD_TO_DEG = 180.0 / math.pi
 
 
-@_jit
+@_inline
 def _apply(state, sb, event):
     """Apply an event to the axis at state block ``sb``; return True if the state changed."""
     cur = int(state[sb + A_STATE])
@@ -300,7 +302,7 @@ def hermite_sample(traj_t, traj_p, traj_v, state, t_us, out):
     return SAMPLE_OK
 
 
-@_jit
+@_inline
 def _ramp_velocity(state, sb, v_goal, amax, dt):
     """Move the reference velocity toward ``v_goal`` under ``amax``; integrate the reference."""
     v = state[sb + A_REF_VEL]
@@ -316,7 +318,7 @@ def _ramp_velocity(state, sb, v_goal, amax, dt):
     return v + dv
 
 
-@_jit
+@_inline
 def _slew_profile(state, sb, vmax, amax, dt):
     """Advance the time-optimal profile toward the target; return True once on it."""
     d = state[sb + A_TARGET] - state[sb + A_REF]
@@ -344,7 +346,7 @@ def _slew_profile(state, sb, vmax, amax, dt):
     return False
 
 
-@_jit
+@_inline
 def _reference(state, params, sb, pb, a, sample_code, sample, dt):
     """Update the reference of one axis for this tick; return event bits."""
     ev = 0
@@ -383,7 +385,7 @@ def _reference(state, params, sb, pb, a, sample_code, sample, dt):
     return ev
 
 
-@_jit
+@_inline
 def _control(state, params, sb, pb, dt):
     """Run the cascaded position/velocity loops; return the current command (A)."""
     e = state[sb + A_REF] - state[sb + A_ENC]
@@ -432,7 +434,7 @@ def _control(state, params, sb, pb, dt):
     return i_cmd
 
 
-@_jit
+@_inline
 def _watchdog(state, params, sb, pb, mount_faults):
     """Return the fault bits that trip on this axis now (0 when healthy)."""
     f = mount_faults
@@ -454,7 +456,7 @@ def _watchdog(state, params, sb, pb, mount_faults):
     return f
 
 
-@_jit
+@_inline
 def _sense(state, params, sb, pb, dt):
     """Read the absolute encoder (unless faulted) and update the velocity estimate."""
     counts_per_rad = math.ldexp(1.0, int(params[pb + P_ENC_BITS])) / TWO_PI
@@ -469,7 +471,7 @@ def _sense(state, params, sb, pb, dt):
     state[sb + A_VEL_EST] += beta * (raw_v - state[sb + A_VEL_EST])
 
 
-@_jit
+@_inline
 def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
     """Integrate one axis over one tick; return the electrical power drawn (W)."""
     cur = state[sb + A_CUR]
@@ -523,7 +525,7 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
     return power
 
 
-@_jit
+@_inline
 def _peak(state, sb):
     """Track the peak |following error| (every tick: a peak must not be missed)."""
     err_as = abs(state[sb + A_ERR]) / ARCSEC
@@ -531,7 +533,7 @@ def _peak(state, sb):
         state[sb + A_ERR_PEAK_AS] = err_as
 
 
-@_jit
+@_inline
 def _derived(state, sb):
     """Refresh the human-facing copies (degrees, arcseconds) of one axis.
 
@@ -545,7 +547,7 @@ def _derived(state, sb):
     state[sb + A_TWIST_AS] = (state[sb + A_POS_M] - state[sb + A_POS_L]) / ARCSEC
 
 
-@_jit
+@_inline
 def _clock(state, params):
     """Advance true and mount time by one tick, handling the PPS edge; return event bits."""
     ev = 0
@@ -573,7 +575,7 @@ def _clock(state, params):
     return ev
 
 
-@_jit
+@_inline
 def _mount_state(state):
     """Derive the mount state from its axes (see states module docstring)."""
     s0 = int(state[STATE_AXIS0 + A_STATE])
