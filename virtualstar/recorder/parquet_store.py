@@ -1,0 +1,436 @@
+"""The embedded store: hourly Parquet files of exact samples, a 1-s envelope beside them.
+
+Layout of a store directory::
+
+    DIR/recording.json                         signals (name, unit, dtype) and sessions
+    DIR/samples/20261121T22Z-<session>.parquet  t_us (int64) + one column per signal
+    DIR/overview/20261121T22Z-<session>.parquet 1-s buckets: t_us, n, <name>__min, <name>__max
+    DIR/gaps.csv                                after_t_us, before_t_us, lost_samples, reason, session
+
+Files are standard Parquet (pandas, polars, DuckDB, MATLAB's parquetread): values are
+stored exactly as streamed, compressed with zstd; float columns use BYTE_STREAM_SPLIT and
+integer columns (t_us first) DELTA_BINARY_PACKED, which shrink smooth signals and
+regular clocks the most. A file is partitioned by mount-time hour and written one big
+row group at a time from a background thread, so memory stays bounded by one row group
+and the event loop keeps receiving while zstd compresses. A file being written is named
+``*.parquet.inprogress`` and renamed when its hour (or the recording) ends.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import os
+import secrets
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import asdict
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.dataset as ds
+import pyarrow.parquet as pq
+
+from .decimation import Envelope, rebucket
+from .exceptions import EmptyStore, QueryError, StoreError
+from .samples import Gap, SampleBlock, SignalInfo
+
+__all__ = [
+    "DEFAULT_ROW_GROUP_ROWS",
+    "OVERVIEW_BUCKET_US",
+    "PARQUET_FORMAT",
+    "ParquetStoreReader",
+    "ParquetStoreWriter",
+]
+
+PARQUET_FORMAT = "virtualstar-recorder/1"
+DEFAULT_ROW_GROUP_ROWS = 1 << 18  # ≈ 4.4 min at 1 kHz: big for zstd, small for a 2-s query
+DEFAULT_ZSTD_LEVEL = 3
+HOUR_US = 3_600_000_000
+OVERVIEW_BUCKET_US = 1_000_000
+MAX_PENDING_FLUSHES = 2  # row groups handed to the writer thread before `write` waits
+GAP_FIELDS = ["after_t_us", "before_t_us", "lost_samples", "reason", "session"]
+
+
+def _hour_label(hour: int) -> str:
+    return datetime.fromtimestamp(hour * 3600, UTC).strftime("%Y%m%dT%HZ")
+
+
+def _utc_text(t_us: int) -> str:
+    return datetime.fromtimestamp(t_us / 1e6, UTC).isoformat(timespec="microseconds").replace(
+        "+00:00", "Z")
+
+
+class ParquetStoreWriter:
+    """Write one recording session into a store directory (created when missing).
+
+    Use: ``w = ParquetStoreWriter(dir); w.begin(signals, source=..., rate_hz=...);``
+    ``w.write(block)...; w.write_gap(gap); w.close()``. Raises StoreError when the
+    directory cannot be written or holds signals of other types under the same names.
+    """
+
+    def __init__(self, path: str | Path, *, row_group_rows: int = DEFAULT_ROW_GROUP_ROWS,
+                 zstd_level: int = DEFAULT_ZSTD_LEVEL) -> None:
+        self.path = Path(path)
+        self.row_group_rows = int(row_group_rows)
+        self.zstd_level = int(zstd_level)
+        self.session = ""
+        self.signals: list[SignalInfo] = []
+        self.rows_written = 0
+        self.files: list[Path] = []
+        self._schema: pa.Schema | None = None
+        self._overview_schema: pa.Schema | None = None
+        self._buffer: list[SampleBlock] = []
+        self._buffered = 0
+        self._hour: int | None = None
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="parquet-writer")
+        self._pending: list[Future[None]] = []
+        self._open: dict[str, tuple[int, pq.ParquetWriter, Path]] = {}
+        self._closed = False
+
+    # -- session -------------------------------------------------------------------------
+    def begin(self, signals: list[SignalInfo], *, source: str = "", rate_hz: float = 0.0,
+              period_us: float = 0.0) -> str:
+        """Start a session of `signals`; return its id. Raises StoreError."""
+        self.signals = list(signals)
+        self.session = datetime.now(UTC).strftime("%Y%m%dT%H%M%S") + "-" + secrets.token_hex(3)
+        try:
+            (self.path / "samples").mkdir(parents=True, exist_ok=True)
+            (self.path / "overview").mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StoreError(f"cannot create the store directory {self.path}: {exc.strerror}") from None
+        meta = _read_meta(self.path)
+        known = {s["name"]: s for s in meta.get("signals", [])}
+        for s in self.signals:
+            old = known.get(s.name)
+            if old is not None and old.get("dtype") != s.dtype:
+                raise StoreError(f"store {self.path} already holds {s.name} as {old.get('dtype')}; "
+                                 f"this recording streams it as {s.dtype}: use another directory")
+            known[s.name] = asdict(s)
+        meta["format"] = PARQUET_FORMAT
+        meta["signals"] = list(known.values())
+        meta.setdefault("sessions", []).append({
+            "id": self.session, "source": source, "rate_hz": rate_hz, "period_us": period_us,
+            "names": [s.name for s in self.signals],
+            "started_utc": datetime.now(UTC).isoformat(timespec="seconds")})
+        _write_meta(self.path, meta)
+        fields = [pa.field("t_us", pa.int64(), nullable=False,
+                           metadata={"unit": "us", "doc": "mount time, µs since 1970 UTC"})]
+        fields += [pa.field(s.name, pa.from_numpy_dtype(np.dtype(s.dtype)),
+                            metadata={"unit": s.unit}) for s in self.signals]
+        self._schema = pa.schema(fields, metadata={"format": PARQUET_FORMAT,
+                                                   "session": self.session})
+        ov = [pa.field("t_us", pa.int64()), pa.field("n", pa.int64())]
+        for s in self.signals:
+            t = pa.from_numpy_dtype(np.dtype(s.dtype))
+            ov += [pa.field(f"{s.name}__min", t), pa.field(f"{s.name}__max", t)]
+        self._overview_schema = pa.schema(ov, metadata={"bucket_us": str(OVERVIEW_BUCKET_US)})
+        return self.session
+
+    # -- samples -------------------------------------------------------------------------
+    def write(self, block: SampleBlock) -> None:
+        """Buffer `block`; hand whole row groups (or an ended hour) to the writer thread."""
+        if len(block) == 0:
+            return
+        hours = block.t_us // HOUR_US
+        if hours[0] != hours[-1]:  # split at each hour boundary
+            cuts = np.flatnonzero(np.diff(hours)) + 1
+            for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(block)], strict=True):
+                self.write(block.slice(int(a), int(b)))
+            return
+        hour = int(hours[0])
+        if self._hour is not None and hour != self._hour:
+            self._flush()
+        self._hour = hour
+        self._buffer.append(block)
+        self._buffered += len(block)
+        if self._buffered >= self.row_group_rows:
+            self._flush()
+
+    def write_gap(self, gap: Gap) -> None:
+        """Append `gap` to gaps.csv at once (gaps are rare and must survive a crash)."""
+        path = self.path / "gaps.csv"
+        new = not path.exists()
+        try:
+            with path.open("a", newline="") as f:
+                w = csv.writer(f)
+                if new:
+                    w.writerow(GAP_FIELDS)
+                w.writerow([gap.after_t_us, gap.before_t_us, gap.lost_samples, gap.reason,
+                            gap.session or self.session])
+        except OSError as exc:
+            raise StoreError(f"cannot append to {path}: {exc.strerror}") from None
+
+    def flush(self) -> None:
+        """Write what is buffered and wait until it is on disk (files stay open)."""
+        self._flush()
+        self._wait(0)
+
+    def close(self) -> None:
+        """Write the rest, close and rename every file; raise StoreError if a write failed."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._flush()
+            self._pending.append(self._pool.submit(self._close_all))
+            self._wait(0)
+        finally:
+            self._pool.shutdown(wait=True)
+
+    def __enter__(self) -> ParquetStoreWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _flush(self) -> None:
+        if not self._buffer:
+            return
+        blocks, self._buffer, self._buffered = self._buffer, [], 0
+        hour = self._hour
+        self._wait(MAX_PENDING_FLUSHES - 1)
+        self._pending.append(self._pool.submit(self._write_group, hour, blocks))
+
+    def _wait(self, keep: int) -> None:
+        while len(self._pending) > keep:
+            future = self._pending.pop(0)
+            exc = future.exception()
+            if exc is not None:
+                if isinstance(exc, StoreError):
+                    raise exc
+                raise StoreError(f"writing the store {self.path} failed: {exc}") from exc
+
+    # -- the writer thread ---------------------------------------------------------------
+    def _write_group(self, hour: int, blocks: list[SampleBlock]) -> None:
+        assert self._schema is not None and self._overview_schema is not None
+        t_us = np.concatenate([b.t_us for b in blocks]) if len(blocks) > 1 else blocks[0].t_us
+        columns = [pa.array(t_us, pa.int64())]
+        for s in self.signals:
+            col = (np.concatenate([b.columns[s.name] for b in blocks]) if len(blocks) > 1
+                   else blocks[0].columns[s.name])
+            columns.append(pa.array(col))
+        table = pa.Table.from_arrays(columns, schema=self._schema)
+        self._writer("samples", hour, self._schema).write_table(table, row_group_size=len(t_us))
+        self.rows_written += len(t_us)
+        self._write_overview(hour, table)
+
+    def _write_overview(self, hour: int, table: pa.Table) -> None:
+        from .decimation import envelope
+
+        assert self._overview_schema is not None
+        names = [s.name for s in self.signals]
+        env = envelope(table.column("t_us").to_numpy(),
+                       {n: table.column(n).to_numpy() for n in names}, OVERVIEW_BUCKET_US)
+        arrays: list[Any] = [pa.array(env.t_us, pa.int64()), pa.array(env.n, pa.int64())]
+        for n in names:
+            arrays += [pa.array(env.mins[n]), pa.array(env.maxs[n])]
+        ov = pa.Table.from_arrays(arrays, schema=self._overview_schema)
+        self._writer("overview", hour, self._overview_schema).write_table(ov)
+
+    def _writer(self, kind: str, hour: int, schema: pa.Schema) -> pq.ParquetWriter:
+        current = self._open.get(kind)
+        if current is not None and current[0] == hour:
+            return current[1]
+        if current is not None:
+            self._close_one(kind)
+        final = self.path / kind / f"{_hour_label(hour)}-{self.session}.parquet"
+        temp = final.with_name(final.name + ".inprogress")
+        encodings = {"t_us": "DELTA_BINARY_PACKED"}
+        for f in schema:
+            if f.name != "t_us":
+                if pa.types.is_floating(f.type):
+                    encodings[f.name] = "BYTE_STREAM_SPLIT"
+                elif pa.types.is_integer(f.type):
+                    encodings[f.name] = "DELTA_BINARY_PACKED"
+        try:
+            writer = pq.ParquetWriter(temp, schema, compression="zstd",
+                                      compression_level=self.zstd_level, use_dictionary=False,
+                                      column_encoding=encodings, write_statistics=True)
+        except OSError as exc:
+            raise StoreError(f"cannot create {temp}: {exc}") from None
+        self._open[kind] = (hour, writer, final)
+        return writer
+
+    def _close_one(self, kind: str) -> None:
+        _, writer, final = self._open.pop(kind)
+        writer.close()
+        os.replace(final.with_name(final.name + ".inprogress"), final)
+        if kind == "samples":
+            self.files.append(final)
+
+    def _close_all(self) -> None:
+        for kind in list(self._open):
+            self._close_one(kind)
+
+
+def _read_meta(path: Path) -> dict[str, Any]:
+    meta_path = path / "recording.json"
+    if not meta_path.exists():
+        return {}
+    try:
+        return json.loads(meta_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise StoreError(f"{meta_path} is not readable JSON: {exc}") from None
+
+
+def _write_meta(path: Path, meta: dict[str, Any]) -> None:
+    tmp = path / "recording.json.tmp"
+    tmp.write_text(json.dumps(meta, indent=2) + "\n")
+    os.replace(tmp, path / "recording.json")
+
+
+class ParquetStoreReader:
+    """Read a store directory: signals, time range, windows at full rate, envelopes, gaps.
+
+    Raises EmptyStore when `path` holds no finished sample file.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_dir():
+            raise EmptyStore(f"store directory {self.path} does not exist")
+        self.meta = _read_meta(self.path)
+        self.sample_files = sorted((self.path / "samples").glob("*.parquet"))
+        self.overview_files = sorted((self.path / "overview").glob("*.parquet"))
+        if not self.sample_files:
+            hint = (" (a recording is still writing it: *.inprogress files are finished at the "
+                    "end of each hour)" if any((self.path / "samples").glob("*.inprogress")) else "")
+            raise EmptyStore(f"{self.path} holds no sample files (samples/*.parquet){hint}")
+        try:
+            schemas = [pq.read_schema(f) for f in self.sample_files]
+            self.schema = pa.unify_schemas(schemas)
+        except (OSError, pa.ArrowInvalid) as exc:
+            raise StoreError(f"cannot read the Parquet files of {self.path}: {exc}") from None
+        self._dataset: ds.Dataset | None = None
+
+    @property
+    def dataset(self) -> ds.Dataset:
+        if self._dataset is None:
+            self._dataset = ds.dataset([str(f) for f in self.sample_files], schema=self.schema,
+                                       format="parquet")
+        return self._dataset
+
+    def signals(self) -> list[SignalInfo]:
+        """Return the recorded signals with their units and dtypes."""
+        out = []
+        for f in self.schema:
+            if f.name == "t_us":
+                continue
+            unit = (f.metadata or {}).get(b"unit", b"").decode()
+            out.append(SignalInfo(f.name, unit, np.dtype(f.type.to_pandas_dtype()).name))
+        return out
+
+    def time_range(self) -> tuple[int, int]:
+        """Return (first, last) sample time in the store, µs."""
+        lo, hi = None, None
+        for f in self.sample_files:
+            md = pq.ParquetFile(f).metadata
+            for i in range(md.num_row_groups):
+                st = md.row_group(i).column(0).statistics
+                if st is None or not st.has_min_max:
+                    continue
+                lo = st.min if lo is None else min(lo, st.min)
+                hi = st.max if hi is None else max(hi, st.max)
+        if lo is None or hi is None:
+            raise EmptyStore(f"{self.path} holds no samples")
+        return int(lo), int(hi)
+
+    def count(self) -> int:
+        """Return the number of stored samples (rows)."""
+        return sum(pq.ParquetFile(f).metadata.num_rows for f in self.sample_files)
+
+    def _names(self, names: list[str] | None) -> list[str]:
+        have = [f.name for f in self.schema if f.name != "t_us"]
+        if not names:
+            return have
+        unknown = [n for n in names if n not in have]
+        if unknown:
+            raise QueryError(f"unknown signal(s) {', '.join(unknown)}; the store holds "
+                             f"{', '.join(have)}")
+        return list(names)
+
+    def window(self, from_t_us: int, to_t_us: int, names: list[str] | None = None) -> SampleBlock:
+        """Return every sample with from_t_us <= t_us < to_t_us, sorted by time."""
+        names = self._names(names)
+        flt = (ds.field("t_us") >= from_t_us) & (ds.field("t_us") < to_t_us)
+        table = self.dataset.to_table(columns=["t_us", *names], filter=flt)
+        t = table.column("t_us").to_numpy()
+        cols = {n: table.column(n).to_numpy(zero_copy_only=False) for n in names}
+        if len(t) > 1 and np.any(np.diff(t) < 0):
+            order = np.argsort(t, kind="stable")
+            t = t[order]
+            cols = {n: v[order] for n, v in cols.items()}
+        return SampleBlock(t, cols)
+
+    def envelope(self, from_t_us: int, to_t_us: int, names: list[str] | None = None,
+                 buckets: int = 2000) -> Envelope:
+        """Return the min/max envelope of [from, to) in about `buckets` buckets.
+
+        Buckets of 1 s or more come from the stored 1-s overview (edges rounded to whole
+        seconds); finer ones are computed from the samples themselves.
+        """
+        from .decimation import envelope
+
+        names = self._names(names)
+        if buckets < 1:
+            raise QueryError(f"buckets must be >= 1, got {buckets}")
+        if to_t_us <= from_t_us:
+            raise QueryError(f"empty window: --to ({to_t_us}) must be after --from ({from_t_us})")
+        bucket_us = max(1, -(-(to_t_us - from_t_us) // buckets))
+        if bucket_us < OVERVIEW_BUCKET_US or not self.overview_files:
+            block = self.window(from_t_us, to_t_us, names)
+            return envelope(block.t_us, block.columns, bucket_us)
+        bucket_us = -(-bucket_us // OVERVIEW_BUCKET_US) * OVERVIEW_BUCKET_US
+        cols = ["t_us", "n"] + [f"{n}__{m}" for n in names for m in ("min", "max")]
+        ov = ds.dataset([str(f) for f in self.overview_files], format="parquet")
+        lo = from_t_us // OVERVIEW_BUCKET_US * OVERVIEW_BUCKET_US
+        table = ov.to_table(columns=cols, filter=(ds.field("t_us") >= lo)
+                            & (ds.field("t_us") < to_t_us))
+        fine = Envelope(OVERVIEW_BUCKET_US, table.column("t_us").to_numpy(),
+                        table.column("n").to_numpy(),
+                        {n: table.column(f"{n}__min").to_numpy() for n in names},
+                        {n: table.column(f"{n}__max").to_numpy() for n in names})
+        return rebucket(fine, bucket_us)
+
+    def gaps(self) -> list[Gap]:
+        """Return every recorded gap, in file order."""
+        path = self.path / "gaps.csv"
+        if not path.exists():
+            return []
+        with path.open(newline="") as f:
+            return [Gap(int(r["after_t_us"]), int(r["before_t_us"]), int(r["lost_samples"]),
+                        r["reason"], r["session"]) for r in csv.DictReader(f)]
+
+    def iter_blocks(self, names: list[str] | None = None,
+                    batch_rows: int = 1 << 18) -> Any:
+        """Yield SampleBlocks of the whole store in time order, `batch_rows` at a time."""
+        names = self._names(names)
+        files = sorted(self.sample_files, key=lambda f: _first_t(f))
+        for f in files:
+            pf = pq.ParquetFile(f)
+            present = [n for n in names if n in pf.schema_arrow.names]
+            for batch in pf.iter_batches(batch_size=batch_rows, columns=["t_us", *present]):
+                t = batch.column("t_us").to_numpy()
+                cols = {}
+                for n in names:
+                    if n in present:
+                        cols[n] = batch.column(n).to_numpy(zero_copy_only=False)
+                    else:
+                        cols[n] = np.full(len(t), np.nan)
+                yield SampleBlock(t, cols)
+
+
+def _first_t(path: Path) -> int:
+    md = pq.ParquetFile(path).metadata
+    with contextlib.suppress(Exception):
+        return int(md.row_group(0).column(0).statistics.min)
+    return 0
+
+
+def utc_text(t_us: int) -> str:
+    """Return mount time `t_us` as ISO-8601 UTC text with microseconds."""
+    return _utc_text(t_us)

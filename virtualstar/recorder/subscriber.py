@@ -1,0 +1,322 @@
+"""Subscribe to an ASTCom stream and hand every sample, and every gap, to a store.
+
+`SampleSink` turns stream packets into sample blocks and finds gaps from the tick
+numbers (a packet whose first tick is later than the one expected after the previous
+packet means samples were dropped: their number is exact). `Recorder` owns the
+connection: it connects, streams, feeds the sink, and when the endpoint goes away it
+reconnects with back-off and records the hole as a "reconnect" gap.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from astcom_client import AstcomError, Client, StreamPacket, parse_type
+
+from .exceptions import RecorderError
+from .samples import UNKNOWN_LOST, Gap, SampleBlock, SignalInfo
+
+__all__ = ["Recorder", "RecordingSummary", "SampleSink", "StoreWriter"]
+
+log = logging.getLogger("virtualstar.recorder")
+
+DEFAULT_RECONNECT_DELAY_S = 0.2
+MAX_RECONNECT_DELAY_S = 5.0
+CLIENT_QUEUE_PACKETS = 65_536  # client-side packet queue: a burst of several seconds at 10 kHz
+
+
+class StoreWriter(Protocol):
+    """What the recorder needs of a store (ParquetStoreWriter, InfluxStoreWriter)."""
+
+    def begin(self, signals: list[SignalInfo], *, source: str = "", rate_hz: float = 0.0,
+              period_us: float = 0.0) -> str: ...
+
+    def write(self, block: SampleBlock) -> None: ...
+
+    def write_gap(self, gap: Gap) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class SampleSink:
+    """Turn packets into blocks for `writer`, finding gaps from tick numbers.
+
+    `names` are the recorded columns, in order; `tick_us` the device tick period (µs),
+    used to tell a live gap (ticks and times advance together) from an endpoint that
+    restarted (ticks begin again).
+    """
+
+    def __init__(self, writer: StoreWriter, names: list[str], *, session: str = "",
+                 on_gap: Callable[[Gap], None] | None = None) -> None:
+        self.writer = writer
+        self.names = list(names)
+        self.session = session
+        self.on_gap = on_gap
+        self.samples = 0
+        self.packets = 0
+        self.lost = 0
+        self.unknown_gaps = 0
+        self.gaps: list[Gap] = []
+        self.first_t_us: int | None = None
+        self.last_t_us: int | None = None
+        self.last_tick: int | None = None
+        self._period_ticks = 1
+        self._tick_us = 0.0
+        self._reconnected = False
+
+    def reconnected(self) -> None:
+        """Say that the next packet comes over a new connection (its gap is a reconnect)."""
+        self._reconnected = True
+
+    def accept(self, packet: StreamPacket) -> None:
+        """Store the samples of `packet` and any gap before it."""
+        n = packet.n
+        if n == 0:
+            return
+        t_us = packet.t_us
+        if self.last_tick is not None:
+            self._check_gap(packet, int(t_us[0]))
+        self._period_ticks = packet.period_ticks
+        self._tick_us = packet.period_us / max(1, packet.period_ticks)
+        if packet.values.shape[1] == len(self.names) and not packet.where:
+            columns = {name: packet.values[:, j] for j, name in enumerate(self.names)}
+        else:
+            columns = {name: packet.column(name) for name in self.names}
+        self.writer.write(SampleBlock(t_us, columns))
+        if self.first_t_us is None:
+            self.first_t_us = int(t_us[0])
+        self.last_t_us = int(t_us[-1])
+        self.last_tick = packet.first_tick + (n - 1) * packet.period_ticks
+        self.samples += n
+        self.packets += 1
+
+    def _check_gap(self, packet: StreamPacket, first_t_us: int) -> None:
+        assert self.last_tick is not None and self.last_t_us is not None
+        expected = self.last_tick + self._period_ticks
+        reconnect, self._reconnected = self._reconnected, False
+        if packet.first_tick == expected and first_t_us > self.last_t_us:
+            return
+        same_clock = packet.first_tick > self.last_tick and first_t_us > self.last_t_us
+        if same_clock:
+            lost = (packet.first_tick - expected) // self._period_ticks
+            reason = "reconnect" if reconnect else "dropped"
+        else:  # the endpoint restarted: ticks began again, only the times tell the hole
+            dt = first_t_us - self.last_t_us
+            lost = max(0, round(dt / packet.period_us) - 1) if dt > 0 else UNKNOWN_LOST
+            reason = "restart"
+            lost = UNKNOWN_LOST if dt <= 0 else lost
+        gap = Gap(self.last_t_us, first_t_us, int(lost), reason, self.session)
+        if lost > 0:
+            self.lost += lost
+        elif lost == UNKNOWN_LOST:
+            self.unknown_gaps += 1
+        self.gaps.append(gap)
+        self.writer.write_gap(gap)
+        if self.on_gap is not None:
+            self.on_gap(gap)
+
+
+@dataclass
+class RecordingSummary:
+    """What a recording did; `lost` counts samples known missing (exact from ticks)."""
+
+    names: list[str]
+    rate_hz: float
+    samples: int = 0
+    lost: int = 0
+    gaps: list[Gap] = field(default_factory=list)
+    reconnects: int = 0
+    packets: int = 0
+    first_t_us: int | None = None
+    last_t_us: int | None = None
+    wall_s: float = 0.0
+    session: str = ""
+    store: str = ""
+
+    def as_dict(self) -> dict[str, object]:
+        return {"names": self.names, "rate_hz": self.rate_hz, "samples": self.samples,
+                "samples_per_signal": self.samples, "lost": self.lost,
+                "gaps": [g.__dict__ for g in self.gaps], "reconnects": self.reconnects,
+                "packets": self.packets, "first_t_us": self.first_t_us,
+                "last_t_us": self.last_t_us, "wall_s": round(self.wall_s, 3),
+                "session": self.session, "store": self.store}
+
+
+def dtype_of(type_name: str) -> str:
+    """Return the numpy dtype name of an ASTCom scalar type ("f64" → "float64")."""
+    spec = parse_type(type_name)
+    if not spec.is_numeric_scalar or spec.dtype is None:
+        raise RecorderError(f"type {type_name} cannot be recorded: the recorder takes numeric "
+                            "scalar signals (bool, i8..u64, f32, f64)")
+    return np.dtype(spec.dtype).name
+
+
+Connector = Callable[[], Awaitable[Client]]
+
+
+class Recorder:
+    """Record `names` at `rate_hz` from the endpoint `connect()` reaches, into `writer`.
+
+    `connect` returns a new connected Client each call (e.g. ``lambda:
+    Client.connect(url, password=pw)``); it is called again after the connection is lost.
+    Raises RecorderError (or the AstcomError of the endpoint) when the first connection or
+    the stream request fails: a wrong URL or signal name is a mistake, not an outage.
+    """
+
+    def __init__(self, connect: Connector, names: list[str], rate_hz: float, writer: StoreWriter,
+                 *, source: str = "", on_gap: Callable[[Gap], None] | None = None,
+                 reconnect_delay_s: float = DEFAULT_RECONNECT_DELAY_S) -> None:
+        if not names:
+            raise RecorderError("name at least one signal to record")
+        if len(set(names)) != len(names):
+            raise RecorderError(f"signal names repeat: {names}")
+        self.connect = connect
+        self.names = list(names)
+        self.rate_hz = float(rate_hz)
+        self.writer = writer
+        self.source = source
+        self.reconnect_delay_s = reconnect_delay_s
+        self.sink = SampleSink(writer, self.names, on_gap=on_gap)
+        self.summary = RecordingSummary(self.names, self.rate_hz)
+        self._progress = asyncio.Event()
+        self._stop = asyncio.Event()
+        self.signals: list[SignalInfo] = []
+
+    def stop(self) -> None:
+        """Ask `run` to finish after the packets already received."""
+        self._stop.set()
+
+    async def wait_for_tick(self, tick: int) -> None:
+        """Wait until a sample of tick >= `tick` was received (simulated-time pacing)."""
+        while self.sink.last_tick is None or self.sink.last_tick < tick:
+            self._progress.clear()
+            await self._progress.wait()
+
+    async def _open(self, first: bool) -> tuple[Client, object]:
+        client = await self.connect()
+        try:
+            if first:
+                infos = {i.name: i for i in await client.list()}
+                unknown = [n for n in self.names if n not in infos]
+                if unknown:
+                    raise RecorderError(f"the endpoint has no signal {', '.join(unknown)}; "
+                                        f"`astcom list URL` shows its {len(infos)} names")
+                bad = [n for n in self.names if infos[n].kind == "function"]
+                if bad:
+                    raise RecorderError(f"{', '.join(bad)} are functions, not signals")
+                try:
+                    self.signals = [SignalInfo(n, infos[n].unit, dtype_of(infos[n].type))
+                                    for n in self.names]
+                except RecorderError as exc:
+                    raise RecorderError(f"{exc} ({', '.join(self.names)})") from None
+            stream = await client.stream(self.names, rate_hz=self.rate_hz)
+        except BaseException:
+            await client.close()
+            raise
+        if first:
+            self.summary.rate_hz = stream.rate_hz
+            session = self.writer.begin(self.signals, source=self.source, rate_hz=stream.rate_hz,
+                                        period_us=1e6 / stream.rate_hz)
+            self.sink.session = self.summary.session = session
+        return client, stream
+
+    async def run(self, duration_s: float | None = None) -> RecordingSummary:
+        """Record until `duration_s` (wall seconds) elapse or `stop()`; return the summary.
+
+        The store is closed (files finished) before returning, also on error.
+        """
+        t0 = time.monotonic()
+        deadline = None if duration_s is None else t0 + duration_s
+        try:
+            client, stream = await self._open(first=True)
+            delay = self.reconnect_delay_s
+            while True:
+                ended = await self._consume(stream, deadline)
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(client.close(), 2.0)
+                if not ended:
+                    break  # stopped or out of time
+                log.warning("connection lost; reconnecting")
+                client = stream = None
+                while client is None:
+                    if self._stop.is_set() or (deadline and time.monotonic() >= deadline):
+                        break
+                    try:
+                        client, stream = await self._open(first=False)
+                    except (OSError, ConnectionError, AstcomError, TimeoutError) as exc:
+                        log.info("reconnect failed (%s); retrying in %.1f s", exc, delay)
+                        await self._sleep(delay, deadline)
+                        delay = min(delay * 2, MAX_RECONNECT_DELAY_S)
+                if client is None:
+                    break
+                delay = self.reconnect_delay_s
+                self.summary.reconnects += 1
+                self.sink.reconnected()
+        finally:
+            try:
+                self.writer.close()
+            finally:
+                self._finish_summary(time.monotonic() - t0)
+        return self.summary
+
+    async def _sleep(self, seconds: float, deadline: float | None) -> None:
+        if deadline is not None:
+            seconds = max(0.0, min(seconds, deadline - time.monotonic()))
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._stop.wait(), seconds)
+
+    async def _consume(self, stream, deadline: float | None) -> bool:
+        """Feed packets to the sink; return True when the connection ended under us."""
+        stopper = asyncio.ensure_future(self._stop.wait())
+        try:
+            while True:
+                timeout = None if deadline is None else deadline - time.monotonic()
+                if timeout is not None and timeout <= 0:
+                    return False
+                getter = asyncio.ensure_future(stream.__anext__())
+                done, _ = await asyncio.wait({getter, stopper}, timeout=timeout,
+                                             return_when=asyncio.FIRST_COMPLETED)
+                if getter not in done:
+                    getter.cancel()
+                    with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
+                        await getter
+                    self._drain(stream)
+                    return False
+                try:
+                    packet = getter.result()
+                except StopAsyncIteration:
+                    return not self._stop.is_set()
+                self.sink.accept(packet)
+                self._drain(stream)
+                self._progress.set()
+        finally:
+            stopper.cancel()
+
+    def _drain(self, stream) -> None:
+        """Take every packet already queued without awaiting (cheap under load)."""
+        queue = stream._queue
+        while queue:
+            self.sink.accept(queue.popleft())
+        self._progress.set()
+
+    def _finish_summary(self, wall_s: float) -> None:
+        s = self.summary
+        s.samples, s.lost, s.gaps = self.sink.samples, self.sink.lost, list(self.sink.gaps)
+        s.packets, s.first_t_us, s.last_t_us = self.sink.packets, self.sink.first_t_us, self.sink.last_t_us
+        s.wall_s = wall_s
+
+
+def client_connector(url: str, *, password: str | None = None) -> Connector:
+    """Return a connector for `url` with a client queue deep enough for bursts."""
+    async def connect() -> Client:
+        return await Client.connect(url, password=password, name="vs-record",
+                                    queue_packets=CLIENT_QUEUE_PACKETS)
+    return connect
