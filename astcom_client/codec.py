@@ -14,7 +14,6 @@ extension lengths) and by a nesting-depth walk after decoding.
 
 from __future__ import annotations
 
-import math
 import struct
 from dataclasses import dataclass
 from typing import Any
@@ -41,6 +40,9 @@ _DTYPE_BY_CODE: dict[int, np.dtype] = {i: NUMERIC_DTYPES[n] for n, i in DTYPE_CO
 _CODE_BY_DTYPE: dict[np.dtype, int] = {NUMERIC_DTYPES[n]: i for n, i in DTYPE_CODES.items()}
 _MAX_NDIM = 8
 _Q = struct.Struct("<q")
+_HEAD = struct.Struct("<BBH")
+_SHAPES = [struct.Struct(f"<{n}I") for n in range(_MAX_NDIM + 1)]
+_HEAD_BYTES = [(4 + 4 * n + 7) // 8 * 8 for n in range(_MAX_NDIM + 1)]
 
 
 @dataclass(frozen=True)
@@ -65,15 +67,27 @@ def _array_header(dtype_code: int, shape: tuple[int, ...]) -> bytes:
     return head + b"\0" * (-len(head) % 8)
 
 
+_HEADERS: dict[tuple[int, tuple[int, ...]], bytes] = {}
+
+
 def encode_ndarray(arr: np.ndarray) -> msgpack.ExtType:
     """Return the EXT_NDARRAY for a numeric or bool numpy array."""
-    code = _CODE_BY_DTYPE.get(arr.dtype.newbyteorder("<") if arr.dtype.byteorder == ">" else arr.dtype)
-    if code is None:
-        raise TypeError(f"cannot send numpy arrays of dtype {arr.dtype}; use bool, ints or floats")
+    code = _CODE_BY_DTYPE.get(arr.dtype)
+    if code is None or not arr.flags.c_contiguous:
+        dtype = arr.dtype.newbyteorder("<") if arr.dtype.byteorder == ">" else arr.dtype
+        code = _CODE_BY_DTYPE.get(dtype)
+        if code is None:
+            raise TypeError(f"cannot send numpy arrays of dtype {arr.dtype}; use bool, ints or floats")
+        arr = np.asarray(arr, dtype=_DTYPE_BY_CODE[code], order="C")  # keeps 0-d arrays 0-d
     if arr.ndim > _MAX_NDIM:
         raise TypeError(f"cannot send arrays of more than {_MAX_NDIM} dimensions")
-    data = np.asarray(arr, dtype=_DTYPE_BY_CODE[code], order="C")  # keeps 0-d arrays 0-d
-    return msgpack.ExtType(EXT_NDARRAY, b"".join((_array_header(code, data.shape), data.data)))
+    header = _HEADERS.get((code, arr.shape))
+    if header is None:
+        header = _array_header(code, arr.shape)
+        if len(_HEADERS) >= 256:
+            _HEADERS.clear()
+        _HEADERS[(code, arr.shape)] = header
+    return msgpack.ExtType(EXT_NDARRAY, b"".join((header, arr.data)))
 
 
 def _default(obj: Any) -> Any:
@@ -92,12 +106,12 @@ class Codec:
     def __init__(self, limits: CodecLimits | None = None) -> None:
         self.limits = limits or CodecLimits()
         self._packer = msgpack.Packer(default=_default, use_bin_type=True, autoreset=True)
+        self._layouts: dict[bytes, tuple[np.dtype, tuple[int, ...], int, int]] = {}
         lim = self.limits
         self._unpack_kwargs = dict(
             raw=False,
             strict_map_key=True,
             ext_hook=self._ext_hook,
-            max_buffer_size=lim.max_frame_bytes,
             max_str_len=lim.max_str_bytes,
             max_bin_len=lim.max_frame_bytes,
             max_array_len=lim.max_array_len,
@@ -114,25 +128,24 @@ class Codec:
         if len(frame) > self.limits.max_frame_bytes:
             raise LimitExceeded(f"frame of {len(frame)} bytes exceeds the limit of "
                                 f"{self.limits.max_frame_bytes} bytes")
-        unpacker = msgpack.Unpacker(**self._unpack_kwargs)
         try:
-            unpacker.feed(frame)
-            obj = unpacker.unpack()
-        except msgpack.OutOfData:
-            raise MalformedFrame("frame ends inside a msgpack value (truncated frame)") from None
+            obj = msgpack.unpackb(frame, **self._unpack_kwargs)
+        except msgpack.ExtraData as exc:
+            raise MalformedFrame(f"frame holds {len(exc.extra)} extra bytes after its msgpack "
+                                 "value (exactly one value per frame)") from None
         except (LimitExceeded, MalformedFrame):
             raise
         except ValueError as exc:
             text = str(exc)
             if "exceeds max" in text:
                 raise LimitExceeded(f"frame exceeds a size limit: {text}") from None
+            if "incomplete" in text or "truncated" in text.lower():
+                raise MalformedFrame("frame ends inside a msgpack value (truncated frame)") from None
             raise MalformedFrame(f"frame is not valid msgpack: {text}") from None
         except Exception as exc:  # msgpack raises several types for hostile bytes
             raise MalformedFrame(f"frame is not valid msgpack: {type(exc).__name__}: {exc}") from None
-        if unpacker.tell() != len(frame):
-            raise MalformedFrame(f"frame holds {len(frame) - unpacker.tell()} extra bytes after "
-                                 "its msgpack value (exactly one value per frame)")
-        _check_depth(obj, self.limits.max_depth)
+        if type(obj) is list or type(obj) is dict:
+            _check_depth(obj, self.limits.max_depth, 1)
         return obj
 
     def _ext_hook(self, code: int, data: bytes) -> Any:
@@ -145,42 +158,52 @@ class Codec:
         raise MalformedFrame(f"unknown extension type {code}; known: 1 (ndarray), 2 (timestamp)")
 
     def _decode_ndarray(self, data: bytes) -> np.ndarray:
+        # Stream packets repeat the same header; remember parsed headers (a bounded cache).
+        if len(data) < 4 or data[1] > _MAX_NDIM:
+            raise MalformedFrame("ndarray extension shorter than its header or of more than "
+                                 f"{_MAX_NDIM} dimensions")
+        key = data[:_HEAD_BYTES[data[1]]]
+        layout = self._layouts.get(key)
+        if layout is None:
+            layout = self._parse_array_header(data)
+            if len(self._layouts) >= 256:
+                self._layouts.clear()
+            self._layouts[key] = layout
+        dtype, shape, count, head = layout
+        if len(data) - head != count * dtype.itemsize:
+            raise MalformedFrame(f"ndarray of shape {shape} and dtype {dtype} needs "
+                                 f"{count * dtype.itemsize} bytes, got {len(data) - head}")
+        arr = np.frombuffer(data, dtype=dtype, count=count, offset=head)
+        if dtype.kind == "b" and count and arr.view(np.uint8).max() > 1:
+            raise MalformedFrame("bool ndarray holds bytes other than 0 and 1")
+        return arr if len(shape) == 1 else arr.reshape(shape)
+
+    def _parse_array_header(self, data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int]:
         if len(data) < 4:
             raise MalformedFrame("ndarray extension shorter than its 4-byte header")
-        code, ndim, _zero = struct.unpack_from("<BBH", data)
+        code, ndim, _zero = _HEAD.unpack_from(data)
         dtype = _DTYPE_BY_CODE.get(code)
         if dtype is None:
             raise MalformedFrame(f"ndarray dtype code {code} unknown; expected 0..{len(DTYPE_CODES) - 1}")
         if ndim > _MAX_NDIM:
             raise MalformedFrame(f"ndarray of {ndim} dimensions; at most {_MAX_NDIM}")
-        head = 4 + 4 * ndim
-        head += -head % 8
+        head = _HEAD_BYTES[ndim]
         if len(data) < head:
             raise MalformedFrame("ndarray extension shorter than its shape header")
-        shape = struct.unpack_from(f"<{ndim}I", data, 4)
-        count = math.prod(shape)
+        shape = _SHAPES[ndim].unpack_from(data, 4)
+        count = 1
+        for size in shape:
+            count *= size
         if count > self.limits.max_array_len:
             raise LimitExceeded(f"ndarray of {count} elements exceeds the limit of "
                                 f"{self.limits.max_array_len}")
-        if len(data) - head != count * dtype.itemsize:
-            raise MalformedFrame(f"ndarray of shape {shape} and dtype {dtype} needs "
-                                 f"{count * dtype.itemsize} bytes, got {len(data) - head}")
-        arr = np.frombuffer(data, dtype=dtype, count=count, offset=head).reshape(shape)
-        if code == DTYPE_CODES["bool"] and count and arr.view(np.uint8).max() > 1:
-            raise MalformedFrame("bool ndarray holds bytes other than 0 and 1")
-        return arr
+        return dtype, shape, count, head
 
 
-def _check_depth(obj: Any, max_depth: int) -> None:
-    stack: list[tuple[Any, int]] = [(obj, 1)]
-    while stack:
-        item, depth = stack.pop()
-        if isinstance(item, list):
-            children: Any = item
-        elif isinstance(item, dict):
-            children = item.values()
-        else:
-            continue
-        if depth > max_depth:
-            raise LimitExceeded(f"frame nests deeper than {max_depth} levels")
-        stack.extend((child, depth + 1) for child in children if isinstance(child, list | dict))
+def _check_depth(obj: list | dict, max_depth: int, depth: int) -> None:
+    """Raise LimitExceeded when containers nest deeper than `max_depth` (recursion is bounded by it)."""
+    if depth > max_depth:
+        raise LimitExceeded(f"frame nests deeper than {max_depth} levels")
+    for child in (obj.values() if type(obj) is dict else obj):
+        if type(child) is list or type(child) is dict:
+            _check_depth(child, max_depth, depth + 1)

@@ -18,7 +18,6 @@ import numpy as np
 from .codec import Codec, TimestampUs
 from .commands import (
     Command,
-    DataFrame,
     Define,
     Invoke,
     List,
@@ -29,6 +28,7 @@ from .commands import (
     StreamStop,
     Undefine,
     Write,
+    data_frame,
 )
 from .exceptions import (
     DeviceError,
@@ -172,9 +172,9 @@ class StreamGroup:
         return row
 
     def _flush(self, codec: Codec) -> None:
-        data = DataFrame(self.message.msg, self.seq, self.packet_tick, self.packet_t_us,
-                         self.period_us, self.k, self.spp, [g.buf for g in self.groups])
-        frame = codec.encode(data.to_frame())
+        frame = codec.encode(data_frame(self.message.msg, self.seq, self.packet_tick,
+                                        self.packet_t_us, self.period_us, self.k, self.spp,
+                                        [g.buf for g in self.groups]))
         self.seq += 1
         self.fill = 0
         for conn in self.subscribers.values():
