@@ -17,6 +17,7 @@ from mount_emulator.states import (
     FAULT_LIMIT,
     FAULT_OVERCURRENT,
     FAULT_OVERTEMP,
+    FAULT_OVERVOLTAGE,
     STATUS_FAULT,
     AxisEvent,
     AxisState,
@@ -114,3 +115,16 @@ def test_every_state_can_reach_off_or_fault_and_fault_only_leaves_by_reset():
 def test_slew_is_refused_while_off_and_lists_what_is_allowed(mount):
     with pytest.raises(CommandRejected, match="allowed now: POWER_ON"):
         mount.slew(0.1, 0.5)
+
+
+def test_bus_overvoltage_cuts_both_axes():
+    m = holding_mount()
+    m.set_param("safety.overvoltage", m.param("power.supply_voltage") - 1.0)
+    m.run(ticks(0.1))
+    assert m.axis_state(0) == AxisState.FAULT and m.axis_state(1) == AxisState.FAULT
+    assert int(m.state[L.G_FAULTS]) & FAULT_OVERVOLTAGE
+    m.set_param("safety.overvoltage", 65.0)
+    m.safety_reset()
+    m.power_on()
+    m.run(ticks(0.5))
+    assert m.mount_state == AxisState.HOLDING

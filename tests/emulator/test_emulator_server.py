@@ -126,6 +126,21 @@ def test_guide_measure_reports_the_hidden_index_errors():
     asyncio.run(_with_client(_config(speed=0.0), body))
 
 
+def test_time_set_utc_over_astcom_applies_on_the_pps_edge():
+    async def body(emu, c):
+        await c.write({"time.drift_ppm": 0.0})
+        now = (await c.read(["time.mount_us"]))["time.mount_us"]
+        target = now // 1_000_000 + 3600  # one hour ahead
+        await c.invoke("time.set_utc", target)
+        await _wait_for(c, "time.sync_count", lambda v: v == 1)
+        v = await c.read(["time.mount_us", "time.true_us"])  # both at one tick
+        offset_us = v["time.mount_us"] - v["time.true_us"]
+        assert offset_us % 1_000_000 == 0  # the jump happened exactly on a whole true second
+        assert 3590 <= offset_us // 1_000_000 <= 3600
+        assert v["time.mount_us"] >= target * 1_000_000
+    asyncio.run(_with_client(_config(speed=0.0), body))
+
+
 def _start_cli(*args: str) -> tuple[subprocess.Popen, str]:
     proc = subprocess.Popen([str(BIN / "mount-emulator"), "--port", "0", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
