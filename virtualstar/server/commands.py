@@ -1,0 +1,273 @@
+"""The VSS commands: one parameter dataclass and one handler per command, in a table.
+
+`COMMANDS[name] = Command(params_class, handler, doc)`. Parameters are checked
+against the dataclass fields (unknown keys and wrong types are refused with the
+list of valid ones) before the handler runs; handlers are thin calls into the
+`Telescope`. docs/vss-api.md lists the same table for client authors.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import math
+import typing
+import warnings
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import Any
+
+from .exceptions import BadRequest, TargetUnreachable, UnknownCommand, VssError
+from .telescope import Operation, Telescope, parse_target
+
+__all__ = ["COMMANDS", "Command", "dispatch"]
+
+
+@dataclass(frozen=True)
+class NoParams:
+    pass
+
+
+@dataclass(frozen=True)
+class TargetParams:
+    radec: str | None = None
+    ra_deg: float | None = None
+    dec_deg: float | None = None
+    star: str | None = None
+    altaz: str | None = None
+    az_deg: float | None = None
+    el_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class TrackParams(TargetParams):
+    tle: str | None = None
+    sat: str | None = None
+    duration_s: float | None = None
+    wait: bool = False
+    max_wait_s: float | None = None
+
+
+@dataclass(frozen=True)
+class StopParams:
+    reset_faults: bool = False
+
+
+@dataclass(frozen=True)
+class ParkParams:
+    wait: bool = True
+
+
+@dataclass(frozen=True)
+class ModeParams:
+    mode: str
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    path: str
+
+
+@dataclass(frozen=True)
+class ErrorsParams:
+    from_us: int | None = None
+    to_us: int | None = None
+    series: bool = False
+    max_points: int = 2000
+
+
+@dataclass(frozen=True)
+class WaitParams:
+    id: int | None = None
+
+
+@dataclass(frozen=True)
+class Command:
+    params: type
+    handler: Callable[[Telescope, Any], Awaitable[Any]]
+    doc: str
+
+
+def _check(cls: type, params: dict[str, Any], cmd: str) -> Any:
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(params) - set(fields))
+    if unknown:
+        raise BadRequest(f"{cmd}: unknown parameters {unknown}; valid: {sorted(fields) or 'none'}")
+    hints = typing.get_type_hints(cls)
+    values = {}
+    for name, f in fields.items():
+        if name not in params:
+            if f.default is dataclasses.MISSING:
+                raise BadRequest(f"{cmd}: parameter {name!r} is required")
+            continue
+        value = params[name]
+        hint = hints[name]
+        allowed = typing.get_args(hint) or (hint,)
+        if value is None and type(None) in allowed:
+            values[name] = None
+            continue
+        if float in allowed and isinstance(value, int | float) and not isinstance(value, bool):
+            if not math.isfinite(value):
+                raise BadRequest(f"{cmd}: {name}={value!r} must be a finite number")
+            values[name] = float(value) if int not in allowed else value
+        elif _plain_match(value, allowed):
+            values[name] = value
+        else:
+            expected = " or ".join(t.__name__ for t in allowed if t is not type(None))
+            raise BadRequest(f"{cmd}: {name}={value!r} has the wrong type; expected {expected}")
+    return cls(**values)
+
+
+def _plain_match(value: Any, allowed: tuple) -> bool:
+    if isinstance(value, bool):
+        return bool in allowed
+    return (int in allowed and isinstance(value, int)) or (str in allowed and isinstance(value, str))
+
+
+async def _result(op: Operation, *, wait_done: bool) -> dict[str, Any]:
+    fut = op.done if wait_done else op.begun
+    await asyncio.shield(fut)
+    if op.phase in ("failed", "aborted"):
+        err = op.info.get("error", {})
+        e = VssError(err.get("message", "the operation failed"))
+        e.code = err.get("code", "internal")
+        raise e
+    return op.as_dict()
+
+
+async def _ping(t: Telescope, p: NoParams) -> Any:
+    return {"pong": True}
+
+
+async def _status(t: Telescope, p: NoParams) -> Any:
+    return await t.status()
+
+
+async def _slew(t: Telescope, p: TargetParams) -> Any:
+    target, name, fixed = parse_target(dataclasses.asdict(p))
+    if fixed is not None:
+        op = await t.slew_altaz(*fixed)
+    else:
+        op = await t.follow_target(target, name, kind="slew")
+    return await _result(op, wait_done=False)
+
+
+async def _track(t: Telescope, p: TrackParams) -> Any:
+    if p.duration_s is not None and not p.duration_s > 0:
+        raise BadRequest(f"track: duration_s={p.duration_s} must be positive (seconds)")
+    if p.tle is not None:
+        if any(getattr(p, k) is not None for k in ("radec", "ra_deg", "star", "altaz", "az_deg")):
+            raise BadRequest("track: give either a TLE or a sky target, not both")
+        sat = _satellite(p.tle, p.sat)
+        op = await t.track_satellite(sat, max_wait_s=p.max_wait_s)
+        return await _result(op, wait_done=p.wait)
+    if p.sat is not None:
+        raise BadRequest("track: 'sat' selects a satellite inside 'tle'; no TLE was given")
+    target, name, fixed = parse_target({k: v for k, v in dataclasses.asdict(p).items()
+                                        if k in {f.name for f in dataclasses.fields(TargetParams)}})
+    if fixed is not None:
+        raise BadRequest("track: a fixed az/el does not move; use slew for it")
+    op = await t.follow_target(target, name, kind="track", duration_s=p.duration_s)
+    return await _result(op, wait_done=p.wait)
+
+
+def _satellite(tle: str, name: str | None):
+    from catalogs import parse_tle_text
+    from catalogs.exceptions import CatalogError
+    from virtualstar.astro import Satellite
+    from virtualstar.astro.exceptions import AstroError
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            records = parse_tle_text(tle, "the TLE text")
+    except CatalogError as exc:
+        raise BadRequest(str(exc)) from None
+    if not records:
+        raise BadRequest("the TLE text holds no satellite: expected a name line and two "
+                         "element lines (1 ..., 2 ...)")
+    if name is not None:
+        key = name.strip().lower()
+        chosen = [r for r in records if r.name.strip().lower() == key] or \
+                 [r for r in records if key in r.name.strip().lower()]
+        if not chosen:
+            raise TargetUnreachable(f"no satellite named {name!r} in the TLE; it holds: "
+                                    f"{', '.join(r.name.strip() for r in records[:20])}")
+        record = chosen[0]
+    else:
+        record = records[0]
+    try:
+        return Satellite.from_record(record)
+    except AstroError as exc:
+        raise BadRequest(str(exc)) from None
+
+
+async def _stop(t: Telescope, p: StopParams) -> Any:
+    return await t.stop(reset_faults=p.reset_faults)
+
+
+async def _reset(t: Telescope, p: NoParams) -> Any:
+    return await t.stop(reset_faults=True)
+
+
+async def _park(t: Telescope, p: ParkParams) -> Any:
+    op = await t.park()
+    return await _result(op, wait_done=p.wait) if p.wait else op.as_dict()
+
+
+async def _mode(t: Telescope, p: ModeParams) -> Any:
+    return t.set_mode(p.mode)
+
+
+async def _load(t: Telescope, p: ModelParams) -> Any:
+    return t.load_model(p.path)
+
+
+async def _unload(t: Telescope, p: NoParams) -> Any:
+    return t.unload_model()
+
+
+async def _errors(t: Telescope, p: ErrorsParams) -> Any:
+    out: dict[str, Any] = {"stats": t.errors.stats(p.from_us, p.to_us).as_dict(),
+                           "samples": t.errors.samples}
+    if p.series:
+        out["series"] = t.errors.series(p.from_us, p.to_us, max(1, p.max_points))
+    return out
+
+
+async def _wait(t: Telescope, p: WaitParams) -> Any:
+    op = t.op
+    if op is None or (p.id is not None and op.id != p.id):
+        raise BadRequest(f"no running operation {p.id if p.id is not None else ''}".strip()
+                         + (f"; the current one is {op.id}" if op else "; nothing is running"))
+    return await _result(op, wait_done=True)
+
+
+COMMANDS: dict[str, Command] = {
+    "ping": Command(NoParams, _ping, "Answer at once (liveness)."),
+    "status": Command(NoParams, _status, "Positions, RA/Dec, states, errors, mount time."),
+    "slew": Command(TargetParams, _slew, "Slew to a target; sky targets are then tracked. "
+                    "Answers when landed."),
+    "track": Command(TrackParams, _track, "Track a sky target or a satellite pass; answers "
+                     "when tracking has begun (satellite: when the pass is planned), or at the "
+                     "end with wait=true."),
+    "stop": Command(StopParams, _stop, "Stop the operation, bring the mount to rest; "
+                    "reset_faults=true also clears latched faults."),
+    "reset_faults": Command(NoParams, _reset, "Stop and clear the mount's latched faults."),
+    "park": Command(ParkParams, _park, "Slew to the park position and power off."),
+    "set_mode": Command(ModeParams, _mode, "mode=active (commands move the mount) or passive "
+                        "(watch only)."),
+    "load_model": Command(ModelParams, _load, "Load a pointing model JSON file (server side path)."),
+    "unload_model": Command(NoParams, _unload, "Drop the pointing model."),
+    "errors": Command(ErrorsParams, _errors, "Tracking-error RMS and peak over a mount-time "
+                      "window; series=true adds per-bin values."),
+    "wait": Command(WaitParams, _wait, "Wait until the running operation ends; return its summary."),
+}
+
+
+async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any]) -> Any:
+    """Check parameters and run one command; raise VssError subclasses for the client."""
+    command = COMMANDS.get(cmd)
+    if command is None:
+        raise UnknownCommand(f"unknown command {cmd!r}; valid commands: {', '.join(COMMANDS)}")
+    return await command.handler(telescope, _check(command.params, params, cmd))

@@ -1,0 +1,100 @@
+"""Errors of the VirtualStar Server, one tree; `.code` travels in API error replies.
+
+::
+
+    VssError                                        .code
+    ├── BadRequest (ValueError)                     bad_request      malformed message or parameters
+    ├── UnknownCommand (KeyError)                   unknown_command  no such command (lists valid ones)
+    ├── MappingError (ValueError)                   mapping          mapping file wrong or names missing on the mount
+    ├── NotActive (PermissionError)                 passive          the server is passive: it only watches
+    ├── MountUnavailable (ConnectionError)          mount_offline    no connection to the mount right now
+    ├── MountRejected (RuntimeError)                mount_rejected   the mount refused a command (its message)
+    ├── MountFault (RuntimeError)                   mount_fault      the mount latched a fault during an operation
+    ├── TargetUnreachable (ValueError)              unreachable      below the horizon, beyond the cable wrap, no pass
+    └── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "BadRequest",
+    "MappingError",
+    "MountFault",
+    "MountRejected",
+    "MountUnavailable",
+    "NotActive",
+    "OperationAborted",
+    "TargetUnreachable",
+    "UnknownCommand",
+    "VssError",
+]
+
+
+class VssError(Exception):
+    """Base of every VSS error; `code` is the short text code sent to API clients."""
+
+    code = "internal"
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.message = message
+
+    def __str__(self) -> str:
+        return self.message
+
+
+class BadRequest(ValueError, VssError):
+    """A request is malformed or a parameter is wrong."""
+
+    code = "bad_request"
+
+
+class UnknownCommand(KeyError, VssError):
+    """A request names a command the server does not have."""
+
+    code = "unknown_command"
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return self.message
+
+
+class MappingError(ValueError, VssError):
+    """The role mapping file is wrong, or names in it do not exist on the mount."""
+
+    code = "mapping"
+
+
+class NotActive(PermissionError, VssError):
+    """A command that moves the mount was sent while the server is passive."""
+
+    code = "passive"
+
+
+class MountUnavailable(ConnectionError, VssError):
+    """The mount is not connected (the server keeps retrying)."""
+
+    code = "mount_offline"
+
+
+class MountRejected(RuntimeError, VssError):
+    """The mount refused a command; the message is the mount's own."""
+
+    code = "mount_rejected"
+
+
+class MountFault(RuntimeError, VssError):
+    """The mount latched a fault (or its state went to fault) during an operation."""
+
+    code = "mount_fault"
+
+
+class TargetUnreachable(ValueError, VssError):
+    """The target cannot be followed: below the horizon, beyond the cable wrap, no pass."""
+
+    code = "unreachable"
+
+
+class OperationAborted(RuntimeError, VssError):
+    """An operation ended early: a newer command, a fault, a lost mount or a shutdown."""
+
+    code = "aborted"

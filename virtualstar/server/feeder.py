@@ -1,0 +1,122 @@
+"""Keep the mount's trajectory buffer filled ahead of its clock, never late.
+
+The feeder samples a path on a fixed grid of mount time (`point_rate_hz`) and
+pushes the points in batches whenever the buffer has free space, keeping
+`lead_s` seconds of mount time buffered. Each cycle costs one read (mount
+time, free space, state) and at most one push; between cycles it sleeps for a
+fraction of the lead, converted to wall time by the simulation speed. A point
+is never pushed less than `min_lead_s` before the mount reaches it: if the
+feeder ever falls that far behind (a stalled host), it skips ahead on the grid
+and counts the gap in `late_gaps` instead of sending points the mount would
+reject.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .exceptions import MountFault
+from .mount_link import MountLink
+from .trajectories import Path
+
+__all__ = ["Feeder", "FeederConfig", "FeederStats"]
+
+
+@dataclass(frozen=True)
+class FeederConfig:
+    """Grid and lead of the trajectory feed (mount seconds), pacing by `speed`."""
+
+    point_rate_hz: float = 20.0
+    lead_s: float = 5.0
+    min_lead_s: float = 0.5
+    max_batch: int = 1000
+    speed: float = 1.0  # mount seconds per wall second
+
+    @property
+    def step_us(self) -> int:
+        return int(round(1e6 / self.point_rate_hz))
+
+
+@dataclass
+class FeederStats:
+    """What the feeder did: points pushed and the smallest lead seen (mount µs)."""
+
+    pushed: int = 0
+    batches: int = 0
+    rejected: int = 0
+    late_gaps: int = 0
+    min_lead_us: int | None = None
+    last_point_us: int = 0
+    ended: str = ""
+    lead_history: list[int] = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        return {"pushed": self.pushed, "batches": self.batches, "rejected": self.rejected,
+                "late_gaps": self.late_gaps, "min_lead_s": None if self.min_lead_us is None
+                else self.min_lead_us / 1e6, "ended": self.ended}
+
+
+class Feeder:
+    """Feeds one path to the mount; create one per trajectory."""
+
+    def __init__(self, link: MountLink, config: FeederConfig, path: Path, first_us: int,
+                 *, fault_code: int) -> None:
+        self.link = link
+        self.config = config
+        self.path = path
+        self.step_us = config.step_us
+        self.next_us = int(first_us)
+        self.fault_code = fault_code
+        self.stats = FeederStats()
+        self.done = False
+        self.task: asyncio.Task | None = None
+
+    async def cycle(self) -> int:
+        """Top up the buffer once; return the mount time read (µs)."""
+        v = await self.link.read(["mount_time", "free_points", "mount_state"])
+        now = int(v["mount_time"])
+        if int(v["mount_state"]) == self.fault_code:
+            raise MountFault("the mount went to FAULT while tracking")
+        st = self.stats
+        if st.pushed:
+            lead = st.last_point_us - now
+            st.min_lead_us = lead if st.min_lead_us is None else min(st.min_lead_us, lead)
+        cfg = self.config
+        earliest = now + int(cfg.min_lead_s * 1e6)
+        if self.next_us <= earliest:
+            if st.pushed:
+                st.late_gaps += 1
+            k = math.ceil((earliest + 1 - self.next_us) / self.step_us)
+            self.next_us += k * self.step_us
+        horizon = now + int(cfg.lead_s * 1e6)
+        end = self.path.end_us
+        if end is not None:
+            horizon = min(horizon, end)
+        n = 0 if self.next_us > horizon else (horizon - self.next_us) // self.step_us + 1
+        n = int(min(n, int(v["free_points"]), cfg.max_batch))
+        if n > 0:
+            t = self.next_us + np.arange(n, dtype=np.int64) * self.step_us
+            p = self.path.sample(t)
+            accepted = await self.link.call("traj_push", p.t_us, p.az_rad, p.el_rad,
+                                            p.az_rate_rad_s, p.el_rate_rad_s)
+            st.batches += 1
+            st.pushed += int(accepted)
+            st.rejected += n - int(accepted)
+            st.last_point_us = int(t[-1])
+            self.next_us = int(t[-1]) + self.step_us
+        if end is not None and self.next_us > end:
+            self.done = True
+        return now
+
+    async def run(self) -> None:
+        """Top up until the path ends (or the task is cancelled)."""
+        cfg = self.config
+        pause_s = max(0.002, cfg.lead_s / 4.0 / max(cfg.speed, 1e-9))
+        while not self.done:
+            await self.cycle()
+            await asyncio.sleep(pause_s)
+        self.stats.ended = "path ended"

@@ -1,0 +1,180 @@
+"""The VirtualStar Server: the `Telescope` behind a WebSocket/JSON API.
+
+Each client connection gets a ``hello`` event, then every event the telescope
+emits and a ``heartbeat`` event every `heartbeat_s` seconds. Requests are
+handled concurrently (one task each), so a client waiting for a long track
+can still ask for status on the same socket. A client that disconnects only
+loses its pending answers: operations belong to the telescope, never to a
+connection. A slow client's event queue drops its oldest events rather than
+holding up the server.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.exceptions import ConnectionClosed
+
+from .commands import COMMANDS, dispatch
+from .exceptions import BadRequest, VssError
+from .protocol import API_VERSION, ErrorReply, Event, Reply, decode_request
+from .telescope import Telescope
+
+__all__ = ["DEFAULT_PORT", "VssServer", "parse_listen_url"]
+
+log = logging.getLogger("virtualstar.server")
+
+DEFAULT_PORT = 8740
+EVENT_QUEUE = 256
+
+
+def parse_listen_url(url: str) -> tuple[str, int]:
+    """Return (host, port) of a ``ws://HOST:PORT`` URL; raise BadRequest otherwise."""
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(url)
+    try:
+        port = parts.port
+    except ValueError:
+        port = -1
+    if parts.scheme != "ws" or not parts.hostname or port is None or port < 0:
+        raise BadRequest(f"listen address {url!r}: expected ws://HOST:PORT, e.g. "
+                         f"ws://127.0.0.1:{DEFAULT_PORT} (port 0 picks a free one)")
+    return parts.hostname, port
+
+
+@dataclass(eq=False)  # identity hash: kept in a set
+class _Client:
+    ws: ServerConnection
+    queue: asyncio.Queue[str]
+    dropped: int = 0
+
+    def put(self, text: str) -> None:
+        if self.queue.full():
+            with contextlib.suppress(asyncio.QueueEmpty):
+                self.queue.get_nowait()
+            self.dropped += 1
+        self.queue.put_nowait(text)
+
+
+class VssServer:
+    """Serve a Telescope to WebSocket clients; `await start(url)` returns the bound URL."""
+
+    def __init__(self, telescope: Telescope, *, heartbeat_s: float = 1.0) -> None:
+        self.telescope = telescope
+        self.heartbeat_s = heartbeat_s
+        self._clients: set[_Client] = set()
+        self._seq = itertools.count(1)
+        self._server: Server | None = None
+        self._heartbeat: asyncio.Task | None = None
+        self.url = ""
+        self.requests = 0
+        telescope.emit = self.broadcast
+
+    def broadcast(self, kind: str, data: dict[str, Any]) -> None:
+        """Push an event to every connected client."""
+        text = Event(kind, data, next(self._seq)).to_json()
+        for client in list(self._clients):
+            client.put(text)
+
+    async def start(self, url: str = f"ws://127.0.0.1:{DEFAULT_PORT}") -> str:
+        """Start the telescope and listen; return the bound ``ws://`` URL."""
+        host, port = parse_listen_url(url)
+        await self.telescope.start()
+        self._server = await serve(self._session, host, port, max_size=1 << 20,
+                                   ping_interval=None)
+        bound = self._server.sockets[0].getsockname()
+        self.url = f"ws://{host}:{bound[1]}"
+        self._heartbeat = asyncio.get_running_loop().create_task(self._beat())
+        log.info("VirtualStar Server listening on %s", self.url)
+        return self.url
+
+    async def close(self) -> None:
+        """Stop listening, close client connections, stop the telescope."""
+        if self._heartbeat is not None:
+            self._heartbeat.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._heartbeat
+        if self._server is not None:
+            self._server.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(self._server.wait_closed(), 5.0)
+        await self.telescope.close()
+
+    async def __aenter__(self) -> VssServer:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def _beat(self) -> None:
+        while True:
+            await asyncio.sleep(self.heartbeat_s)
+            self.broadcast("heartbeat", {"t_unix": time.time(),
+                                         "mount_connected": self.telescope.link.connected})
+
+    async def _session(self, ws: ServerConnection) -> None:
+        client = _Client(ws, asyncio.Queue(EVENT_QUEUE))
+        self._clients.add(client)
+        writer = asyncio.get_running_loop().create_task(self._writer(client))
+        tasks: set[asyncio.Task] = set()
+        client.put(Event("hello", {"server": "virtualstar", "api_version": API_VERSION,
+                                   "commands": sorted(COMMANDS),
+                                   "heartbeat_s": self.heartbeat_s}, next(self._seq)).to_json())
+        try:
+            async for message in ws:
+                task = asyncio.get_running_loop().create_task(self._handle(client, message))
+                tasks.add(task)
+                task.add_done_callback(tasks.discard)
+        except ConnectionClosed:
+            pass
+        finally:
+            self._clients.discard(client)
+            for task in [*tasks, writer]:
+                task.cancel()
+            for task in [*tasks, writer]:
+                with contextlib.suppress(BaseException):
+                    await task
+
+    async def _writer(self, client: _Client) -> None:
+        with contextlib.suppress(ConnectionClosed):
+            while True:
+                await client.ws.send(await client.queue.get())
+
+    async def _handle(self, client: _Client, message: str | bytes) -> None:
+        self.requests += 1
+        rid = None
+        try:
+            request = decode_request(message)
+            rid = request.id
+            result = await dispatch(self.telescope, request.cmd, request.params)
+            text = Reply(rid, result).to_json()
+        except BadRequest as exc:
+            text = ErrorReply(rid if rid is not None else _guess_id(message), exc.code,
+                              str(exc)).to_json()
+        except VssError as exc:
+            text = ErrorReply(rid, exc.code, str(exc)).to_json()
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # a bug answers as an error; the server keeps running
+            log.exception("request failed")
+            text = ErrorReply(rid, "internal", f"{type(exc).__name__}: {exc}").to_json()
+        # answers are never dropped, unlike events
+        with contextlib.suppress(ConnectionClosed):
+            await client.ws.send(text)
+
+
+def _guess_id(message: str | bytes) -> Any:
+    with contextlib.suppress(Exception):
+        doc = json.loads(message)
+        if isinstance(doc, dict) and isinstance(doc.get("id"), int | str):
+            return doc["id"]
+    return None

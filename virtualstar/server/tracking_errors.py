@@ -1,0 +1,125 @@
+"""Tracking-error statistics from the mount's per-tick error stream.
+
+Samples (mount time µs, azimuth and elevation following error in arcsec,
+elevation in rad) are reduced on arrival into fixed bins of `bin_us` mount
+time holding the count, the sums of squares and the peak of the on-sky error
+(azimuth error × cos(elevation) combined with the elevation error) and of each
+axis. Any window's RMS and peak are then exact sums over bins, and memory is
+bounded by the number of bins kept (a deque), whatever the sample rate.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ErrorStats", "TrackingErrorHistory"]
+
+DEFAULT_BIN_US = 100_000  # 0.1 s of mount time
+DEFAULT_MAX_BINS = 36_000  # one hour of mount time at 0.1 s
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """RMS and peak of the tracking error over a window (arcsec); n samples."""
+
+    n: int
+    rms_arcsec: float
+    peak_arcsec: float
+    az_rms_arcsec: float
+    el_rms_arcsec: float
+    from_us: int
+    to_us: int
+
+    def as_dict(self) -> dict:
+        return {"n": self.n, "rms_arcsec": self.rms_arcsec, "peak_arcsec": self.peak_arcsec,
+                "az_rms_arcsec": self.az_rms_arcsec, "el_rms_arcsec": self.el_rms_arcsec,
+                "from_us": self.from_us, "to_us": self.to_us}
+
+
+class TrackingErrorHistory:
+    """Bounded history of tracking-error bins; feed it with `add(t_us, az_as, el_as, el_rad)`."""
+
+    def __init__(self, *, bin_us: int = DEFAULT_BIN_US, max_bins: int = DEFAULT_MAX_BINS) -> None:
+        self.bin_us = int(bin_us)
+        # each bin: [bin index, n, sum sky², sum az², sum el², peak sky]
+        self._bins: deque[list[float]] = deque(maxlen=max_bins)
+        self.samples = 0
+        self.last_t_us = 0
+        self.last_sky_arcsec = 0.0
+
+    def clear(self) -> None:
+        self._bins.clear()
+
+    def add(self, t_us: np.ndarray, az_err_arcsec: np.ndarray, el_err_arcsec: np.ndarray,
+            el_rad: np.ndarray) -> None:
+        """Reduce a block of samples into the bins (times increasing)."""
+        t = np.asarray(t_us, np.int64)
+        if t.size == 0:
+            return
+        az_sky = np.asarray(az_err_arcsec, float) * np.cos(np.asarray(el_rad, float))
+        el = np.asarray(el_err_arcsec, float)
+        sky2 = az_sky**2 + el**2
+        idx = t // self.bin_us
+        starts = np.flatnonzero(np.r_[True, idx[1:] != idx[:-1]])
+        n = np.diff(np.r_[starts, t.size])
+        s_sky = np.add.reduceat(sky2, starts)
+        s_az = np.add.reduceat(az_sky**2, starts)
+        s_el = np.add.reduceat(el**2, starts)
+        peak = np.sqrt(np.maximum.reduceat(sky2, starts))
+        for k, i0 in enumerate(starts):
+            b = int(idx[i0])
+            if self._bins and self._bins[-1][0] == b:
+                last = self._bins[-1]
+                last[1] += n[k]
+                last[2] += s_sky[k]
+                last[3] += s_az[k]
+                last[4] += s_el[k]
+                last[5] = max(last[5], peak[k])
+            elif not self._bins or self._bins[-1][0] < b:
+                self._bins.append([b, float(n[k]), s_sky[k], s_az[k], s_el[k], peak[k]])
+        self.samples += int(t.size)
+        self.last_t_us = int(t[-1])
+        self.last_sky_arcsec = float(math.sqrt(sky2[-1]))
+
+    def stats(self, from_us: int | None = None, to_us: int | None = None) -> ErrorStats:
+        """Return RMS and peak over bins whose start lies in [from_us, to_us)."""
+        lo = -(2**62) if from_us is None else int(from_us) // self.bin_us
+        hi = 2**62 if to_us is None else -(-int(to_us) // self.bin_us)
+        sel = [b for b in self._bins if lo <= b[0] < hi]
+        n = sum(b[1] for b in sel)
+        if n == 0:
+            return ErrorStats(0, math.nan, math.nan, math.nan, math.nan,
+                              int(from_us or 0), int(to_us or 0))
+        return ErrorStats(
+            int(n),
+            math.sqrt(sum(b[2] for b in sel) / n),
+            max(b[5] for b in sel),
+            math.sqrt(sum(b[3] for b in sel) / n),
+            math.sqrt(sum(b[4] for b in sel) / n),
+            int(sel[0][0] * self.bin_us),
+            int((sel[-1][0] + 1) * self.bin_us),
+        )
+
+    def window(self, seconds: float) -> ErrorStats:
+        """Return the statistics of the last `seconds` of mount time received."""
+        return self.stats(self.last_t_us - int(seconds * 1e6), None)
+
+    def series(self, from_us: int | None = None, to_us: int | None = None,
+               max_points: int = 5000) -> dict[str, list]:
+        """Return per-bin (t_us, rms, peak) in arcsec, decimated to at most `max_points`."""
+        lo = -(2**62) if from_us is None else int(from_us) // self.bin_us
+        hi = 2**62 if to_us is None else -(-int(to_us) // self.bin_us)
+        sel = [b for b in self._bins if lo <= b[0] < hi]
+        step = max(1, math.ceil(len(sel) / max_points))
+        out: dict[str, list] = {"t_us": [], "rms_arcsec": [], "peak_arcsec": []}
+        for k in range(0, len(sel), step):
+            group = sel[k:k + step]
+            n = sum(b[1] for b in group)
+            out["t_us"].append(int(group[0][0] * self.bin_us))
+            out["rms_arcsec"].append(math.sqrt(sum(b[2] for b in group) / n))
+            out["peak_arcsec"].append(max(b[5] for b in group))
+        return out
