@@ -198,7 +198,8 @@ class Stream:
 
     async def get(self, timeout_s: float | None = None) -> StreamPacket:
         """Return the next packet; raise TimeoutError after `timeout_s`."""
-        return await asyncio.wait_for(self.__anext__(), timeout_s)
+        async with asyncio.timeout(timeout_s):
+            return await self.__anext__()
 
     async def stop(self) -> None:
         """Stop the stream on the endpoint; iteration ends after the queued packets."""
@@ -384,7 +385,8 @@ class Client:
         self._pending[seq] = future
         try:
             await self._flush()
-            return await asyncio.wait_for(future, self.timeout_s)
+            async with asyncio.timeout(self.timeout_s):  # no extra task, unlike wait_for
+                return await future
         finally:
             self._pending.pop(seq, None)
 

@@ -43,6 +43,20 @@ _INT = (int,)
 _NUM = (int, float)
 
 
+_FIELD_CACHE: dict[type, tuple[tuple[str, bool], ...]] = {}
+
+
+def _fields(cls: type) -> tuple[tuple[str, bool], ...]:
+    """Return (name, required) of a command's fields, computed once per class."""
+    fields = _FIELD_CACHE.get(cls)
+    if fields is None:
+        fields = tuple((f.name, f.default is dataclasses.MISSING
+                        and f.default_factory is dataclasses.MISSING)
+                       for f in dataclasses.fields(cls))
+        _FIELD_CACHE[cls] = fields
+    return fields
+
+
 @dataclass(frozen=True)
 class Command:
     """Base of every request; subclasses set OP, ROLE and SCHEMA."""
@@ -53,7 +67,7 @@ class Command:
 
     def to_args(self) -> dict[str, Any]:
         """Return the args map sent on the wire."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {name: getattr(self, name) for name, _ in _fields(type(self))}
 
     def to_frame(self, seq: int) -> list[Any]:
         """Return the request frame ``[OP, seq, args]`` (before msgpack)."""
@@ -63,18 +77,18 @@ class Command:
     def from_args(cls, args: dict[str, Any]) -> Command:
         """Build the command from a decoded args map; raise MalformedFrame naming the field."""
         values: dict[str, Any] = {}
-        for f in dataclasses.fields(cls):
-            if f.name not in args:
-                if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                    raise MalformedFrame(f"{cls.OP}: missing field {f.name!r}")
+        for name, required in _fields(cls):
+            if name not in args:
+                if required:
+                    raise MalformedFrame(f"{cls.OP}: missing field {name!r}")
                 continue
-            value = args[f.name]
-            allowed = cls.SCHEMA[f.name]
+            value = args[name]
+            allowed = cls.SCHEMA[name]
             if not isinstance(value, allowed) or (isinstance(value, bool) and bool not in allowed):
                 names = "/".join(t.__name__ for t in allowed)
-                raise MalformedFrame(f"{cls.OP}: field {f.name!r} must be {names}, "
+                raise MalformedFrame(f"{cls.OP}: field {name!r} must be {names}, "
                                      f"got {type(value).__name__}")
-            values[f.name] = value
+            values[name] = value
         return cls(**values)
 
 

@@ -197,9 +197,10 @@ class Endpoint:
 
     async def _session(self, conn: ServerConnection, transport: Transport) -> None:
         wake = asyncio.Event()
+        control_lock = asyncio.Lock()
         self.service.attach(conn)
         self._wakers[conn.client_id] = wake
-        writer = asyncio.create_task(self._writer(conn, transport, wake))
+        writer = asyncio.create_task(self._writer(conn, transport, wake, control_lock))
         loop = asyncio.get_running_loop()
         timer = loop.call_later(self.config.auth_timeout_s, self._auth_expired, conn, wake)
         try:
@@ -217,7 +218,10 @@ class Endpoint:
                         await self._execute(conn, event)
                 if conn.role:
                     timer.cancel()
-                wake.set()
+                # Replies go out from here, without a hop through the writer task (latency).
+                await self._send_control(conn, transport, control_lock)
+                if conn.state is ServerState.CLOSED:
+                    wake.set()
         finally:
             timer.cancel()
             self.service.detach(conn)
@@ -232,30 +236,44 @@ class Endpoint:
         try:
             result = self.service.execute(conn, event.command)
             if isinstance(result, PendingInvoke):
-                try:
-                    value = await result.awaitable
-                except Exception as exc:
-                    raise DeviceError(f"{result.function.name} failed: "
-                                      f"{type(exc).__name__}: {exc}") from None
-                result = result.complete(value)
+                result = await self._finish_invoke(result)
         except AstcomError as exc:
             conn.send_error(event.seq, exc)
             return
         conn.send_result(event.seq, result)
+
+    @staticmethod
+    async def _finish_invoke(pending: PendingInvoke) -> dict[str, Any]:
+        try:
+            value = await pending.awaitable
+        except Exception as exc:
+            raise DeviceError(f"{pending.function.name} failed: {type(exc).__name__}: {exc}"
+                              ) from None
+        return pending.complete(value)
 
     def _auth_expired(self, conn: ServerConnection, wake: asyncio.Event) -> None:
         if conn.state is not ServerState.READY and conn.state is not ServerState.CLOSED:
             conn.close(AuthTimeout.code, f"not authenticated within {self.config.auth_timeout_s:g} s")
             wake.set()
 
-    async def _writer(self, conn: ServerConnection, transport: Transport, wake: asyncio.Event) -> None:
+    async def _send_control(self, conn: ServerConnection, transport: Transport,
+                            lock: asyncio.Lock) -> None:
+        async with lock:  # one sender of replies at a time keeps them in request order
+            while (frame := conn.next_control()) is not None:
+                await transport.send(frame)
+
+    async def _writer(self, conn: ServerConnection, transport: Transport, wake: asyncio.Event,
+                      control_lock: asyncio.Lock) -> None:
         try:
             while True:
                 await wake.wait()
                 wake.clear()
+                if conn.has_control:
+                    await self._send_control(conn, transport, control_lock)
                 while (frame := conn.next_frame()) is not None:
                     await transport.send(frame)
                 if conn.state is ServerState.CLOSED:
+                    await self._send_control(conn, transport, control_lock)
                     break
         except ConnectionClosed:
             pass

@@ -284,6 +284,14 @@ class ServerConnection:
             return self._stream.popleft()[0]
         return None
 
+    def next_control(self) -> bytes | None:
+        """Return the next reply frame to send, or None (stream packets stay queued)."""
+        return self._control.popleft() if self._control else None
+
+    @property
+    def has_control(self) -> bool:
+        return bool(self._control)
+
     @property
     def queue_depth(self) -> int:
         """Return the number of stream packets waiting to be sent."""
