@@ -161,3 +161,10 @@ def test_omm_elements_give_the_same_orbit_as_the_tle():
     np.testing.assert_allclose(again.teme_km(times)[0], sat.teme_km(times)[0], atol=1e-3)
     with pytest.raises(SatelliteError, match="OMM"):
         Satellite.from_omm({"OBJECT_NAME": "x"})
+
+
+def test_strided_time_selections_propagate():
+    times = UtcTimes.from_iso(["2024-05-18T00:00:00"]).shifted(np.arange(0.0, 100.0))
+    r_every, _ = SATS["ISS (ZARYA)"].teme_km(times)
+    r_some, _ = SATS["ISS (ZARYA)"].teme_km(times[::7])
+    np.testing.assert_array_equal(r_some, r_every[::7])

@@ -142,3 +142,31 @@ def test_topocentric_apparent_radec_matches_astropy_tete_within_1_mas(site, eop)
                    obstime=Time(VEGA.epoch_jyear, format="jyear", scale="tt"))
     ref = coo.apply_space_motion(new_obstime=t_ap).transform_to(TETE(obstime=t_ap, location=loc))
     assert sep_rad(ref.ra.rad, ref.dec.rad, ra, dec).max() < ONE_MAS_RAD
+
+
+def _erfa_refraction_second_implementation(el, refa, refb):
+    """ERFA atioq's refraction step, written out again for the test (A tan z + B tan^3 z,
+    Newton-Raphson corrected, sin(el) floored at 0.05 as atioq does)."""
+    r, z = np.cos(el), np.maximum(np.sin(el), 0.05)
+    tz = r / z
+    w = refb * tz * tz
+    d = (refa + w) * tz / (1.0 + (refa + 3.0 * w) / (z * z))
+    cosdel = 1.0 - d * d / 2.0
+    return np.arctan2(cosdel * np.sin(el) + d * r, r * (cosdel - d * z / r))
+
+
+def test_refraction_table_reproduces_erfa_to_a_microarcsecond_above_3_deg(site):
+    from virtualstar.astro.observed import refraction_table
+
+    refa, refb = erfa.refco(site.pressure_hpa, site.temperature_c, site.humidity,
+                            site.wavelength_um)
+    table = refraction_table(site.pressure_hpa, site.temperature_c, site.humidity,
+                             site.wavelength_um)
+    el = np.radians(np.linspace(3.0, 90.0, 200_001))
+    ours, _ = table.apply(el, np.zeros_like(el))
+    truth = _erfa_refraction_second_implementation(el, refa, refb)
+    assert np.abs(ours - truth).max() < 0.001 * ONE_MAS_RAD
+    low = np.radians(np.linspace(-1.0, 3.0, 20_001))
+    ours_low, _ = table.apply(low, np.zeros_like(low))
+    truth_low = _erfa_refraction_second_implementation(low, refa, refb)
+    assert np.abs(ours_low - truth_low).max() < 0.01 * ONE_MAS_RAD

@@ -99,7 +99,8 @@ class Satellite:
 
         Raises SatelliteError when SGP4 fails at any of the times (decay, ...).
         """
-        err, r, v = self.satrec.sgp4_array(times.jd1, times.jd2)
+        err, r, v = self.satrec.sgp4_array(np.ascontiguousarray(times.jd1, dtype=float),
+                                           np.ascontiguousarray(times.jd2, dtype=float))
         if err.any():
             bad = np.flatnonzero(err)
             code = int(err[bad[0]])

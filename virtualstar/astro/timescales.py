@@ -69,7 +69,8 @@ class UtcTimes:
         return self.jd1.shape[0]
 
     def __getitem__(self, index) -> UtcTimes:
-        return UtcTimes(np.atleast_1d(self.jd1[index]), np.atleast_1d(self.jd2[index]))
+        return UtcTimes(np.ascontiguousarray(np.atleast_1d(self.jd1[index])),
+                        np.ascontiguousarray(np.atleast_1d(self.jd2[index])))
 
     def to_unix_us(self) -> np.ndarray:
         """Return mount time (int64 µs since 1970-01-01 UTC, POSIX)."""
