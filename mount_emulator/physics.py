@@ -200,6 +200,18 @@ SAMPLE_BEFORE = 1  # the mount time is before the first point: hold
 SAMPLE_UNDERRUN = 2  # no point after the mount time
 TWO_PI = 2.0 * math.pi
 TICKS_PER_SECOND = 1_000_000 // TICK_US
+# Per-block constants derived from the parameters (reciprocals, discretisation factors).
+# Parameters only change between blocks, so computing them once per call is exact.
+K_CPR = 0  # encoder counts per radian
+K_RPC = 1  # radians per count
+K_BETA_V = 2  # velocity-filter factor dt / (tau_v + dt)
+K_ALPHA_I = 3  # current-lag factor dt / (tau_i + dt)
+K_DT_JM = 4  # dt / J_motor
+K_DT_JL = 5  # dt / J_load
+K_INV_KT = 6
+K_INV_VS = 7  # 1 / friction smoothing velocity
+K_DT_TAU_TH = 8  # dt / thermal tau
+N_K = 9
 RAD_TO_DEG = 180.0 / math.pi
 
 
@@ -386,7 +398,7 @@ def _reference(state, params, sb, pb, a, sample_code, sample, dt):
 
 
 @_inline
-def _control(state, params, sb, pb, dt):
+def _control(state, params, sb, pb, dt, k):
     """Run the cascaded position/velocity loops; return the current command (A)."""
     e = state[sb + A_REF] - state[sb + A_ENC]
     state[sb + A_ERR] = e
@@ -416,13 +428,13 @@ def _control(state, params, sb, pb, dt):
     state[sb + A_VEL_CMD] = v_cmd
     # velocity loop (PID on the error) with acceleration feed-forward
     ev = v_cmd - state[sb + A_VEL_EST]
-    kt = params[pb + P_KT]
     imax = params[pb + P_I_MAX]
     # friction feed-forward on the commanded velocity, same smoothing as the plant model
-    x = v_cmd / params[pb + P_FRIC_VS]
+    x = v_cmd * k[K_INV_VS]
     x = min(max(x, -1.0), 1.0)
     i_unsat = (
-        (params[pb + P_AFF] * params[pb + P_J_FF] * state[sb + A_REF_ACC] + params[pb + P_FRIC_FF] * x) / kt
+        (params[pb + P_AFF] * params[pb + P_J_FF] * state[sb + A_REF_ACC] + params[pb + P_FRIC_FF] * x)
+        * k[K_INV_KT]
         + params[pb + P_KV] * ev
         + params[pb + P_KVI] * state[sb + A_INT_VEL]
         + params[pb + P_KVD] * (ev - state[sb + A_PREV_EV]) / dt
@@ -457,25 +469,23 @@ def _watchdog(state, params, sb, pb, mount_faults):
 
 
 @_inline
-def _sense(state, params, sb, pb, dt):
+def _sense(state, params, sb, pb, dt, k):
     """Read the absolute encoder (unless faulted) and update the velocity estimate."""
-    counts_per_rad = math.ldexp(1.0, int(params[pb + P_ENC_BITS])) / TWO_PI
     if params[pb + P_INJ_ENC] == 0.0:
-        counts = math.floor(state[sb + A_POS_M] * counts_per_rad + 0.5)
+        counts = math.floor(state[sb + A_POS_M] * k[K_CPR] + 0.5)
         state[sb + A_ENC_COUNTS] = counts
-        state[sb + A_ENC] = counts / counts_per_rad
+        state[sb + A_ENC] = counts * k[K_RPC]
     enc = state[sb + A_ENC]
     raw_v = (enc - state[sb + A_PREV_ENC]) / dt
     state[sb + A_PREV_ENC] = enc
-    beta = dt / (params[pb + P_TAU_V] + dt)
-    state[sb + A_VEL_EST] += beta * (raw_v - state[sb + A_VEL_EST])
+    state[sb + A_VEL_EST] += k[K_BETA_V] * (raw_v - state[sb + A_VEL_EST])
 
 
 @_inline
-def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
+def _plant(state, params, sb, pb, i_cmd, dt, ambient_c, k):
     """Integrate one axis over one tick; return the electrical power drawn (W)."""
     cur = state[sb + A_CUR]
-    cur += (i_cmd - cur) * (dt / (params[pb + P_TAU_I] + dt))
+    cur += (i_cmd - cur) * k[K_ALPHA_I]
     state[sb + A_CUR] = cur
     state[sb + A_CUR_CMD] = i_cmd
     pm = state[sb + A_POS_M]
@@ -486,13 +496,13 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
     t_motor = kt * cur + params[pb + P_COG] * math.sin(params[pb + P_COG_N] * pm)
     t_spring = params[pb + P_K] * (pm - pl) + params[pb + P_C] * (vm - vl)
     t_grav = params[pb + P_GRAV] * math.cos(pl) if params[pb + P_GRAV] != 0.0 else 0.0
-    jm = params[pb + P_JM]
-    vm_free = vm + dt * (t_motor - t_spring - params[pb + P_VISC] * vm) / jm
+    dt_jm = k[K_DT_JM]
+    vm_free = vm + (t_motor - t_spring - params[pb + P_VISC] * vm) * dt_jm
     fc = params[pb + P_COULOMB]
     st = int(state[sb + A_STATE])
     if st in (OFF, FAULT):
         # holding brake: exact stiction (implicit clamp), it never creeps
-        dv_c = dt * (fc + params[pb + P_BRAKE]) / jm
+        dv_c = (fc + params[pb + P_BRAKE]) * dt_jm
         if vm_free > dv_c:
             vm = vm_free - dv_c
         elif vm_free < -dv_c:
@@ -502,14 +512,14 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
     else:
         # Coulomb friction solved implicitly, linear below the smoothing velocity:
         # no stick-slip hunting under integral action, stable at any step
-        dv_c = dt * fc / jm
+        dv_c = fc * dt_jm
         v_s = params[pb + P_FRIC_VS]
-        vm = vm_free / (1.0 + dv_c / v_s)
+        vm = vm_free / (1.0 + dv_c * k[K_INV_VS])
         if vm > v_s:
             vm = vm_free - dv_c
         elif vm < -v_s:
             vm = vm_free + dv_c
-    vl = vl + dt * (t_spring - t_grav) / params[pb + P_JL]
+    vl = vl + (t_spring - t_grav) * k[K_DT_JL]
     state[sb + A_VEL_M] = vm
     state[sb + A_VEL_L] = vl
     state[sb + A_POS_M] = pm + dt * vm
@@ -519,7 +529,7 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c):
     r_th = params[pb + P_RTH]
     heat = cur * cur * params[pb + P_R_OHM]
     temp = state[sb + A_TEMP]
-    state[sb + A_TEMP] = temp + dt * (heat - (temp - ambient_c) / r_th) * r_th / params[pb + P_TAU_TH]
+    state[sb + A_TEMP] = temp + (heat * r_th - (temp - ambient_c)) * k[K_DT_TAU_TH]
     power = heat + kt * cur * vm
     state[sb + A_POWER] = power
     return power
@@ -588,6 +598,25 @@ def _mount_state(state):
     return OFF
 
 
+@_inline
+def _block_constants(params, dt):
+    """Return the per-axis constants (``K_*``) derived from the parameters for one block."""
+    k = np.empty((2, N_K))
+    for a in range(2):
+        pb = PARAM_AXIS0 + a * AXIS_STRIDE
+        cpr = math.ldexp(1.0, int(params[pb + P_ENC_BITS])) / TWO_PI
+        k[a, K_CPR] = cpr
+        k[a, K_RPC] = 1.0 / cpr
+        k[a, K_BETA_V] = dt / (params[pb + P_TAU_V] + dt)
+        k[a, K_ALPHA_I] = dt / (params[pb + P_TAU_I] + dt)
+        k[a, K_DT_JM] = dt / params[pb + P_JM]
+        k[a, K_DT_JL] = dt / params[pb + P_JL]
+        k[a, K_INV_KT] = 1.0 / params[pb + P_KT]
+        k[a, K_INV_VS] = 1.0 / params[pb + P_FRIC_VS]
+        k[a, K_DT_TAU_TH] = dt / params[pb + P_TAU_TH]
+    return k
+
+
 @_jit
 def step(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace_dst):
     """Advance the mount by ``n_ticks`` ticks of 100 µs; return the events seen (EV_* bits).
@@ -599,6 +628,7 @@ def step(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace
     events = 0
     sample = np.zeros(6)
     n_trace = trace_src.shape[0]
+    kk = _block_constants(params, dt)
     for n in range(n_ticks):
         events |= _clock(state, params)
         t_us = state[G_MOUNT_US] + state[G_MOUNT_FRAC_US]
@@ -626,13 +656,14 @@ def step(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace
         for a in range(2):
             sb = STATE_AXIS0 + a * AXIS_STRIDE
             pb = PARAM_AXIS0 + a * AXIS_STRIDE
-            _sense(state, params, sb, pb, dt)
+            k = kk[a]
+            _sense(state, params, sb, pb, dt, k)
             ev = _reference(state, params, sb, pb, a, code, sample, dt)
             if ev & EV_UNDERRUN and not events & EV_UNDERRUN:
                 state[G_TRAJ_UNDERRUNS] += 1.0
                 state[G_STATUS] = int(state[G_STATUS]) | STATUS_UNDERRUN
             events |= ev
-            i_cmd = _control(state, params, sb, pb, dt)
+            i_cmd = _control(state, params, sb, pb, dt, k)
             f = _watchdog(state, params, sb, pb, mount_faults)
             if f != 0:
                 state[sb + A_FAULTS] = int(state[sb + A_FAULTS]) | f
@@ -641,7 +672,7 @@ def step(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace
                     events |= EV_FAULT
             if int(state[sb + A_STATE]) == FAULT:
                 i_cmd = 0.0
-            p_total += _plant(state, params, sb, pb, i_cmd, dt, ambient)
+            p_total += _plant(state, params, sb, pb, i_cmd, dt, ambient, k)
             _peak(state, sb)
             if n_trace > 0:
                 _derived(state, sb)
