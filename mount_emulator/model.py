@@ -223,10 +223,15 @@ class MountModel:
         ``traj.out_of_range``. Points beyond the free space are neither stored
         nor counted: push them again later.
         """
-        t = np.asarray(t_us, dtype=np.int64).ravel()
-        az = np.asarray(az_rad, dtype=np.float64).ravel()
-        el = np.asarray(el_rad, dtype=np.float64).ravel()
+        try:
+            t = np.asarray(t_us, dtype=np.int64).ravel()
+            az = np.asarray(az_rad, dtype=np.float64).ravel()
+            el = np.asarray(el_rad, dtype=np.float64).ravel()
+        except (TypeError, ValueError) as exc:
+            raise TrajectoryError(f"trajectory arrays must be numeric (t_us integer µs): {exc}") from None
         rates = az_rate_rad_s is not None or el_rate_rad_s is not None
+        if rates and (az_rate_rad_s is None or el_rate_rad_s is None):
+            raise TrajectoryError("give both az_rate_rad_s and el_rate_rad_s, or neither")
         if rates:
             vaz = np.asarray(az_rate_rad_s, dtype=np.float64).ravel()
             vel = np.asarray(el_rate_rad_s, dtype=np.float64).ravel()
@@ -251,7 +256,8 @@ class MountModel:
             if t[k] <= earliest or t[k] <= last:
                 late += 1
                 continue
-            if not (lims[0][0] <= az[k] <= lims[0][1] and lims[1][0] <= el[k] <= lims[1][1]):
+            if (not (lims[0][0] <= az[k] <= lims[0][1] and lims[1][0] <= el[k] <= lims[1][1])
+                    or math.isinf(vaz[k]) or math.isinf(vel[k])):
                 out += 1
                 continue
             i = tail % cap

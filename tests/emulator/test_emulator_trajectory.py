@@ -137,3 +137,8 @@ def test_trajectory_init_is_refused_while_tracking():
     m.traj_reset()
     m.run(ticks(0.5))
     assert m.axis_state(0) == AxisState.HOLDING
+
+
+def test_push_refuses_one_rate_array_without_the_other(mount):
+    with pytest.raises(TrajectoryError, match="both az_rate_rad_s and el_rate_rad_s"):
+        mount.traj_push([mount.mount_time_us + 1000], [0.0], [0.3], [0.0], None)
