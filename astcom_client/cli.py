@@ -202,11 +202,13 @@ def stream_command(url: Url, names: Annotated[list[str], typer.Argument(
                     writer = csv.writer(handle)
                     writer.writerow(["t_us", "tick", *stream.names])
                 start = time.monotonic()
+                samples = lost = packets = 0
                 while (left := duration - (time.monotonic() - start)) > 0:
                     try:
                         packet = await stream.get(timeout_s=left)
                     except TimeoutError:
                         break
+                    samples, lost, packets = samples + packet.n, lost + packet.lost, packets + 1
                     if writer is not None:
                         for t_us, tick, row in zip(packet.t_us.tolist(), packet.ticks.tolist(),
                                                    packet.values.tolist(), strict=True):
@@ -219,9 +221,9 @@ def stream_command(url: Url, names: Annotated[list[str], typer.Argument(
             finally:
                 if handle is not None:
                     handle.close()
-            return {"samples": {n: stream.samples for n in stream.names}, "lost": stream.lost,
+            return {"samples": {n: samples for n in stream.names}, "lost": lost,
                     "rate_hz": stream.rate_hz, "duration_s": round(elapsed, 6),
-                    "packets": stream.packets, "out": str(out_file) if out_file else None}
+                    "packets": packets, "out": str(out_file) if out_file else None}
 
     summary = _run(main())
     if as_json:
