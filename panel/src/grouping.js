@@ -1,0 +1,53 @@
+// Group LIST entries by their dotted-name prefix (`axis.az.kp` -> `axis.az`), so any
+// device's names lay out by module without the panel knowing the device.
+
+/** Return [{group, entries}] sorted by group, entries in LIST order; '' for names without a dot. */
+export function groupByPrefix(entries) {
+  const groups = new Map();
+  for (const e of entries) {
+    const dot = e.name.lastIndexOf('.');
+    const group = dot < 0 ? '' : e.name.slice(0, dot);
+    if (!groups.has(group)) groups.set(group, []);
+    groups.get(group).push(e);
+  }
+  return [...groups.entries()]
+    .sort(([a], [b]) => a.localeCompare(b))
+    .map(([group, list]) => ({ group, entries: list }));
+}
+
+/** Return the entries whose name, unit or doc contains every word of `filter`. */
+export function filterEntries(entries, filter) {
+  const words = filter.toLowerCase().split(/\s+/).filter(Boolean);
+  if (!words.length) return entries;
+  return entries.filter((e) => {
+    const text = `${e.name} ${e.unit} ${e.doc}`.toLowerCase();
+    return words.every((w) => text.includes(w));
+  });
+}
+
+/** Return the part of a name after its group, for compact tables. */
+export function shortName(name) {
+  const dot = name.lastIndexOf('.');
+  return dot < 0 ? name : name.slice(dot + 1);
+}
+
+/** Format a value read from the endpoint for a table cell. */
+export function formatValue(v) {
+  if (v === null || v === undefined) return '—';
+  if (typeof v === 'number') {
+    if (Number.isInteger(v)) return String(v);
+    const a = Math.abs(v);
+    return a !== 0 && (a < 1e-3 || a >= 1e6) ? v.toExponential(6) : v.toPrecision(8).replace(/\.?0+$/, '');
+  }
+  if (typeof v === 'boolean' || typeof v === 'string') return String(v);
+  if (v instanceof Uint8Array) return `bytes(${v.length})`;
+  if (typeof v.toNested === 'function') return JSON.stringify(v.toNested());
+  return JSON.stringify(v);
+}
+
+/** Return the JSON-able form of a value (NdArray -> nested array). */
+export function plainValue(v) {
+  if (v && typeof v.toNested === 'function') return v.toNested();
+  if (v instanceof Uint8Array) return Array.from(v);
+  return v;
+}

@@ -1,0 +1,189 @@
+// The panel's one connection to an endpoint and what every tab shares.
+//
+// Two ASTCom connections, as the protocol suggests (§6 "Private and stream channels"):
+// `control` carries LIST/READ/WRITE/INVOKE/STATS, `data` carries only the stream, so a
+// burst of samples never delays a reply and a slow reply never stalls the plot.
+import { markRaw, reactive } from 'vue';
+import { Client } from './astcom/index.js';
+import { compileExpression } from './expressions.js';
+import { SeriesStore } from './series.js';
+
+export const session = reactive({
+  url: 'ws://127.0.0.1:8765',
+  role: 'operator',
+  status: 'disconnected', // disconnected | connecting | connected
+  hello: null,
+  grantedRole: null,
+  entries: [],
+  log: [],
+  stream: { names: [], rateHz: 1000, active: false, samples: 0, lost: 0, packets: 0, actualRateHz: 0 },
+  computes: [], // {name, expr, error}
+});
+
+export const series = new SeriesStore();
+const links = { control: null, data: null, stream: null, compiled: [] };
+
+/** Debug counters the end-to-end tests and the benchmark read from the page. */
+export const probe = { plotUpdates: 0, plotPoints: 0, lastPlotSeries: [] };
+if (typeof window !== 'undefined') window.panelProbe = { session, series, probe };
+
+export function logEvent(text, level = 'error') {
+  session.log.unshift({ time: new Date().toISOString().slice(11, 23), level, text });
+  if (session.log.length > 100) session.log.length = 100;
+}
+
+function connectOne(url, password, role, clientName) {
+  return Client.connect(url, { password, role, clientName });
+}
+
+/** Open both channels and list the endpoint; errors land in the log and are rethrown. */
+export async function connect(url, password) {
+  await disconnect();
+  session.url = url;
+  session.status = 'connecting';
+  try {
+    const control = await connectOne(url, password, session.role, 'panel');
+    const data = await connectOne(url, password, 'observer', 'panel-stream');
+    links.control = markRaw(control);
+    links.data = markRaw(data);
+    control.onClose((err) => lost(err));
+    data.onClose((err) => lost(err));
+    session.hello = { server: control.hello.server, loopRateHz: control.hello.loop_rate_hz, limits: control.hello.limits };
+    session.grantedRole = control.role;
+    session.entries = await control.list();
+    session.status = 'connected';
+    logEvent(`connected to ${control.hello.server} at ${url} as ${control.role}`, 'info');
+  } catch (err) {
+    await disconnect();
+    logEvent(`connect ${url}: ${err.message}`);
+    throw err;
+  }
+}
+
+function lost(err) {
+  if (session.status !== 'connected') return;
+  logEvent(`connection lost: ${err.message}`);
+  disconnect();
+}
+
+export async function disconnect() {
+  const { control, data } = links;
+  links.control = null;
+  links.data = null;
+  links.stream = null;
+  session.stream.active = false;
+  session.status = 'disconnected';
+  await Promise.all([control?.close(), data?.close()]);
+}
+
+export function requireControl() {
+  if (!links.control) throw new Error('not connected: connect on the Board tab first');
+  return links.control;
+}
+
+/** Run a request on the control channel, logging its error before rethrowing. */
+export async function guarded(what, fn) {
+  try {
+    return await fn(requireControl());
+  } catch (err) {
+    logEvent(`${what}: ${err.message}`);
+    throw err;
+  }
+}
+
+export const read = (names) => guarded(`read ${names.length > 3 ? `${names.length} values` : names.join(', ')}`, (c) => c.read(names));
+export const write = (values) => guarded(`write ${Object.keys(values).join(', ')}`, (c) => c.write(values));
+export const invoke = (name, args = []) => guarded(`call ${name}`, (c) => c.invoke(name, args, 60_000));
+export const stats = () => guarded('stats', (c) => c.stats());
+export const ping = () => guarded('ping', (c) => c.ping());
+
+// ------------------------------------------------------------------ streaming
+function recompile() {
+  const names = session.stream.names;
+  links.compiled = [];
+  for (const c of session.computes) {
+    try {
+      const expr = compileExpression(c.expr, names);
+      c.error = '';
+      series.ensure(c.name);
+      links.compiled.push({ name: c.name, expr });
+    } catch (err) {
+      c.error = err.message;
+      series.drop(c.name);
+    }
+  }
+}
+
+/** Replace the compute list (from the Compute tab or a loaded file). */
+export function setComputes(list) {
+  for (const c of session.computes) series.drop(c.name);
+  session.computes = list.map((c) => ({ name: c.name, expr: c.expr, error: '' }));
+  recompile();
+}
+
+function onPacket(packet, stream) {
+  const columns = {};
+  stream.columns.forEach((name, j) => {
+    columns[name] = packet.columns[j];
+  });
+  if (links.compiled.length) {
+    const row = {};
+    for (const { name } of links.compiled) columns[name] = new Float64Array(packet.n);
+    for (let i = 0; i < packet.n; i++) {
+      for (const name of stream.columns) row[name] = columns[name][i];
+      for (const { name, expr } of links.compiled) {
+        try {
+          columns[name][i] = expr.evaluate(row);
+        } catch {
+          columns[name][i] = Number.NaN;
+        }
+      }
+    }
+  }
+  series.append(packet.tUs, columns);
+  const s = session.stream;
+  s.samples = stream.samples;
+  s.lost = stream.lost;
+  s.packets = stream.packets;
+}
+
+/** Stream `names` at `rateHz` on the data channel; replaces any running stream. */
+export async function startStream(names, rateHz) {
+  if (!links.data) throw new Error('not connected: connect on the Board tab first');
+  await stopStream();
+  try {
+    const stream = await links.data.stream(names, rateHz);
+    links.stream = markRaw(stream);
+    Object.assign(session.stream, {
+      names: [...stream.columns], rateHz, active: true, samples: 0, lost: 0, packets: 0,
+      actualRateHz: stream.rateHz,
+    });
+    series.reset(stream.columns, stream.rateHz);
+    recompile();
+    stream.onPacket(onPacket);
+    stream.onEnd(() => {
+      session.stream.active = false;
+    });
+  } catch (err) {
+    logEvent(`stream ${names.join(', ')}: ${err.message}`);
+    throw err;
+  }
+}
+
+export async function stopStream() {
+  const stream = links.stream;
+  links.stream = null;
+  session.stream.active = false;
+  if (stream) {
+    try {
+      await stream.stop();
+    } catch (err) {
+      logEvent(`stop stream: ${err.message}`);
+    }
+  }
+}
+
+// ------------------------------------------------------------------ LIST helpers
+export const signals = () => session.entries.filter((e) => e.kind === 'signal');
+export const parameters = () => session.entries.filter((e) => e.kind === 'parameter');
+export const functions = () => session.entries.filter((e) => e.kind === 'function');

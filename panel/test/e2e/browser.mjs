@@ -1,0 +1,53 @@
+// Launch Debian's chromium through playwright-core (never a downloaded browser build).
+import { mkdtempSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+import { chromium } from 'playwright-core';
+
+export const CHROMIUM = process.env.CHROMIUM_PATH || '/usr/bin/chromium';
+
+// Without the background-networking flags chromium keeps trying to reach Google's servers.
+const ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+  '--disable-background-networking', '--disable-component-update', '--disable-sync',
+  '--disable-dev-shm-usage'];
+
+/** Return {context, close()}: a persistent context in a fresh, empty profile folder. */
+export async function launch({ width = 1400, height = 900 } = {}) {
+  const profile = mkdtempSync(join(tmpdir(), 'panel-chromium-'));
+  const context = await chromium.launchPersistentContext(profile, {
+    executablePath: CHROMIUM,
+    headless: true,
+    args: ARGS,
+    viewport: { width, height },
+    acceptDownloads: true,
+  });
+  return {
+    context,
+    async close() {
+      await context.close();
+      rmSync(profile, { recursive: true, force: true });
+    },
+  };
+}
+
+/** Open the panel, connect to `endpoint` on the Board tab, wait for "connected". */
+export async function openAndConnect(page, panelUrl, endpoint, password) {
+  await page.goto(panelUrl);
+  await page.fill('input[name=url]', endpoint);
+  await page.fill('input[name=password]', password || '');
+  await page.click('button.connect');
+  await page.waitForFunction(() => window.panelProbe?.session.status === 'connected', null, { timeout: 15_000 });
+}
+
+/** Tick signals on the Signals tab and start streaming them at `rateHz`. */
+export async function streamSignals(page, names, rateHz) {
+  await page.click('button[data-tab=Signals]');
+  for (const name of names) {
+    await page.fill('input[name=signal-filter]', name);
+    await page.locator(`input[data-signal="${name}"]`).check();
+  }
+  await page.fill('input[name=signal-filter]', '');
+  await page.fill('input[name=rate]', String(rateHz));
+  await page.click('button.start-stream');
+  await page.waitForFunction(() => window.panelProbe.session.stream.samples > 0, null, { timeout: 10_000 });
+}

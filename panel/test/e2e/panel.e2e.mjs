@@ -1,0 +1,135 @@
+// End-to-end: the built panel in headless chromium against a live mount emulator.
+// Run by tests/panel/test_panel_e2e.py, which starts the emulator and `vs panel`'s server,
+// then checks with the Python client what this script did through the page.
+//
+// env: PANEL_URL, ASTCOM_URL, ASTCOM_PASSWORD, ARTIFACTS (screenshot folder), RESULT (JSON
+// path), PARAM_NAME, PARAM_VALUE, AZ_FORMULA, EL_FORMULA, TRAJ_DURATION_S, TRAJ_STEP_S.
+import assert from 'node:assert/strict';
+import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
+import { join } from 'node:path';
+import { launch, openAndConnect, streamSignals } from './browser.mjs';
+
+const env = process.env;
+const ARTIFACTS = env.ARTIFACTS || 'artifacts/panel';
+mkdirSync(ARTIFACTS, { recursive: true });
+const result = { steps: [] };
+const step = (name) => {
+  result.steps.push(name);
+  console.log(`e2e: ${name}`);
+};
+const shot = (page, tab) => page.screenshot({ path: join(ARTIFACTS, `${tab.toLowerCase()}.png`), fullPage: false });
+const tab = (page, name) => page.click(`button[data-tab=${name}]`);
+
+const browser = await launch();
+const page = await browser.context.newPage();
+page.on('pageerror', (err) => {
+  result.pageErrors = [...(result.pageErrors || []), err.message];
+});
+try {
+  await openAndConnect(page, env.PANEL_URL, env.ASTCOM_URL, env.ASTCOM_PASSWORD);
+  step('connected');
+  result.entries = await page.evaluate(() => window.panelProbe.session.entries.length);
+
+  // Input: power the mount on (Start), then check a function call returns a value.
+  await tab(page, 'Input');
+  await page.waitForFunction(() => document.querySelector('input[name=quick-start]').value !== '');
+  result.quickStart = await page.inputValue('input[name=quick-start]');
+  await page.click('button.quick-start');
+  await page.fill('input[name=call-name]', 'time.now_us');
+  await page.click('button.call');
+  await page.waitForFunction(() => document.querySelector('.call-result').textContent.trim() !== '');
+  result.nowUs = Number(await page.textContent('.call-result'));
+  step('function called');
+
+  // Signals: stream two signals at 1 kHz on the stream channel.
+  await streamSignals(page, ['axis.az.error', 'axis.az.position_deg'], 1000);
+  step('streaming');
+
+  // Compute: an expression over a streamed signal, checked sample by sample in the page.
+  await tab(page, 'Compute');
+  await page.fill('input[name=compute-name-0]', 'az_err_arcsec');
+  await page.fill('input[name=compute-expr-0]', 'axis.az.error * 3600 * 180 / pi');
+  await page.click('button.apply-computes');
+  await page.waitForTimeout(400);
+  result.computeCheck = await page.evaluate(() => {
+    const { series } = window.panelProbe;
+    const err = series.series.get('axis.az.error');
+    const c = series.series.get('az_err_arcsec');
+    let n = 0;
+    let worst = 0;
+    for (let i = 0; i < series.count; i++) {
+      if (Number.isNaN(c[i])) continue;
+      n++;
+      worst = Math.max(worst, Math.abs(c[i] - err[i] * 3600 * 180 / Math.PI));
+    }
+    return { n, worst };
+  });
+  assert.ok(result.computeCheck.n > 0, 'the computed series received no sample');
+  // Save the Compute tab's state, clear it, load the file back.
+  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#tab-Compute button.save-state')]);
+  const savedPath = join(ARTIFACTS, 'panel-compute.json');
+  await download.saveAs(savedPath);
+  result.savedCompute = JSON.parse(readFileSync(savedPath, 'utf8'));
+  await page.fill('input[name=compute-expr-0]', '');
+  await page.setInputFiles('#tab-Compute input.state-input', savedPath);
+  await page.waitForFunction(() => document.querySelector('input[name=compute-expr-0]').value !== '');
+  result.reloadedExpr = await page.inputValue('input[name=compute-expr-0]');
+  await shot(page, 'Compute');
+  step('compute');
+
+  // Plot: the plot receives data (decimated points drawn, several redraws).
+  await tab(page, 'Plot');
+  const before = await page.evaluate(() => window.panelProbe.probe.plotUpdates);
+  await page.waitForFunction((b) => window.panelProbe.probe.plotUpdates > b + 5 && window.panelProbe.probe.plotPoints > 50,
+    before, { timeout: 10_000 });
+  result.plot = await page.evaluate(() => ({ ...window.panelProbe.probe, samples: window.panelProbe.session.stream.samples, lost: window.panelProbe.session.stream.lost }));
+  await shot(page, 'Plot');
+  step('plot');
+
+  // Input: run a trajectory from formulas; meanwhile change a parameter online.
+  await tab(page, 'Input');
+  await page.fill('input[name="traj-expr-az_rad"]', env.AZ_FORMULA);
+  await page.fill('input[name="traj-expr-el_rad"]', env.EL_FORMULA);
+  await page.fill('input[name=traj-duration]', env.TRAJ_DURATION_S);
+  await page.fill('input[name=traj-step]', env.TRAJ_STEP_S);
+  await page.fill('input[name=traj-lead]', '0.5');
+  await page.click('button.run-trajectory');
+  await page.waitForFunction(() => window.panelTrajectory.lastRun !== null);
+  step('trajectory started');
+
+  await tab(page, 'Parameters');
+  await page.fill('input[name=param-filter]', env.PARAM_NAME);
+  await page.fill(`input[data-param="${env.PARAM_NAME}"]`, env.PARAM_VALUE);
+  await page.click(`button[data-set="${env.PARAM_NAME}"]`);
+  await page.waitForFunction(([name, v]) => document.querySelector(`[data-param-value="${name}"]`)?.textContent.trim() === v,
+    [env.PARAM_NAME, env.PARAM_VALUE], { timeout: 10_000 });
+  result.paramShown = await page.textContent(`[data-param-value="${env.PARAM_NAME}"]`);
+  await page.fill('input[name=param-filter]', 'axis.az');
+  await shot(page, 'Parameters');
+  step('parameter written');
+
+  await tab(page, 'Input');
+  await page.waitForFunction(() => window.panelTrajectory.lastRun?.done && !window.panelTrajectory.running, null, { timeout: 20_000 });
+  result.trajectory = await page.evaluate(() => JSON.parse(JSON.stringify({ ...window.panelTrajectory.lastRun, status: window.panelTrajectory.status })));
+  await shot(page, 'Input');
+  step('trajectory pushed');
+
+  await tab(page, 'Diagnostics');
+  await page.waitForFunction(() => [...document.querySelectorAll('#tab-Diagnostics td.num')].some((td) => td.textContent.trim() !== '—'));
+  await shot(page, 'Diagnostics');
+  await tab(page, 'Signals');
+  await shot(page, 'Signals');
+  await tab(page, 'Board');
+  await page.waitForTimeout(1100); // one poll of the watch list and STATS
+  await shot(page, 'Board');
+  step('screenshots');
+  result.ok = true;
+} catch (err) {
+  result.ok = false;
+  result.error = String(err.stack || err);
+  await page.screenshot({ path: join(ARTIFACTS, 'failure.png') }).catch(() => {});
+} finally {
+  writeFileSync(env.RESULT || join(ARTIFACTS, 'e2e-result.json'), JSON.stringify(result, null, 2));
+  await browser.close();
+}
+process.exit(result.ok ? 0 : 1);

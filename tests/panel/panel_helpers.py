@@ -1,0 +1,113 @@
+"""Live processes for the panel tests: an ASTCom endpoint, the node test runners."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import re
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+PANEL_DIR = ROOT / "panel"
+ARTIFACTS = ROOT / "artifacts" / "panel"
+CHROMIUM = Path(os.environ.get("CHROMIUM_PATH", "/usr/bin/chromium"))
+PASSWORD = "panel-test-secret"
+URL_RE = re.compile(r"(wss?://[^\s)]+)")
+
+
+class LiveProcess:
+    """A child process that prints its ws:// URL on a line; its output is kept for failures."""
+
+    def __init__(self, args: list[str], *, timeout_s: float = 60.0, env: dict | None = None) -> None:
+        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True, env={**os.environ, **(env or {})}, cwd=ROOT)
+        self.lines: list[str] = []
+        self.url = self._wait_url(timeout_s)
+        threading.Thread(target=self._drain, daemon=True).start()
+
+    def _wait_url(self, timeout_s: float) -> str:
+        deadline = time.monotonic() + timeout_s
+        assert self.proc.stdout is not None
+        while time.monotonic() < deadline:
+            line = self.proc.stdout.readline()
+            if not line:
+                break
+            self.lines.append(line)
+            match = URL_RE.search(line)
+            if match:
+                return match.group(1)
+        self.stop()
+        raise RuntimeError("endpoint did not print its URL:\n" + "".join(self.lines))
+
+    def _drain(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+def wait_ready(url: str, timeout_s: float = 60.0) -> None:
+    """Wait until the endpoint answers a READ (its first loop may still be compiling)."""
+    from astcom_client import Client
+
+    async def probe() -> None:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                async with await Client.connect(url, password=PASSWORD, timeout_s=5.0) as c:
+                    await c.read(["mount.tick"])
+                    return
+            except (ConnectionError, TimeoutError):
+                if time.monotonic() > deadline:
+                    raise
+                await asyncio.sleep(0.5)
+
+    asyncio.run(probe())
+
+
+def start_emulator() -> LiveProcess:
+    """Start the mount emulator (real time, fixed geometry seed) on a free loopback port."""
+    code = "from mount_emulator.cli import main; main()"
+    emu = LiveProcess([sys.executable, "-c", code, "--port", "0", "--seed", "7",
+                       "--password", PASSWORD])
+    try:
+        wait_ready(emu.url)
+    except BaseException:
+        emu.stop()
+        raise
+    return emu
+
+
+def start_example_device(rate_hz: float) -> LiveProcess:
+    """Start astcom_client's example device on a free loopback port."""
+    return LiveProcess([sys.executable, "-m", "astcom_client.example_device", "ws://127.0.0.1:0",
+                        "--password", PASSWORD, "--rate", str(rate_hz)])
+
+
+def node() -> str:
+    """Return the node executable or fail with what to install."""
+    path = shutil.which("node")
+    if path is None:
+        raise RuntimeError("node is not installed: the panel needs Node >= 20 (see setup/30-panel.sh)")
+    return path
+
+
+def ensure_panel_built() -> None:
+    """Build the bundle when it is missing (setup/30-panel.sh normally did)."""
+    if not (PANEL_DIR / "node_modules").is_dir():
+        raise RuntimeError("panel/node_modules is missing: run `bash setup/30-panel.sh`")
+    if not (ROOT / "virtualstar" / "panel" / "static" / "index.html").is_file():
+        subprocess.run(["npm", "run", "build"], cwd=PANEL_DIR, check=True, capture_output=True)

@@ -1,0 +1,29 @@
+"""The JavaScript ASTCom client's unit tests (node's test runner) against a live Python endpoint."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+from panel_helpers import PANEL_DIR, PASSWORD, node, start_example_device
+
+RATE_HZ = 10_000
+
+
+@pytest.fixture(scope="module")
+def example_endpoint():
+    device = start_example_device(RATE_HZ)
+    yield device
+    device.stop()
+
+
+def test_js_client_unit_tests_pass_against_the_python_example_device(example_endpoint):
+    env = {"ASTCOM_URL": example_endpoint.url, "ASTCOM_PASSWORD": PASSWORD,
+           "ASTCOM_RATE_HZ": str(RATE_HZ), "PATH": "/usr/bin:/bin:/usr/local/bin"}
+    run = subprocess.run([node(), "--test", "--test-reporter=spec", "test/unit/"], cwd=PANEL_DIR,
+                         env=env, capture_output=True, text=True, timeout=60)
+    report = run.stdout + run.stderr
+    assert run.returncode == 0, report
+    # every test file ran and none was skipped: the summary names the counts
+    assert "ℹ fail 0" in report and "ℹ skipped 0" in report, report
+    assert "ℹ pass 16" in report, report

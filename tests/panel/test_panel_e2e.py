@@ -1,0 +1,171 @@
+"""The panel end to end in headless chromium against the mount emulator, checked with the Python client.
+
+The page (panel/test/e2e/panel.e2e.mjs) connects, streams, computes, plots, writes a parameter
+and runs a formula trajectory; this test then reads the parameter back with astcom_client and
+compares the mount's trajectory reference, streamed here during the run, with the formulas
+evaluated independently in numpy.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+
+import numpy as np
+import pytest
+from panel_helpers import (
+    ARTIFACTS,
+    CHROMIUM,
+    PANEL_DIR,
+    PASSWORD,
+    ensure_panel_built,
+    node,
+    start_emulator,
+)
+
+from astcom_client import Client
+from virtualstar.panel import PanelConfig, PanelServer
+
+TABS = ("board", "diagnostics", "signals", "plot", "compute", "parameters", "input")
+PARAM_NAME, PARAM_VALUE = "axis.az.kp", "29.75"
+# The formulas as typed in the page (degrees, t in s) and the same written in numpy.
+AZ_FORMULA = "p0 + 0.3 * sin(2 * pi * 0.5 * t)"
+EL_FORMULA = "p0 - 0.2 * (1 - cos(2 * pi * 0.5 * t))"
+
+
+def az_deg_of(t, p0):
+    return p0 + 0.3 * np.sin(2 * np.pi * 0.5 * t)
+
+
+def el_deg_of(t, p0):
+    return p0 - 0.2 * (1 - np.cos(2 * np.pi * 0.5 * t))
+
+
+DURATION_S, STEP_S = 3.0, 0.02
+# Hermite interpolation between 20 ms samples of these sines is far inside this
+REFERENCE_TOL_DEG = 1e-4
+
+
+@pytest.fixture(scope="module")
+def emulator():
+    emu = start_emulator()
+    yield emu
+    emu.stop()
+
+
+@pytest.fixture(scope="module")
+def panel_url():
+    ensure_panel_built()
+    with PanelServer(PanelConfig(port=0)) as server:
+        yield server.start()
+
+
+async def _run(emulator_url: str, panel_url: str, result_path) -> tuple[dict, dict]:
+    """Run the page script while streaming the trajectory reference; return (result, stream)."""
+    names = ["traj.ref_az", "traj.ref_el", "axis.az.state"]
+    got: dict[str, list] = {"t_us": [], "az": [], "el": [], "state": [], "lost": 0}
+    async with await Client.connect(emulator_url, password=PASSWORD) as client:
+        stream = await client.stream(names, rate_hz=500)
+
+        async def collect():
+            async for packet in stream:
+                got["t_us"].extend(packet.t_us.tolist())
+                got["az"].extend(packet.column("traj.ref_az").tolist())
+                got["el"].extend(packet.column("traj.ref_el").tolist())
+                got["state"].extend(packet.column("axis.az.state").tolist())
+                got["lost"] += packet.lost
+
+        collector = asyncio.create_task(collect())
+        proc = await asyncio.create_subprocess_exec(
+            node(), "test/e2e/panel.e2e.mjs", cwd=PANEL_DIR,
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
+            env={"PATH": "/usr/bin:/bin:/usr/local/bin", "HOME": str(result_path.parent),
+                 "PANEL_URL": panel_url, "ASTCOM_URL": emulator_url, "ASTCOM_PASSWORD": PASSWORD,
+                 "ARTIFACTS": str(ARTIFACTS), "RESULT": str(result_path),
+                 "PARAM_NAME": PARAM_NAME, "PARAM_VALUE": PARAM_VALUE,
+                 "AZ_FORMULA": AZ_FORMULA, "EL_FORMULA": EL_FORMULA,
+                 "TRAJ_DURATION_S": str(DURATION_S), "TRAJ_STEP_S": str(STEP_S),
+                 "CHROMIUM_PATH": str(CHROMIUM)})
+        out, _ = await asyncio.wait_for(proc.communicate(), timeout=75)
+        result = json.loads(result_path.read_text()) if result_path.exists() else {}
+        result["log"] = out.decode(errors="replace")
+        run = result.get("trajectory") or {}
+        if run:  # keep streaming until the mount has passed the trajectory's last point
+            end_us = run["t0_us"] + int((DURATION_S + 0.3) * 1e6)
+            while not got["t_us"] or got["t_us"][-1] < end_us:
+                await asyncio.sleep(0.1)
+        collector.cancel()
+        await stream.stop()
+        result["param_read_back"] = (await client.read([PARAM_NAME]))[PARAM_NAME]
+        result["traj_counts"] = await client.read(["traj.accepted", "traj.late", "traj.underruns"])
+    return result, got
+
+
+@pytest.fixture(scope="module")
+def e2e(emulator, panel_url, tmp_path_factory):
+    if not CHROMIUM.is_file():
+        pytest.fail(f"{CHROMIUM} is missing: run `bash setup/30-panel.sh` (installs Debian's chromium)")
+    result_path = tmp_path_factory.mktemp("e2e") / "result.json"
+    result, got = asyncio.run(_run(emulator.url, panel_url, result_path))
+    assert result.get("ok"), result.get("error", "") + "\n" + result["log"]
+    return result, got
+
+
+def test_page_connects_and_discovers_the_endpoint_list(e2e):
+    result, _ = e2e
+    assert result["entries"] > 150
+    assert result["quickStart"] == "mount.power_on"  # found by name in LIST, not hard-coded
+    assert result["nowUs"] > 1.7e15
+    assert not result.get("pageErrors"), result.get("pageErrors")
+
+
+def test_streamed_signal_reaches_the_plot_without_loss(e2e):
+    result, _ = e2e
+    plot = result["plot"]
+    assert plot["samples"] > 500 and plot["lost"] == 0
+    assert plot["plotUpdates"] > 5 and plot["plotPoints"] > 50
+    assert "az_err_arcsec" in plot["lastPlotSeries"] and "axis.az.error" in plot["lastPlotSeries"]
+
+
+def test_compute_expression_matches_its_signal_sample_by_sample_and_reloads_from_file(e2e):
+    result, _ = e2e
+    assert result["computeCheck"]["n"] > 0 and result["computeCheck"]["worst"] < 1e-9
+    saved = result["savedCompute"]
+    assert saved["tab"] == "Compute"
+    assert saved["state"]["expressions"][0]["expr"] == "axis.az.error * 3600 * 180 / pi"
+    assert result["reloadedExpr"] == "axis.az.error * 3600 * 180 / pi"
+
+
+def test_parameter_written_in_the_page_reads_back_with_the_python_client(e2e):
+    result, _ = e2e
+    assert result["param_read_back"] == float(PARAM_VALUE)
+    assert result["paramShown"].strip() == PARAM_VALUE
+
+
+def test_formula_trajectory_is_followed_by_the_mount_reference(e2e):
+    result, got = e2e
+    run = result["trajectory"]
+    n_points = int(DURATION_S / STEP_S) + 1
+    assert run["n"] == n_points and run["accepted"] == n_points
+    counts = result["traj_counts"]
+    assert counts["traj.accepted"] == n_points and counts["traj.late"] == 0
+    t_us = np.array(got["t_us"], dtype=np.int64)
+    t_s = (t_us - run["t0_us"]) / 1e6
+    inside = (t_s > STEP_S) & (t_s < DURATION_S - STEP_S)
+    assert inside.sum() > 0.9 * (DURATION_S - 2 * STEP_S) * 500 and got["lost"] == 0
+    p0_az, p0_el = (a["p0"] for a in run["axes"])
+    az_deg = np.degrees(np.array(got["az"]))[inside]
+    el_deg = np.degrees(np.array(got["el"]))[inside]
+    assert np.max(np.abs(az_deg - az_deg_of(t_s[inside], p0_az))) < REFERENCE_TOL_DEG
+    assert np.max(np.abs(el_deg - el_deg_of(t_s[inside], p0_el))) < REFERENCE_TOL_DEG
+    tracking = 3  # AxisState.TRACKING, as listed in the emulator's doc of axis.az.state
+    assert np.all(np.array(got["state"])[inside] == tracking)
+    assert math.isfinite(p0_az) and math.isfinite(p0_el)
+
+
+def test_a_screenshot_of_each_tab_is_kept(e2e):
+    for tab in TABS:
+        png = ARTIFACTS / f"{tab}.png"
+        assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", png
+        assert png.stat().st_size > 10_000, f"{png} looks empty"
