@@ -79,6 +79,7 @@ class _Group:
     trace_cols: np.ndarray  # ... from these trace columns
     getters: list[tuple[int, int, Variable]]  # (buffer col, width, variable) read via get()
     buf: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    untraced: list[tuple[int, int, Variable]] = field(default_factory=list)
 
 
 class StreamGroup:
@@ -122,6 +123,7 @@ class StreamGroup:
             group.getters.append((pos, width, var))
         for group in self.groups:
             group.buf = np.zeros((self.spp, len(group.columns)), dtype=group.dtype)
+            group.untraced = [g for g in group.getters if g[2].trace_column is None]
 
     def layout(self) -> dict[str, Any]:
         """Return the column layout sent in the STREAM_START reply."""
@@ -161,8 +163,7 @@ class StreamGroup:
                 self._flush(codec)
 
     def _current_row(self, group: _Group, include_traced: bool) -> np.ndarray | None:
-        getters = group.getters if include_traced else [
-            g for g in group.getters if g[2].trace_column is None]
+        getters = group.getters if include_traced else group.untraced
         if not getters:
             return None
         row = np.zeros(len(group.columns), dtype=group.dtype)

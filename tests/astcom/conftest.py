@@ -1,4 +1,8 @@
-"""Shared settings of the ASTCom tests: a fast hypothesis profile."""
+"""Shared settings of the ASTCom tests: a modest hypothesis profile.
+
+The profile is registered here and applied per test (`@settings.get_profile("astcom")`)
+rather than loaded globally, so it does not change other packages' property tests.
+"""
 
 from hypothesis import HealthCheck, settings
 
@@ -8,4 +12,3 @@ settings.register_profile(
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
 )
-settings.load_profile("astcom")

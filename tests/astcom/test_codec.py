@@ -6,7 +6,7 @@ import struct
 import msgpack
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
@@ -15,6 +15,7 @@ from astcom_client.codec import DTYPE_CODES
 from astcom_client.types import NUMERIC_DTYPES
 
 codec = Codec()
+ASTCOM = settings.get_profile("astcom")
 
 DTYPES = ["bool", "i8", "i16", "i32", "i64", "u8", "u16", "u32", "u64", "f32", "f64"]
 
@@ -24,11 +25,13 @@ values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=4)
                       | st.dictionaries(st.text(max_size=8), inner, max_size=4), max_leaves=20)
 
 
+@ASTCOM
 @given(values)
 def test_plain_values_round_trip(value: object) -> None:
     assert codec.decode(codec.encode(value)) == value
 
 
+@ASTCOM
 @given(st.sampled_from(DTYPES).flatmap(
     lambda d: hnp.arrays(NUMERIC_DTYPES[d], hnp.array_shapes(min_dims=0, max_dims=3, max_side=5))))
 def test_numpy_arrays_round_trip_with_dtype_and_shape(arr: np.ndarray) -> None:
@@ -135,6 +138,7 @@ def test_unknown_extension_types_are_refused() -> None:
         codec.decode(msgpack.packb(msgpack.ExtType(9, b"abc")))
 
 
+@ASTCOM
 @given(st.binary(max_size=200))
 def test_garbage_bytes_raise_only_documented_errors(data: bytes) -> None:
     with contextlib.suppress(MalformedFrame, LimitExceeded):

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import msgpack
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import astcom_client
@@ -28,6 +28,7 @@ from astcom_client.protocol import (
 )
 
 PASSWORDS = {"operator": "op", "observer": "obs"}
+ASTCOM = settings.get_profile("astcom")
 SANS_IO = ["protocol.py", "commands.py", "codec.py", "service.py", "auth.py", "types.py",
            "registry.py", "framing.py", "exceptions.py", "url.py"]
 
@@ -140,6 +141,7 @@ def test_every_command_names_the_field_of_the_wrong_type(cls: type[Command]) -> 
         cls.from_args(args)
 
 
+@ASTCOM
 @given(st.lists(st.binary(max_size=50), max_size=8), st.data())
 def test_frames_survive_any_split_of_the_tcp_byte_stream(frames: list, data) -> None:
     stream = b"".join(frame_bytes(f) for f in frames)
@@ -156,6 +158,7 @@ def test_an_announced_frame_beyond_the_limit_is_refused_before_it_arrives() -> N
         FrameReader(max_frame_bytes=10).feed(b"\x00\x00\x00\x0b")
 
 
+@ASTCOM
 @given(st.binary(max_size=300))
 def test_random_bytes_into_the_server_core_give_errors_never_exceptions(data: bytes) -> None:
     srv = server()
@@ -175,6 +178,7 @@ frames = st.recursive(
         max_size=4), max_leaves=15)
 
 
+@ASTCOM
 @given(st.lists(frames, min_size=1, max_size=6))
 def test_random_msgpack_frames_after_login_never_break_the_core(objs: list) -> None:
     srv = server(passwords=None)

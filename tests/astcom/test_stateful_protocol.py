@@ -271,5 +271,5 @@ class ProtocolMachine(RuleBasedStateMachine):
 
 
 TestProtocolMachine = ProtocolMachine.TestCase
-TestProtocolMachine.settings = settings(
+TestProtocolMachine.settings = settings(settings.get_profile("astcom"),
     max_examples=80, stateful_step_count=40, deadline=None)
