@@ -169,3 +169,19 @@ def test_satellite_passes_match_a_one_second_scan(site, eop):
         inside = (t >= t_rise) & (t <= t_set)
         assert p.culmination.el_deg == pytest.approx(math.degrees(obs.el_rad[inside].max()),
                                                      abs=0.01)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_keyhole_path_reaches_the_known_optimum_of_the_max_azimuth_error(seed):
+    """For a rate limit L the least possible max |command - az| is
+    max over s < t of (|az(t) - az(s)| - L (t - s)) / 2; the plan attains it."""
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0, 60, 300))
+    az = np.cumsum(rng.normal(0, 0.05, 300)) + 2.0 * np.tanh((t - 30) / 2)
+    rate_deg_s = 3.0
+    lim = math.radians(rate_deg_s)
+    gap = np.abs(az[:, None] - az[None, :]) - lim * np.abs(t[:, None] - t[None, :])
+    optimum = max(gap.max(), 0.0) / 2
+    plan = plan_keyhole(t, az, np.zeros_like(t), rate_deg_s)
+    assert np.abs(plan.az_rad - az).max() == pytest.approx(optimum, rel=1e-9)
+    assert np.abs(np.diff(plan.az_rad) / np.diff(t)).max() <= lim * (1 + 1e-9)

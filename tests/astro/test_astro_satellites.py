@@ -168,3 +168,13 @@ def test_strided_time_selections_propagate():
     r_every, _ = SATS["ISS (ZARYA)"].teme_km(times)
     r_some, _ = SATS["ISS (ZARYA)"].teme_km(times[::7])
     np.testing.assert_array_equal(r_some, r_every[::7])
+
+
+def test_result_does_not_depend_on_how_the_julian_date_is_split(site, eop):
+    sat = SATS["ISS (ZARYA)"]
+    # Across midnight, where UT1-UTC changes slope: the hourly nodes must sit on UTC hours.
+    times = UtcTimes.from_iso(["2024-05-18T23:20:00"]).shifted(np.arange(0.0, 4800.0, 10.0))
+    odd_split = UtcTimes(times.jd1 + 0.3125, times.jd2 - 0.3125)  # exact in binary; not midnight
+    a = sat.observe(times, site, eop)
+    b = sat.observe(odd_split, site, eop)
+    assert sep_rad(a.az_rad, a.el_rad, b.az_rad, b.el_rad).max() < 0.01 * ONE_MAS_RAD

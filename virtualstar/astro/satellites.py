@@ -132,8 +132,8 @@ def teme_to_topocentric(r_km: np.ndarray, v_km_s: np.ndarray, times: UtcTimes, s
     # Earth orientation on hourly nodes aligned to UTC hours: UT1-UTC and polar motion
     # are linear between the daily IERS values, so GMST (linear in UT1 to 1e-15 rad over
     # an hour) and the polar-motion matrix are linear between the nodes too.
-    ref1 = float(times.jd1[0])
-    ref2 = math.floor(float(times.jd2[0]) * 24.0) / 24.0
+    ref1 = math.floor(float(times.jd1[0]) - 0.5) + 0.5  # a UTC midnight
+    ref2 = math.floor(((float(times.jd1[0]) - ref1) + float(times.jd2[0])) * 24.0) / 24.0
     sec = times.seconds_since(ref1, ref2)
     k1 = max(math.ceil(float(sec.max()) / _NODE_S), 1)
     k0 = min(math.floor(float(sec.min()) / _NODE_S), k1 - 1)
@@ -163,11 +163,11 @@ def teme_to_topocentric(r_km: np.ndarray, v_km_s: np.ndarray, times: UtcTimes, s
 @numba.njit(cache=True, fastmath=False, nogil=True)
 def _topocentric_kernel(r_km, v_km_s, sec, node0_s, node_step_s, node_theta, node_mats,
                         site_enu, omega_enu, c_m_s):  # pragma: no cover - compiled
-    # omega_enu is the Earth's rotation vector with the sign that makes omega_enu x r the
-    # ENU components of the ITRS velocity omega x r (see the caller).
     """Rotate TEME by GMST and apply polar motion (both linear between the hourly nodes),
     move to site ENU axes, correct light time; return unit vectors, their Earth-fixed
     rates (1/s) and distances (m)."""
+    # omega_enu is the Earth's rotation vector with the sign that makes omega_enu x r the
+    # ENU components of the ITRS velocity omega x r (see the caller).
     n = r_km.shape[0]
     last = node_mats.shape[0] - 2
     unit = np.empty((n, 3))
