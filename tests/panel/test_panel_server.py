@@ -8,10 +8,11 @@ import urllib.error
 import urllib.request
 
 import pytest
+import typer
 from panel_helpers import ensure_panel_built
 from typer.testing import CliRunner
 
-from virtualstar.cli.main import app
+from virtualstar.cli.panel import panel
 from virtualstar.panel import BundleMissing, CannotListen, PanelConfig, PanelServer
 
 
@@ -65,6 +66,9 @@ def test_taken_port_is_refused_with_cannot_listen():
 
 
 def test_cli_rejects_a_non_websocket_endpoint_and_a_taken_port():
+    app = typer.Typer()
+    app.command("panel")(panel)
+    app.command("other")(lambda: None)  # two commands: typer keeps the subcommand name
     runner = CliRunner()
     bad = runner.invoke(app, ["panel", "--endpoint", "tcp://127.0.0.1:8765"])
     assert bad.exit_code == 2 and "ws://HOST:PORT" in bad.output

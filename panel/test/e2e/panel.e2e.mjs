@@ -83,7 +83,6 @@ try {
   await page.waitForFunction((b) => window.panelProbe.probe.plotUpdates > b + 5 && window.panelProbe.probe.plotPoints > 50,
     before, { timeout: 10_000 });
   result.plot = await page.evaluate(() => ({ ...window.panelProbe.probe, samples: window.panelProbe.session.stream.samples, lost: window.panelProbe.session.stream.lost }));
-  await shot(page, 'Plot');
   step('plot');
 
   // Input: run a trajectory from formulas; meanwhile change a parameter online.
@@ -113,6 +112,10 @@ try {
   result.trajectory = await page.evaluate(() => JSON.parse(JSON.stringify({ ...window.panelTrajectory.lastRun, status: window.panelTrajectory.status })));
   await shot(page, 'Input');
   step('trajectory pushed');
+  // The plot while the mount follows the formulas (1.5 s into the run).
+  await tab(page, 'Plot');
+  await page.waitForFunction((t0) => window.panelProbe.series.lastTUs > t0 + 1.5e6, result.trajectory.t0_us, { timeout: 10_000 });
+  await shot(page, 'Plot');
 
   await tab(page, 'Diagnostics');
   await page.waitForFunction(() => [...document.querySelectorAll('#tab-Diagnostics td.num')].some((td) => td.textContent.trim() !== '—'));
