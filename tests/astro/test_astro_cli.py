@@ -103,3 +103,12 @@ def test_bad_arguments_fail_with_a_clear_message(args, fragment):
 def test_help_texts_tell_what_to_type():
     assert "05h34m31.94s" in _run("where", "--help").stdout
     assert "--min-el" in _run("passes", "--help").stdout
+
+
+def test_where_warns_on_stale_elements_and_still_answers():
+    result = _run("where", "--tle", str(TLE_PATH), "--at", "2024-07-01T00:00:00", *SITE_ARGS,
+                  "--json")
+    assert result.exit_code == 0, result.output
+    assert "warning:" in result.stderr and "TLE epoch" in result.stderr
+    row = json.loads(result.stdout)[0]
+    assert row["target"] == "ISS (ZARYA)" and 300 < row["range_km"] < 15000

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from virtualstar.astro import AstroError, EarthOrientation, satellite_passes
+from virtualstar.astro import EarthOrientation, satellite_passes
 from virtualstar.cli.where import (
     HumidityOpt,
     JsonOpt,
@@ -20,10 +19,10 @@ from virtualstar.cli.where import (
     SiteOpt,
     TemperatureOpt,
     build_site,
-    echo_warnings,
     fail,
     load_satellite,
     parse_times,
+    run_collecting_warnings,
 )
 
 
@@ -53,15 +52,12 @@ def passes(
         raise fail(f"--to {end} is not after --from {start}")
     if span_s > 31 * 86400:
         raise fail(f"--from/--to span {span_s / 86400:.1f} days; at most 31 days per search")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    def work():
         satellite = load_satellite(tle, sat)
-        try:
-            found = satellite_passes(satellite, the_site, t0, t1, min_el_deg=min_el,
-                                     eop=EarthOrientation.from_astropy_iers_data())
-        except AstroError as exc:
-            raise fail(str(exc)) from None
-    echo_warnings(caught)
+        return satellite, satellite_passes(satellite, the_site, t0, t1, min_el_deg=min_el,
+                                           eop=EarthOrientation.from_astropy_iers_data())
+
+    satellite, found = run_collecting_warnings(work)
     rows = [_pass_fields(p) for p in found]
     if as_json:
         typer.echo(json.dumps(rows, indent=1))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import warnings
@@ -49,6 +50,23 @@ def fail(message: str, code: int = 2) -> typer.Exit:
     return typer.Exit(code)
 
 
+class UsageError(Exception):
+    """A bad argument found while warnings are being collected (reported after them)."""
+
+
+def run_collecting_warnings(work):
+    """Run work(); show its warnings on stderr, then its error (if any) and exit 2."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            return work()
+        except (UsageError, AstroError) as exc:
+            error = str(exc)
+        finally:
+            echo_warnings(caught)
+    raise fail(error)
+
+
 def build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction) -> Site:
     """Return the site from the shared options, or raise typer.Exit with a clear error."""
     try:
@@ -60,19 +78,19 @@ def build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refrac
 
 
 def load_satellite(tle: Path, sat: str | None) -> Satellite:
-    """Return the satellite chosen from a TLE/OMM file, or raise typer.Exit."""
+    """Return the satellite chosen from a TLE/OMM file, or raise UsageError."""
     from catalogs import CatalogError, load_tle_file, select_satellite
 
     try:
         records = load_tle_file(tle)
         if not records:
-            raise fail(f"{tle}: no element sets found")
+            raise UsageError(f"{tle}: no element sets found")
         record = select_satellite(records, sat) if sat else records[0]
         return Satellite.from_record(record)
     except OSError as exc:
-        raise fail(f"cannot read {tle}: {exc.strerror}") from None
+        raise UsageError(f"cannot read {tle}: {exc.strerror}") from None
     except (CatalogError, AstroError, KeyError, ValueError) as exc:
-        raise fail(str(exc).strip('"')) from None
+        raise UsageError(str(exc).strip('"')) from None
 
 
 def parse_times(at: list[str] | None) -> UtcTimes:
@@ -102,6 +120,7 @@ class _Row:
     dec_deg: float
     az_rate_deg_s: float
     el_rate_deg_s: float
+    range_km: float | None = None  # satellites only
 
 
 def where(
@@ -125,29 +144,28 @@ def where(
     """Show where a target is: apparent RA/Dec, observed az/el and rates, rise/culmination/set."""
     the_site = build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction)
     times = parse_times(at)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        if tle is not None:
-            obj: Any = load_satellite(tle, sat or target)
-            _check_tle_epoch(tle, sat or target, times)
-        elif target is None:
-            raise fail("give a TARGET (star, planet or RA/Dec) or --tle FILE; see vs where --help")
-        else:
-            try:
-                obj = resolve_target(target)
-            except (AstroError, KeyError) as exc:
-                raise fail(str(exc).strip('"')) from None
-        try:
-            rows, events = _compute(obj, times, the_site)
-        except AstroError as exc:
-            raise fail(str(exc)) from None
-    echo_warnings(caught)
+    obj, rows, events = run_collecting_warnings(
+        lambda: _compute(_target(target, tle, sat, times), times, the_site))
     if as_json:
-        out = [{**row.__dict__, **ev, "target": obj.name, "refraction": the_site.refraction}
-               for row, ev in zip(rows, events, strict=True)]
+        out = [{**_row_fields(row), **ev, "target": obj.name,
+                "refraction": the_site.refraction} for row, ev in zip(rows, events, strict=True)]
         typer.echo(json.dumps(out, indent=1))
         return
     _print_table(obj, the_site, rows, events)
+
+
+def _target(target: str | None, tle: Path | None, sat: str | None, times: UtcTimes) -> Any:
+    if tle is not None:
+        obj = load_satellite(tle, sat or target)
+        _check_tle_epoch(tle, sat or target, times)
+        return obj
+    if target is None:
+        raise UsageError("give a TARGET (star, planet or RA/Dec) or --tle FILE; "
+                         "see vs where --help")
+    try:
+        return resolve_target(target)
+    except KeyError as exc:  # UnknownTarget, catalogs.UnknownStar
+        raise UsageError(str(exc).strip('"')) from None
 
 
 def _check_tle_epoch(tle: Path, sat: str | None, times: UtcTimes) -> None:
@@ -161,7 +179,7 @@ def _check_tle_epoch(tle: Path, sat: str | None, times: UtcTimes) -> None:
     check_epoch(record, when)
 
 
-def _compute(obj: Any, times: UtcTimes, site: Site) -> tuple[list[_Row], list[dict]]:
+def _compute(obj: Any, times: UtcTimes, site: Site) -> tuple[Any, list[_Row], list[dict]]:
     eop = EarthOrientation.from_astropy_iers_data()
     obs = obj.observe(times, site, eop)
     geometric = obj.observe(times, site.without_refraction(), eop)
@@ -170,11 +188,22 @@ def _compute(obj: Any, times: UtcTimes, site: Site) -> tuple[list[_Row], list[di
     rows = [_Row(iso[i], math.degrees(obs.az_rad[i]), math.degrees(obs.el_rad[i]),
                  math.degrees(ra[i]), math.degrees(dec[i]), math.degrees(obs.az_rate_rad_s[i]),
                  math.degrees(obs.el_rate_rad_s[i])) for i in range(len(times))]
+    if isinstance(obj, Satellite):
+        range_km = obj.topocentric(times, site, eop).range_m / 1e3
+        rows = [dataclasses.replace(r, range_km=float(d)) for r, d in zip(rows, range_km,
+                                                                           strict=True)]
     events = []
     for i in range(len(times)):
         found = find_events(obj, site, times[i], 86400.0, eop=eop)
         events.append(_event_fields(found))
-    return rows, events
+    return obj, rows, events
+
+
+def _row_fields(row: _Row) -> dict:
+    fields = dataclasses.asdict(row)
+    if fields["range_km"] is None:
+        del fields["range_km"]
+    return fields
 
 
 def _event_fields(found) -> dict:
