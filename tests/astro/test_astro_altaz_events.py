@@ -185,3 +185,13 @@ def test_keyhole_path_reaches_the_known_optimum_of_the_max_azimuth_error(seed):
     plan = plan_keyhole(t, az, np.zeros_like(t), rate_deg_s)
     assert np.abs(plan.az_rad - az).max() == pytest.approx(optimum, rel=1e-9)
     assert np.abs(np.diff(plan.az_rad) / np.diff(t)).max() <= lim * (1 + 1e-9)
+
+
+def test_horizon_profile_interpolates_through_north():
+    from virtualstar.astro.altaz import Horizon
+
+    trees = Horizon(az_deg=(350.0, 10.0, 180.0), el_deg=(20.0, 10.0, 5.0))
+    el = np.degrees(trees.min_el_rad(np.radians([0.0, 350.0, 95.0, 359.0])))
+    np.testing.assert_allclose(el, [15.0, 20.0, 7.5, 15.5])
+    mask = trees.visible(np.radians([0.0, 0.0]), np.radians([14.0, 16.0]))
+    assert mask.tolist() == [False, True]

@@ -13,7 +13,7 @@ Public API (radians and rad/s inside, degrees at user interfaces):
     plan_slew(...); plan_keyhole(...)
 """
 
-from .altaz import KeyholePlan, MountLimits, elevation_ok, plan_keyhole, unwrap_azimuth
+from .altaz import Horizon, KeyholePlan, MountLimits, elevation_ok, plan_keyhole, unwrap_azimuth
 from .bodies import BODY_SEGMENTS, SolarSystemBody
 from .earth_orientation import EarthOrientation
 from .events import Event, Pass, find_events, satellite_passes
@@ -49,6 +49,7 @@ __all__ = [
     "EarthOrientationWarning",
     "Event",
     "FixedAltAz",
+    "Horizon",
     "IcrsStar",
     "KeyholePlan",
     "MountLimits",

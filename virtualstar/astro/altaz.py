@@ -80,6 +80,33 @@ def elevation_ok(el_rad: np.ndarray, limits: MountLimits = DEFAULT_LIMITS) -> np
 
 
 @dataclass(frozen=True)
+class Horizon:
+    """A local horizon profile: the lowest usable elevation as a function of azimuth.
+
+    az_deg/el_deg: points of the profile (degrees, any order, azimuth north through
+    east); elevation is interpolated linearly in azimuth, wrapping through north.
+    """
+
+    az_deg: tuple[float, ...]
+    el_deg: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.az_deg) != len(self.el_deg) or not self.az_deg:
+            raise ValueError("horizon profile needs as many elevations as azimuths (>= 1)")
+
+    def min_el_rad(self, az_rad: np.ndarray) -> np.ndarray:
+        """Return the horizon elevation (rad) at the given azimuths (rad)."""
+        az = np.mod(np.asarray(self.az_deg, float), 360.0)
+        order = np.argsort(az)
+        return np.radians(np.interp(np.degrees(np.mod(az_rad, 2 * math.pi)), az[order],
+                                    np.asarray(self.el_deg, float)[order], period=360.0))
+
+    def visible(self, az_rad: np.ndarray, el_rad: np.ndarray) -> np.ndarray:
+        """Return a mask of the directions above this horizon."""
+        return np.asarray(el_rad) > self.min_el_rad(az_rad)
+
+
+@dataclass(frozen=True)
 class KeyholePlan:
     """A rate-limited azimuth path through a pass too fast for the mount.
 
