@@ -9,11 +9,13 @@ app = typer.Typer(
     add_completion=False,
 )
 
+from virtualstar.cli import panel as _panel  # noqa: E402
 from virtualstar.cli import passes as _passes  # noqa: E402
 from virtualstar.cli import where as _where  # noqa: E402
 
 app.command("where")(_where.where)
 app.command("passes")(_passes.passes)
+app.command("panel")(_panel.panel)
 
 
 def main() -> None:
