@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml $(SETUP_SCRIPTS) | $(PY)
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m astcom_client.demo
+	$(VENV)/bin/vs demo
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .

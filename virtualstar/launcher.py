@@ -42,5 +42,6 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
                             params=dict(params or {}),
                             passwords={"operator": password} if password else None)
     emulator = MountEmulator(config)
+    emulator.model.run(0)  # compile (or load) the step now, not inside the served loop
     bound = await emulator.start(url)
     return EmbeddedEmulator(bound, emulator)

@@ -29,7 +29,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidURI, WebSocketException
 
 __all__ = ["DEFAULT_SERVER_URL", "SERVER_ENV_VAR", "ServerUnavailable", "VssClient",
-           "VssRequestError", "default_server_url"]
+           "VssRequestError", "call_server", "default_server_url"]
 
 SERVER_ENV_VAR = "VS_SERVER"
 DEFAULT_SERVER_URL = "ws://127.0.0.1:8740"
@@ -219,3 +219,29 @@ class VssClient:
 
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
+
+
+def call_server(url: str, cmd: str, params: dict[str, Any] | None = None, *,
+                on_event=None, timeout_s: float | None = None) -> Any:
+    """Connect, send one command, return its result (blocking; for command lines).
+
+    on_event(name, data) sees every server event while the answer is awaited.
+    Raises VssRequestError or ServerUnavailable.
+    """
+
+    async def run() -> Any:
+        async with await VssClient.connect(url) as client:
+            watcher = None
+            if on_event is not None:
+                async def pump() -> None:
+                    async for kind, data in client.events():
+                        on_event(kind, data)
+
+                watcher = asyncio.get_running_loop().create_task(pump())
+            try:
+                return await client.request(cmd, params, timeout_s)
+            finally:
+                if watcher is not None:
+                    watcher.cancel()
+
+    return asyncio.run(run())

@@ -9,13 +9,29 @@ app = typer.Typer(
     add_completion=False,
 )
 
+from virtualstar.cli import demo as _demo  # noqa: E402
 from virtualstar.cli import panel as _panel  # noqa: E402
+from virtualstar.cli import park as _park  # noqa: E402
 from virtualstar.cli import passes as _passes  # noqa: E402
+from virtualstar.cli import server as _server  # noqa: E402
+from virtualstar.cli import slew as _slew  # noqa: E402
+from virtualstar.cli import status as _status  # noqa: E402
+from virtualstar.cli import stop as _stop  # noqa: E402
+from virtualstar.cli import track as _track  # noqa: E402
+from virtualstar.cli import watch as _watch  # noqa: E402
 from virtualstar.cli import where as _where  # noqa: E402
 
 app.command("where")(_where.where)
 app.command("passes")(_passes.passes)
 app.command("panel")(_panel.panel)
+app.command("server")(_server.server)
+app.command("status")(_status.status)
+app.command("slew")(_slew.slew)
+app.command("track")(_track.track)
+app.command("stop")(_stop.stop)
+app.command("park")(_park.park)
+app.command("watch")(_watch.watch)
+app.command("demo")(_demo.demo)
 
 
 def main() -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,9 +50,9 @@ class FeederStats:
     rejected: int = 0
     late_gaps: int = 0
     min_lead_us: int | None = None
+    first_point_us: int = 0
     last_point_us: int = 0
     ended: str = ""
-    lead_history: list[int] = field(default_factory=list)
 
     def as_dict(self) -> dict:
         return {"pushed": self.pushed, "batches": self.batches, "rejected": self.rejected,
@@ -103,6 +103,8 @@ class Feeder:
             p = self.path.sample(t)
             accepted = await self.link.call("traj_push", p.t_us, p.az_rad, p.el_rad,
                                             p.az_rate_rad_s, p.el_rate_rad_s)
+            if not st.batches:
+                st.first_point_us = int(t[0])
             st.batches += 1
             st.pushed += int(accepted)
             st.rejected += n - int(accepted)

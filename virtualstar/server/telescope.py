@@ -80,7 +80,7 @@ class TelescopeConfig:
     speed: float = 1.0  # mount seconds per wall second (simulated time > 1)
     simulated: bool = False
     point_rate_hz: float = 20.0
-    lead_s: float = 5.0
+    lead_s: float | None = None  # None: 5 s, or 1.5 s of wall time in simulated time
     error_rate_hz: float = 1000.0
     ramp_s: float = 2.0
     settle_s: float = 1.0
@@ -95,7 +95,17 @@ class TelescopeConfig:
     @property
     def start_lead_s(self) -> float:
         """Mount time kept between "now" and the first point pushed (covers request delays)."""
-        return max(1.0, 0.1 * self.speed)
+        return max(1.0, 0.25 * self.speed)
+
+    @property
+    def feed_lead_s(self) -> float:
+        """Mount time of points kept buffered ahead of the mount clock.
+
+        In simulated time the same mount lead is a shorter wall time, and an
+        event loop stalled by a loaded host must not drain the buffer: keep
+        at least 1.5 s of wall time.
+        """
+        return self.lead_s if self.lead_s is not None else max(5.0, 1.5 * self.speed)
 
 
 @dataclass
@@ -433,16 +443,20 @@ class Telescope:
         else:
             raise TargetUnreachable("could not catch up with the target after 4 slews")
         op.info["join_us"] = ramp.join_us
-        if ramp.begin_us - now > cfg.lead_s * 1e6:
+        if ramp.begin_us - now > cfg.feed_lead_s * 1e6:
             self._phase(op, "waiting", start_utc=_iso(ramp.begin_us))
             self._begun(op)
-            await self.wait_until(ramp.begin_us - int((cfg.lead_s - lead) * 1e6), op)
+            await self.wait_until(ramp.begin_us - int((cfg.feed_lead_s - lead) * 1e6), op)
         await self.link.call("traj_init")
-        fcfg = FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=cfg.lead_s,
+        fcfg = FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=cfg.feed_lead_s,
                             min_lead_s=min(0.5, lead / 2), speed=cfg.speed)
         feeder = Feeder(self.link, fcfg, _Until(ramp, end_us), ramp.begin_us,
                         fault_code=self.codes["fault"])
         await feeder.cycle()
+        if feeder.stats.rejected or feeder.stats.first_point_us != ramp.begin_us:
+            # the host stalled past the start of the run-up: never start half-way up a ramp
+            raise OperationAborted("the trajectory could not be primed in time (host too slow "
+                                   "for this simulation speed?)")
         await self.link.call("traj_start")
         self.feeder = feeder
         # the feeder runs from here on, also while the caller waits for the landing

@@ -1,0 +1,65 @@
+"""`vs slew`: point the mount at RA/Dec, Az/El or a catalog star (sky targets are then tracked)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from virtualstar.cli.status import JsonOpt, ServerOpt, _f, ask, fail, print_json
+
+__all__ = ["RadecOpt", "StarOpt", "op_table", "slew", "target_params"]
+
+RadecOpt = Annotated[str | None, typer.Option(
+    "--radec", help='ICRS "RA DEC": "05h34m31.94s +22d00m52.2s", "05:34:31.94 +22:00:52.2" '
+                    '(RA in hours) or "83.633 22.0145" (degrees).')]
+AltazOpt = Annotated[str | None, typer.Option(
+    "--altaz", help='Observed "AZ EL" in degrees (azimuth north through east), e.g. "180 45".')]
+StarOpt = Annotated[str | None, typer.Option(
+    "--star", help='Bright-star name, HIP number or Bayer designation ("Vega", "HIP 91262", '
+                   '"alf Lyr"), or a planet.')]
+
+
+def target_params(radec: str | None, altaz: str | None, star: str | None) -> dict[str, Any]:
+    """Return the API target parameters of exactly one option, or exit with an error."""
+    given = {k: v for k, v in (("radec", radec), ("altaz", altaz), ("star", star)) if v}
+    if len(given) != 1:
+        raise fail("give exactly one of --radec \"RA DEC\", --altaz \"AZ EL\" or --star NAME")
+    return given
+
+
+def op_table(op: dict[str, Any], title: str) -> Table:
+    """Return a rich table of an operation result."""
+    info = op.get("info", {})
+    t = Table(title=title, show_header=False, title_justify="left")
+    t.add_column("what", style="bold")
+    t.add_column("value")
+    t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
+    rows = [("slew time", "slew_time_s", ".1f", " s"),
+            ("landing error RMS", "landing_rms_arcsec", ".3f", "″"),
+            ("landing error peak", "landing_peak_arcsec", ".3f", "″"),
+            ("pass start (UTC)", "pass_start_utc", "", ""),
+            ("pass end (UTC)", "pass_end_utc", "", ""),
+            ("culmination", "culmination_el_deg", ".1f", "°"),
+            ("keyhole error", "keyhole_max_error_arcsec", ".1f", "″"),
+            ("tracking error RMS", "tracking_rms_arcsec", ".3f", "″"),
+            ("tracking error peak", "tracking_peak_arcsec", ".3f", "″"),
+            ("ended", "ended", "", "")]
+    for label, key, fmt, unit in rows:
+        if key in info:
+            value = info[key]
+            t.add_row(label, _f(value, fmt, unit) if fmt else str(value))
+    return t
+
+
+def slew(radec: RadecOpt = None, altaz: AltazOpt = None, star: StarOpt = None,
+         server: ServerOpt = None, as_json: JsonOpt = False) -> None:
+    """Slew to a target and wait until it lands; a sky target is then tracked until `vs stop`."""
+    params = target_params(radec, altaz, star)
+    op = ask(server, "slew", params, progress=True, quiet=as_json)
+    if as_json:
+        print_json(op)
+    else:
+        Console().print(op_table(op, "slew"))

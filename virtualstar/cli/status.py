@@ -1,0 +1,135 @@
+"""`vs status`: where the mount points, what it does, and how well it tracks.
+
+Also holds what every VSS client command shares: the --server and --json
+options and `ask()`, which sends one command and turns failures into clear
+errors on stderr with exit code 1 (the server refused) or 2 (no server).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from virtualstar.vss_client import (
+    SERVER_ENV_VAR,
+    ServerUnavailable,
+    VssRequestError,
+    call_server,
+    default_server_url,
+)
+
+__all__ = ["JsonOpt", "ServerOpt", "ask", "fail", "render_status", "status"]
+
+ServerOpt = Annotated[str | None, typer.Option(
+    "--server", help=f"VirtualStar Server URL (default ${SERVER_ENV_VAR} or "
+                     f"{default_server_url()}).", show_default=False)]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON for scripts instead of tables.")]
+
+
+def fail(message: str, code: int = 2) -> typer.Exit:
+    """Print `error: message` to stderr and return the Exit to raise."""
+    typer.echo(f"error: {message}", err=True)
+    return typer.Exit(code)
+
+
+def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
+        progress: bool = False, quiet: bool = False) -> Any:
+    """Send one command to the server and return its result, or exit with a clear error.
+
+    progress=True shows the server's operation events under a spinner (humans only).
+    """
+    url = server or default_server_url()
+    console = Console(stderr=True)
+    try:
+        if progress and not quiet and console.is_terminal:
+            with console.status(f"{cmd}...") as spinner:
+                def on_event(kind: str, data: dict[str, Any]) -> None:
+                    if kind == "operation":
+                        info = data.get("info", {})
+                        left = info.get("seconds_left")
+                        spinner.update(f"{data.get('kind')} {data.get('target')}: "
+                                       f"{data.get('phase')}"
+                                       + (f" ({left:.0f} s mount time left)" if left else ""))
+                    elif kind == "fault":
+                        console.print(f"[red]mount fault: {data.get('faults')}")
+
+                return call_server(url, cmd, params, on_event=on_event)
+        return call_server(url, cmd, params)
+    except VssRequestError as exc:
+        raise fail(f"the server refused {cmd}: {exc.message} [{exc.code}]", 1) from None
+    except ServerUnavailable as exc:
+        raise fail(str(exc), 2) from None
+
+
+def print_json(doc: Any) -> None:
+    typer.echo(json.dumps(doc, indent=2, allow_nan=False, default=str))
+
+
+def _f(value: Any, fmt: str = ".4f", unit: str = "") -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return f"{value:{fmt}}{unit}"
+
+
+def _hms(ra_deg: float) -> str:
+    h = ra_deg / 15.0
+    hh, rem = divmod(h * 3600.0, 3600.0)
+    mm, ss = divmod(rem, 60.0)
+    return f"{int(hh):02d}h{int(mm):02d}m{ss:05.2f}s"
+
+
+def _dms(dec_deg: float) -> str:
+    sign = "-" if dec_deg < 0 else "+"
+    d, rem = divmod(abs(dec_deg) * 3600.0, 3600.0)
+    m, s = divmod(rem, 60.0)
+    return f"{sign}{int(d):02d}d{int(m):02d}m{s:04.1f}s"
+
+
+def render_status(st: dict[str, Any]) -> Table:
+    """Return a rich table of a status result."""
+    t = Table(title="VirtualStar", show_header=False, title_justify="left")
+    t.add_column("what", style="bold")
+    t.add_column("value")
+    if not st.get("connected"):
+        t.add_row("mount", f"[red]not connected[/] ({st.get('url')}: {st.get('mount_error')})")
+        return t
+    t.add_row("mount", f"{st['mount_state']}  ({st['url']}, {st['mode']}"
+                       + (f", simulated x{st['speed']:g}" if st.get("simulated") else "") + ")")
+    t.add_row("mount time", st["mount_time_utc"])
+    enc, obs, rd = st["encoder"], st["observed"], st["radec"]
+    t.add_row("encoder az / el", f"{enc['az_deg']:.5f}° / {enc['el_deg']:.5f}°")
+    t.add_row("observed az / el", f"{obs['az_deg']:.5f}° / {obs['el_deg']:.5f}°")
+    t.add_row("RA / Dec (ICRS)", f"{_hms(rd['ra_deg'])} / {_dms(rd['dec_deg'])}")
+    for ax in ("az", "el"):
+        a = st["axes"][ax]
+        faults = a.get("fault_text") or str(a["faults"])
+        t.add_row(f"{ax} axis", f"{a['state']}, faults: {faults}")
+    buf = st["buffer"]
+    t.add_row("trajectory buffer", f"{buf.get('points')} points, {buf['free_points']} free, "
+                                   f"{buf.get('underruns')} underruns")
+    op = st.get("operation")
+    if op:
+        t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
+    for window, s in st.get("tracking_error", {}).items():
+        t.add_row(f"tracking error {window}", f"RMS {_f(s['rms_arcsec'], '.3f', '″')}, "
+                                              f"peak {_f(s['peak_arcsec'], '.3f', '″')}")
+    ts = st.get("time_sync", {})
+    t.add_row("time sync", f"{ts.get('mode')}: offset {ts.get('offset_us')} µs, "
+                           f"{ts.get('syncs')} PPS syncs")
+    if st.get("last_fault"):
+        t.add_row("last fault", f"[red]{st['last_fault']}")
+    return t
+
+
+def status(server: ServerOpt = None, as_json: JsonOpt = False) -> None:
+    """Show encoder and observed position, RA/Dec, axis states, mount time and tracking error."""
+    st = ask(server, "status")
+    if as_json:
+        print_json(st)
+    else:
+        Console().print(render_status(st))

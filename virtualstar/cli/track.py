@@ -1,0 +1,60 @@
+"""`vs track`: track a star or RA/Dec sidereally, or a satellite through its next pass."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from virtualstar.cli.slew import RadecOpt, StarOpt, op_table
+from virtualstar.cli.status import JsonOpt, ServerOpt, ask, fail, print_json
+
+__all__ = ["track"]
+
+
+def track(
+    tle: Annotated[Path | None, typer.Option(
+        "--tle", help="TLE file (2- or 3-line sets); tracks the next pass of the satellite.")] = None,
+    sat: Annotated[str | None, typer.Option(
+        "--sat", help="Satellite name in the --tle file (default: the first).")] = None,
+    radec: RadecOpt = None,
+    star: StarOpt = None,
+    duration: Annotated[float | None, typer.Option(
+        "--duration", help="Track this many seconds (mount time), then stop; default: until "
+                           "`vs stop` (stars) or the end of the pass (satellites).")] = None,
+    wait: Annotated[bool, typer.Option(
+        "--wait", help="Wait until the track ends and print its tracking-error summary.")] = False,
+    server: ServerOpt = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Track a target; returns once tracking has begun (satellite: once the pass is planned)."""
+    given = [n for n, v in (("--tle", tle), ("--radec", radec), ("--star", star)) if v]
+    if len(given) != 1:
+        raise fail("give exactly one of --tle FILE [--sat NAME], --radec \"RA DEC\" or --star NAME")
+    if sat and not tle:
+        raise fail("--sat selects a satellite in a --tle file; give --tle FILE too")
+    if duration is not None and not duration > 0:
+        raise fail(f"--duration {duration}: expected a positive number of seconds")
+    params: dict = {"wait": wait}
+    if duration is not None:
+        params["duration_s"] = duration
+    if tle is not None:
+        try:
+            params["tle"] = tle.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise fail(f"cannot read TLE file {tle}: {exc.strerror}") from None
+        except UnicodeDecodeError:
+            raise fail(f"{tle} is not a text TLE file") from None
+        if sat:
+            params["sat"] = sat
+    elif radec:
+        params["radec"] = radec
+    else:
+        params["star"] = star
+    op = ask(server, "track", params, progress=True, quiet=as_json)
+    if as_json:
+        print_json(op)
+    else:
+        Console().print(op_table(op, "track"))
