@@ -164,6 +164,25 @@ def test_formula_trajectory_is_followed_by_the_mount_reference(e2e):
     assert math.isfinite(p0_az) and math.isfinite(p0_el)
 
 
+def test_wrong_password_is_reported_in_the_board_log(e2e):
+    result, _ = e2e
+    assert "wrong password" in result["wrongPasswordLog"] and "401" in result["wrongPasswordLog"]
+
+
+def test_every_tab_saves_its_state_and_loads_it_back(e2e):
+    result, _ = e2e
+    states = result["states"]
+    assert sorted(states) == sorted(t.capitalize() for t in TABS)
+    for tab, doc in states.items():
+        assert doc["panel"] == "virtualstar-rsp" and doc["tab"] == tab and doc["version"] == 1
+    assert "password" not in json.dumps(states["Board"]["state"])
+    assert states["Signals"]["state"]["chosen"] == ["axis.az.error", "axis.az.position_deg"]
+    assert states["Parameters"]["state"]["values"][PARAM_NAME] == float(PARAM_VALUE)
+    axes = {a["arg"]: a for a in states["Input"]["state"]["trajectory"]["axes"]}
+    assert axes["az_rad"]["expr"] == AZ_FORMULA and axes["el_rad"]["p0_signal"] == "axis.el.position"
+    assert states["Compute"]["state"]["expressions"][0]["name"] == "az_err_arcsec"
+
+
 def test_a_screenshot_of_each_tab_is_kept(e2e):
     for tab in TABS:
         png = ARTIFACTS / f"{tab}.png"

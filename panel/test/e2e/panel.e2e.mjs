@@ -26,6 +26,13 @@ page.on('pageerror', (err) => {
   result.pageErrors = [...(result.pageErrors || []), err.message];
 });
 try {
+  // A wrong password is refused and said so in the Board's log; the page stays usable.
+  await page.goto(env.PANEL_URL);
+  await page.fill('input[name=url]', env.ASTCOM_URL);
+  await page.fill('input[name=password]', 'not-the-password');
+  await page.click('button.connect');
+  await page.waitForFunction(() => /wrong password/.test(document.querySelector('[data-testid=log]').textContent));
+  result.wrongPasswordLog = await page.textContent('[data-testid=log] .error');
   await openAndConnect(page, env.PANEL_URL, env.ASTCOM_URL, env.ASTCOM_PASSWORD);
   step('connected');
   result.entries = await page.evaluate(() => window.panelProbe.session.entries.length);
@@ -126,6 +133,23 @@ try {
   await page.waitForTimeout(1100); // one poll of the watch list and STATS
   await shot(page, 'Board');
   step('screenshots');
+
+  // Every tab saves its state to a JSON file and loads it back.
+  result.states = {};
+  for (const name of ['Board', 'Diagnostics', 'Signals', 'Plot', 'Compute', 'Parameters', 'Input']) {
+    await tab(page, name);
+    const [file] = await Promise.all([page.waitForEvent('download'), page.click(`#tab-${name} button.save-state`)]);
+    const path = join(ARTIFACTS, `state-${name.toLowerCase()}.json`);
+    await file.saveAs(path);
+    await page.setInputFiles(`#tab-${name} input.state-input`, path);
+    await page.waitForFunction((n) => /^loaded /.test(document.querySelector(`#tab-${n} .statefile .muted`).textContent), name);
+    result.states[name] = JSON.parse(readFileSync(path, 'utf8'));
+  }
+  // A file of another tab is refused with a message.
+  await tab(page, 'Plot');
+  await page.setInputFiles('#tab-Plot input.state-input', join(ARTIFACTS, 'state-input.json'));
+  await page.waitForFunction(() => /holds the Input tab's state/.test(document.querySelector('#tab-Plot .statefile .muted').textContent));
+  step('states saved and loaded');
   result.ok = true;
 } catch (err) {
   result.ok = false;
