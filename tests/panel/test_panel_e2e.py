@@ -183,6 +183,12 @@ def test_every_tab_saves_its_state_and_loads_it_back(e2e):
     assert states["Compute"]["state"]["expressions"][0]["name"] == "az_err_arcsec"
 
 
+def test_an_injected_fault_turns_its_diagnostics_card_and_board_row_red(e2e):
+    result, _ = e2e
+    assert "axis.el" in result["faultCards"] and "axis.az" not in result["faultCards"]
+    assert "axis.el.fault_text" in result["faultRows"] and "axis.az.fault_text" not in result["faultRows"]
+
+
 def test_a_screenshot_of_each_tab_is_kept(e2e):
     for tab in TABS:
         png = ARTIFACTS / f"{tab}.png"

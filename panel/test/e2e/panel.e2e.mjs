@@ -150,6 +150,23 @@ try {
   await page.setInputFiles('#tab-Plot input.state-input', join(ARTIFACTS, 'state-input.json'));
   await page.waitForFunction(() => /holds the Input tab's state/.test(document.querySelector('#tab-Plot .statefile .muted').textContent));
   step('states saved and loaded');
+
+  // Errors at a glance: once the trajectory is over, inject an encoder fault through the
+  // Parameters tab; the Diagnostics card and the Board's watch list turn red.
+  const endUs = result.trajectory.t0_us + (Number(env.TRAJ_DURATION_S) + 0.5) * 1e6;
+  await page.waitForFunction((t) => window.panelProbe.series.lastTUs > t, endUs, { timeout: 15_000 });
+  await tab(page, 'Parameters');
+  await page.fill('input[name=param-filter]', 'axis.el.inject_encoder_fault');
+  await page.fill('input[data-param="axis.el.inject_encoder_fault"]', '1');
+  await page.click('button[data-set="axis.el.inject_encoder_fault"]');
+  await tab(page, 'Diagnostics');
+  await page.waitForSelector('#tab-Diagnostics .card.bad[data-group="axis.el"]', { timeout: 10_000 });
+  result.faultCards = await page.$$eval('#tab-Diagnostics .card.bad', (cards) => cards.map((c) => c.dataset.group));
+  await page.screenshot({ path: join(ARTIFACTS, 'diagnostics-fault.png') });
+  await tab(page, 'Board');
+  await page.waitForFunction(() => [...document.querySelectorAll('table.watch tr.bad td:first-child')].some((td) => td.textContent === 'axis.el.fault_text'));
+  result.faultRows = await page.$$eval('table.watch tr.bad td:first-child', (tds) => tds.map((td) => td.textContent));
+  step('fault shown');
   result.ok = true;
 } catch (err) {
   result.ok = false;
