@@ -17,21 +17,23 @@ PANEL_DIR = ROOT / "panel"
 ARTIFACTS = ROOT / "artifacts" / "panel"
 CHROMIUM = Path(os.environ.get("CHROMIUM_PATH", "/usr/bin/chromium"))
 PASSWORD = "panel-test-secret"
-URL_RE = re.compile(r"(wss?://[^\s)]+)")
+URL_RE = re.compile(r"((?:wss?|tcp)://[^\s)]+)")
 
 
 class LiveProcess:
     """A child process that prints its ws:// URL on a line; its output is kept for failures."""
 
-    def __init__(self, args: list[str], *, timeout_s: float = 60.0, env: dict | None = None) -> None:
+    def __init__(self, args: list[str], *, n_urls: int = 1, timeout_s: float = 60.0) -> None:
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, env={**os.environ, **(env or {})}, cwd=ROOT)
+                                     text=True, cwd=ROOT)
         self.lines: list[str] = []
-        self.url = self._wait_url(timeout_s)
+        self.urls = self._wait_urls(n_urls, timeout_s)
+        self.url = self.urls[0]
         threading.Thread(target=self._drain, daemon=True).start()
 
-    def _wait_url(self, timeout_s: float) -> str:
+    def _wait_urls(self, n_urls: int, timeout_s: float) -> list[str]:
         deadline = time.monotonic() + timeout_s
+        urls: list[str] = []
         assert self.proc.stdout is not None
         while time.monotonic() < deadline:
             line = self.proc.stdout.readline()
@@ -40,9 +42,11 @@ class LiveProcess:
             self.lines.append(line)
             match = URL_RE.search(line)
             if match:
-                return match.group(1)
+                urls.append(match.group(1))
+                if len(urls) == n_urls:
+                    return urls
         self.stop()
-        raise RuntimeError("endpoint did not print its URL:\n" + "".join(self.lines))
+        raise RuntimeError("endpoint did not print its URLs:\n" + "".join(self.lines))
 
     def _drain(self) -> None:
         assert self.proc.stdout is not None
@@ -92,9 +96,10 @@ def start_emulator() -> LiveProcess:
 
 
 def start_example_device(rate_hz: float) -> LiveProcess:
-    """Start astcom_client's example device on a free loopback port."""
+    """Start astcom_client's example device on free loopback ports: ws:// then tcp://."""
     return LiveProcess([sys.executable, "-m", "astcom_client.example_device", "ws://127.0.0.1:0",
-                        "--password", PASSWORD, "--rate", str(rate_hz)])
+                        "tcp://127.0.0.1:0", "--password", PASSWORD, "--rate", str(rate_hz)],
+                       n_urls=2)
 
 
 def node() -> str:

@@ -19,7 +19,9 @@ def example_endpoint():
 
 
 def test_js_client_and_panel_unit_tests_pass_against_the_python_example_device(example_endpoint):
-    env = {"ASTCOM_URL": example_endpoint.url, "ASTCOM_PASSWORD": PASSWORD,
+    ws_url, tcp_url = example_endpoint.urls
+    assert ws_url.startswith("ws://") and tcp_url.startswith("tcp://")
+    env = {"ASTCOM_URL": ws_url, "ASTCOM_TCP_URL": tcp_url, "ASTCOM_PASSWORD": PASSWORD,
            "ASTCOM_RATE_HZ": str(RATE_HZ), "PATH": "/usr/bin:/bin:/usr/local/bin"}
     run = subprocess.run([node(), "--test", "--test-reporter=spec", "test/unit/"], cwd=PANEL_DIR,
                          env=env, capture_output=True, text=True, timeout=60)

@@ -15,7 +15,7 @@ export const DEFAULT_TIMEOUT_MS = 10_000;
 function openSocket(url, WebSocketImpl) {
   const WS = WebSocketImpl || globalThis.WebSocket;
   if (!WS) throw new ConnectionClosed('no WebSocket implementation: pass {WebSocket} (npm ws in Node 20)');
-  if (!/^wss?:\/\//.test(url)) {
+  if (!WebSocketImpl && !/^wss?:\/\//.test(url)) {
     throw new ConnectionClosed(`${url}: a browser reaches an endpoint by ws:// or wss:// only`);
   }
   return new Promise((resolve, reject) => {
@@ -55,7 +55,7 @@ export class Client {
   /**
    * Connect, say HELLO and authenticate when the endpoint asks for it.
    * options: password, role ('observer'|'operator', the most wanted), clientName,
-   * WebSocket (constructor, for Node), timeoutMs.
+   * WebSocket (constructor: npm ws in Node 20, or TcpSocket from tcp-node.js for tcp://), timeoutMs.
    */
   static async connect(url, options = {}) {
     const ws = await openSocket(url, options.WebSocket);

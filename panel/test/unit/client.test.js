@@ -6,6 +6,7 @@ import WebSocket from 'ws';
 import { Client } from '../../src/astcom/client.js';
 import { NdArray } from '../../src/astcom/codec.js';
 import { AuthenticationFailed, RemoteError } from '../../src/astcom/errors.js';
+import { TcpSocket } from '../../src/astcom/tcp-node.js';
 
 const URL = process.env.ASTCOM_URL;
 const PASSWORD = process.env.ASTCOM_PASSWORD;
@@ -134,4 +135,28 @@ test('a closed client rejects requests with ConnectionClosed', async () => {
   const other = await connect();
   await other.close();
   await assert.rejects(other.list(), (err) => err.name === 'ConnectionClosed');
+});
+
+test('the same client speaks tcp:// with length-prefixed frames (Node only)', async () => {
+  const tcpUrl = process.env.ASTCOM_TCP_URL;
+  assert.ok(tcpUrl, 'set ASTCOM_TCP_URL');
+  const t = await Client.connect(tcpUrl, { password: PASSWORD, WebSocket: TcpSocket, clientName: 'js-tcp' });
+  try {
+    assert.equal(t.role, 'operator');
+    assert.equal(await t.invoke('math.add', [2, 0.5]), 2.5);
+    await t.write({ 'pair.a': 7, 'pair.b': 7 });
+    assert.deepEqual((await t.read(['pair.a', 'pair.b'])).values, { 'pair.a': 7, 'pair.b': 7 });
+    const stream = await t.stream(['counter'], RATE_HZ / 10);
+    const ticks = [];
+    stream.onPacket((p) => {
+      for (let i = 0; i < p.n; i++) ticks.push([p.firstTick + i * p.periodTicks, p.columns[0][i]]);
+    });
+    while (ticks.length < 200) await new Promise((r) => setTimeout(r, 20));
+    await stream.stop();
+    assert.equal(stream.lost, 0);
+    ticks.forEach(([tick, counter]) => assert.equal(counter, tick));
+    assert.ok(ticks.every(([tick]) => tick % 10 === 0), 'samples are phase-aligned on multiples of k');
+  } finally {
+    await t.close();
+  }
 });

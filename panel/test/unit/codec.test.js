@@ -3,6 +3,7 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 import { decodeFrame, encodeFrame, NdArray } from '../../src/astcom/codec.js';
 import { ProtocolError } from '../../src/astcom/errors.js';
+import { tcpFrame } from '../../src/astcom/tcp-node.js';
 import { coerce, isStreamable, parseSignature, parseType } from '../../src/astcom/types.js';
 
 const hex = (bytes) => Buffer.from(bytes).toString('hex').match(/../g).join(' ');
@@ -13,8 +14,10 @@ test('hello request encodes to the bytes of spec section 9', () => {
     '93 a5 48 45 4c 4c 4f 01 82 a7 76 65 72 73 69 6f 6e a3 31 2e 30 a6 63 6c 69 65 6e 74 a1 78');
 });
 
-test('read request encodes to the frame of spec section 1', () => {
-  assert.equal(hex(encodeFrame(['READ', 7, { msg: 3 }])), '93 a4 52 45 41 44 07 81 a3 6d 73 67 03');
+test('read request encodes to the frame of spec section 1, and its tcp form to the prefixed bytes', () => {
+  const frame = encodeFrame(['READ', 7, { msg: 3 }]);
+  assert.equal(hex(frame), '93 a4 52 45 41 44 07 81 a3 6d 73 67 03');
+  assert.equal(hex(tcpFrame(frame)), '00 00 00 0d 93 a4 52 45 41 44 07 81 a3 6d 73 67 03');
 });
 
 test('f64 2x3 array round-trips through the ext 1 header of spec section 2.1', () => {
