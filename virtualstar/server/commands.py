@@ -118,6 +118,14 @@ def _check(cls: type, params: dict[str, Any], cmd: str) -> Any:
     return cls(**values)
 
 
+class OperationFailed(VssError):
+    """An operation a request waited for ended in failure; carries the failure's code."""
+
+    def __init__(self, message: str, code: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
 def _plain_match(value: Any, allowed: tuple) -> bool:
     if isinstance(value, bool):
         return bool in allowed
@@ -129,9 +137,8 @@ async def _result(op: Operation, *, wait_done: bool) -> dict[str, Any]:
     await asyncio.shield(fut)
     if op.phase in ("failed", "aborted"):
         err = op.info.get("error", {})
-        e = VssError(err.get("message", "the operation failed"))
-        e.code = err.get("code", "internal")
-        raise e
+        raise OperationFailed(err.get("message", "the operation failed"),
+                              err.get("code", "internal"))
     return op.as_dict()
 
 

@@ -35,9 +35,9 @@ class VssError(Exception):
 
     code = "internal"
 
-    def __init__(self, message: str) -> None:
-        super().__init__(message)
-        self.message = message
+    @property
+    def message(self) -> str:
+        return str(self.args[0]) if self.args else ""
 
     def __str__(self) -> str:
         return self.message

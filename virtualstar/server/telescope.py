@@ -121,6 +121,7 @@ class Operation:
     done: asyncio.Future | None = None
     task: asyncio.Task | None = None
     cleanup: list[Callable[[], Any]] = field(default_factory=list)
+    abort_error: VssError | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {"id": self.id, "kind": self.kind, "target": self.target, "phase": self.phase,
@@ -290,8 +291,8 @@ class Telescope:
         op = self.op
         if op is None or op.task is None or op.task.done():
             return
-        op.info["abort_reason"] = str(error)
-        op.task.cancel(msg=f"{error.code}:{error}")
+        op.abort_error = error
+        op.task.cancel()
 
     async def run_operation(self, kind: str, target: str,
                             body: Callable[[Operation], Awaitable[dict[str, Any]]],
@@ -316,11 +317,9 @@ class Telescope:
     async def _run(self, op: Operation, body, resume) -> None:
         try:
             result = await body(op)
-        except asyncio.CancelledError as exc:
-            reason = op.info.get("abort_reason") or (exc.args[0] if exc.args else "cancelled")
-            code = reason.split(":", 1)[0] if ":" in str(reason) else "aborted"
-            err = {"code": code if code in ("mount_fault", "mount_offline") else "aborted",
-                   "message": str(reason).split(":", 1)[-1]}
+        except asyncio.CancelledError:
+            why = op.abort_error or OperationAborted("cancelled (server shutting down)")
+            err = {"code": why.code, "message": str(why)}
             if err["code"] == "mount_offline" and resume is not None:
                 self._resume = resume
                 err["message"] += "; the track resumes when the mount is back"
@@ -368,8 +367,8 @@ class Telescope:
     async def cancel_operation(self, reason: str) -> None:
         op = self.op
         if op is not None and op.task is not None and not op.task.done():
-            op.info["abort_reason"] = f"aborted:{reason}"
-            op.task.cancel(msg=f"aborted:{reason}")
+            op.abort_error = OperationAborted(reason)
+            op.task.cancel()
             with contextlib.suppress(BaseException):
                 await op.task
 
@@ -397,8 +396,9 @@ class Telescope:
             await self._halt()
             if state == c["stopping"]:
                 await self.wait_state(("holding", "off"), 120.0)
-        if int((await self.link.read(["mount_state"]))["mount_state"]) == c["off"]:
-            await self.link.call("power_on")
+        axes = await self.link.read(["az_state", "el_state"])
+        if c["off"] in (int(axes["az_state"]), int(axes["el_state"])):
+            await self.link.call("power_on")  # closes the loops of the axes that are off
 
     async def _positions(self) -> tuple[float, float, int]:
         v = await self.link.read(["az_position", "el_position", "mount_time"])
