@@ -293,8 +293,8 @@ _AXIS_STATE = [
     (A_INT_VEL, "int_velocity", "rad", "Velocity-loop integrator", "signal"),
     (A_STATE, "state", "", "Axis state (AxisState: 0 off, 1 holding, 2 slewing, 3 tracking, 4 manual, 5 stopping, 6 fault)", "status"),
     (A_FAULTS, "faults", "", "Latched fault bits (FAULT_*: 1 overcurrent, 2 overtemp, 4 encoder, 8 following error, 16 limit, 32 heartbeat, 64 overvoltage)", "status"),
-    (A_TARGET, "target", "rad", "Slew target", "status"),
-    (A_MANUAL_RATE, "manual_rate", "rad/s", "Manual move rate", "status"),
+    (A_TARGET, "target", "rad", "Slew target", "signal"),
+    (A_MANUAL_RATE, "manual_rate", "rad/s", "Manual move rate", "signal"),
 ]
 
 _GLOBAL_PARAMS = [

@@ -53,6 +53,25 @@ def test_collection_registers_named_variables_with_units_and_the_vss_names():
     assert all(re.fullmatch(r"[a-z_]+(\.[a-z0-9_]+)+", n) for n in infos)
 
 
+def test_physical_quantities_are_registered_as_floats_not_integers():
+    # A value in rad, rad/s, A, … typed as an integer would be cut to whole units on the wire.
+    emu = MountEmulator(_config())
+    infos = [i for i in emu.collection.infos() if i.kind != "function"]
+    physical = [i for i in infos if i.unit in {"rad", "rad/s", "rad/s^2", "A", "V", "degC", "Nm"}]
+    assert {"axis.az.target", "axis.el.manual_rate"} <= {i.name for i in physical}
+    wrong = [(i.name, i.type) for i in physical if not i.type.startswith("f")]
+    assert not wrong, wrong
+
+
+def test_a_fractional_slew_target_reads_back_unrounded():
+    async def body(emu, c):
+        await c.invoke("mount.power_on")
+        await c.invoke("mount.slew", 12.5, 35.25)
+        target = (await c.read(["axis.az.target"]))["axis.az.target"]
+        assert target == pytest.approx(math.radians(12.5), abs=1e-12)
+    asyncio.run(_with_client(_config(speed=0.0), body))
+
+
 async def _with_client(config: EmulatorConfig, body):
     emu = MountEmulator(config)
     url = await emu.start("ws://127.0.0.1:0")
