@@ -80,7 +80,7 @@ class TelescopeConfig:
     speed: float = 1.0  # mount seconds per wall second (simulated time > 1)
     simulated: bool = False
     point_rate_hz: float = 20.0
-    lead_s: float | None = None  # None: 5 s, or 1.5 s of wall time in simulated time
+    lead_s: float | None = None  # None: 5 s, or 3 s of wall time in simulated time
     error_rate_hz: float = 1000.0
     ramp_s: float = 2.0
     settle_s: float = 1.0
@@ -103,9 +103,9 @@ class TelescopeConfig:
 
         In simulated time the same mount lead is a shorter wall time, and an
         event loop stalled by a loaded host must not drain the buffer: keep
-        at least 1.5 s of wall time.
+        at least 3 s of wall time.
         """
-        return self.lead_s if self.lead_s is not None else max(5.0, 1.5 * self.speed)
+        return self.lead_s if self.lead_s is not None else max(5.0, 3.0 * self.speed)
 
 
 @dataclass

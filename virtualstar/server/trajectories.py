@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
+import erfa
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
@@ -227,8 +228,10 @@ def plan_satellite_pass(sat: Satellite, site: Site, start_us: int, end_us: int, 
         width_s = 2.0 * track_rate_limit_deg_s / accel_limit_deg_s2
         az_cmd = _moving_average(plan.az_rad, max(1, int(round(width_s / step_s))))
         az_rate = np.gradient(az_cmd, t_s)
+    # what the sky sees of the commanded path (keyhole and smoothing), arcsec
+    sky_err = float(np.max(erfa.seps(az_cmd, obs.el_rad, az, obs.el_rad))) * 206264.80624709636
     enc = observed_to_encoder(model, az_cmd, obs.el_rad, az_rate, obs.el_rate_rad_s)
-    return PassPlan(TablePath(Points(t, *enc)), plan.limited, plan.max_error_arcsec,
+    return PassPlan(TablePath(Points(t, *enc)), plan.limited, sky_err,
                     plan.max_true_az_rate_deg_s, float(np.degrees(obs.el_rad.max())))
 
 
