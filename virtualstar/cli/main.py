@@ -9,10 +9,13 @@ app = typer.Typer(
     add_completion=False,
 )
 
+from virtualstar.cli import data as _data  # noqa: E402
 from virtualstar.cli import demo as _demo  # noqa: E402
+from virtualstar.cli import experiment as _experiment  # noqa: E402
 from virtualstar.cli import panel as _panel  # noqa: E402
 from virtualstar.cli import park as _park  # noqa: E402
 from virtualstar.cli import passes as _passes  # noqa: E402
+from virtualstar.cli import record as _record  # noqa: E402
 from virtualstar.cli import server as _server  # noqa: E402
 from virtualstar.cli import slew as _slew  # noqa: E402
 from virtualstar.cli import status as _status  # noqa: E402
@@ -24,6 +27,7 @@ from virtualstar.cli import where as _where  # noqa: E402
 app.command("where")(_where.where)
 app.command("passes")(_passes.passes)
 app.command("panel")(_panel.panel)
+app.command("record")(_record.record)
 app.command("server")(_server.server)
 app.command("status")(_status.status)
 app.command("slew")(_slew.slew)
@@ -32,6 +36,8 @@ app.command("stop")(_stop.stop)
 app.command("park")(_park.park)
 app.command("watch")(_watch.watch)
 app.command("demo")(_demo.demo)
+app.add_typer(_data.app, name="data")
+app.add_typer(_experiment.app, name="experiment")
 
 
 def main() -> None:

@@ -2,9 +2,9 @@
 
 An envelope keeps, for each time bucket, the count, minimum and maximum of each signal,
 so a plot of millions of samples at a few thousand pixels still shows every peak.
-Buckets are aligned on mount time (integer µs): bucket k covers
-[k·bucket_us, (k+1)·bucket_us), which lets envelopes computed piecewise (one per
-flushed block) merge exactly into coarser ones.
+Buckets are aligned on an origin in mount time (integer µs, 0 by default): bucket k
+covers [origin + k·bucket_us, origin + (k+1)·bucket_us), which lets envelopes computed
+piecewise (one per flushed block) merge exactly into coarser ones.
 """
 
 from __future__ import annotations
@@ -39,15 +39,18 @@ class Envelope:
         return int(self.t_us.shape[0])
 
 
-def _bucket_starts(t_us: np.ndarray, bucket_us: int) -> tuple[np.ndarray, np.ndarray]:
+def _bucket_starts(t_us: np.ndarray, bucket_us: int,
+                   origin_us: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Return (bucket start µs per distinct bucket, index of its first sample); t_us sorted."""
-    keys = np.floor_divide(t_us, bucket_us)
+    keys = np.floor_divide(t_us - origin_us, bucket_us)
     first = np.flatnonzero(np.diff(keys, prepend=keys[:1] - 1))
-    return keys[first] * bucket_us, first
+    return origin_us + keys[first] * bucket_us, first
 
 
-def envelope(t_us: np.ndarray, columns: dict[str, np.ndarray], bucket_us: int) -> Envelope:
-    """Return the envelope of `columns` sampled at sorted `t_us` in buckets of `bucket_us` µs.
+def envelope(t_us: np.ndarray, columns: dict[str, np.ndarray], bucket_us: int,
+             origin_us: int = 0) -> Envelope:
+    """Return the envelope of `columns` sampled at sorted `t_us` in buckets of `bucket_us` µs
+    counted from `origin_us`.
 
     Raises ValueError for a non-positive bucket or columns of another length than t_us.
     """
@@ -58,7 +61,7 @@ def envelope(t_us: np.ndarray, columns: dict[str, np.ndarray], bucket_us: int) -
         empty = np.empty(0)
         return Envelope(bucket_us, np.empty(0, np.int64), np.empty(0, np.int64),
                         {k: empty for k in columns}, {k: empty for k in columns})
-    starts, first = _bucket_starts(t_us, bucket_us)
+    starts, first = _bucket_starts(t_us, bucket_us, origin_us)
     counts = np.diff(np.append(first, len(t_us)))
     mins, maxs = {}, {}
     for name, values in columns.items():
@@ -79,15 +82,20 @@ def _reduce(v: np.ndarray, first: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def rebucket(env: Envelope, bucket_us: int) -> Envelope:
-    """Return `env` merged into coarser buckets of `bucket_us` µs (a multiple of env's)."""
-    if bucket_us % env.bucket_us:
-        raise ValueError(f"bucket {bucket_us} µs is not a multiple of {env.bucket_us} µs")
+def rebucket(env: Envelope, bucket_us: int, origin_us: int = 0) -> Envelope:
+    """Return `env` merged into coarser buckets of `bucket_us` µs counted from `origin_us`.
+
+    `bucket_us` must be a multiple of env's bucket, and `origin_us` a bucket boundary of
+    env, or a fine bucket would straddle two coarse ones (ValueError).
+    """
+    if bucket_us % env.bucket_us or origin_us % env.bucket_us:
+        raise ValueError(f"bucket {bucket_us} µs and origin {origin_us} µs must be multiples "
+                         f"of {env.bucket_us} µs")
     if len(env) == 0:
         return Envelope(bucket_us, env.t_us, env.n, env.mins, env.maxs)
     order = np.argsort(env.t_us, kind="stable")
     t = env.t_us[order]
-    starts, first = _bucket_starts(t, bucket_us)
+    starts, first = _bucket_starts(t, bucket_us, origin_us)
     n = np.add.reduceat(env.n[order], first)
     mins = {k: np.fmin.reduceat(v[order], first) for k, v in env.mins.items()}
     maxs = {k: np.fmax.reduceat(v[order], first) for k, v in env.maxs.items()}

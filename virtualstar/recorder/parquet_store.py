@@ -383,7 +383,7 @@ class ParquetStoreReader:
         bucket_us = max(1, -(-(to_t_us - from_t_us) // buckets))
         if bucket_us < OVERVIEW_BUCKET_US or not self.overview_files:
             block = self.window(from_t_us, to_t_us, names)
-            return envelope(block.t_us, block.columns, bucket_us)
+            return envelope(block.t_us, block.columns, bucket_us, from_t_us)
         bucket_us = -(-bucket_us // OVERVIEW_BUCKET_US) * OVERVIEW_BUCKET_US
         cols = ["t_us", "n"] + [f"{n}__{m}" for n in names for m in ("min", "max")]
         ov = ds.dataset([str(f) for f in self.overview_files], format="parquet")
@@ -394,7 +394,7 @@ class ParquetStoreReader:
                         table.column("n").to_numpy(),
                         {n: table.column(f"{n}__min").to_numpy() for n in names},
                         {n: table.column(f"{n}__max").to_numpy() for n in names})
-        return rebucket(fine, bucket_us)
+        return rebucket(fine, bucket_us, lo)
 
     def gaps(self) -> list[Gap]:
         """Return every recorded gap, in file order."""

@@ -1,0 +1,220 @@
+"""`vs data`: query, plot and export what `vs record` stored."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from virtualstar.recorder import RecorderError
+from virtualstar.recorder.export import write_csv, write_mat
+from virtualstar.recorder.parquet_store import ParquetStoreReader, utc_text
+from virtualstar.recorder.stores import open_reader
+from virtualstar.recorder.timeparse import parse_time_bound
+
+app = typer.Typer(help="Query, plot and export recorded signals.", no_args_is_help=True,
+                  add_completion=False)
+
+StoreArg = Annotated[str, typer.Argument(
+    help="parquet:DIR (or DIR) or influx:http://HOST:8086/DB (credentials: INFLUX_USERNAME/INFLUX_PASSWORD).")]
+FromOpt = Annotated[str, typer.Option(
+    "--from", help="Window start: start, +S (seconds after the first sample), -S (before the "
+                   "last), ISO-8601 UTC, or mount µs.")]
+ToOpt = Annotated[str, typer.Option("--to", help="Window end (excluded), same forms; 'end' includes the last sample.")]
+NamesOpt = Annotated[list[str] | None, typer.Option(
+    "--names", help="Signals to return (comma-separated or repeated); default: all.")]
+
+
+def _fail(message: str, code: int = 2) -> typer.Exit:
+    typer.echo(f"vs data: error: {message}", err=True)
+    return typer.Exit(code)
+
+
+def _names(names: list[str] | None) -> list[str] | None:
+    if not names:
+        return None
+    return [n.strip() for item in names for n in item.split(",") if n.strip()]
+
+
+def _window(reader, t_from: str, t_to: str) -> tuple[int, int]:
+    start, end = reader.time_range()
+    a = parse_time_bound(t_from, start, end, option="--from")
+    b = parse_time_bound(t_to, start, end, option="--to")
+    if b <= a:
+        raise RecorderError(f"empty window: --to {t_to!r} ({b} µs) is not after --from "
+                            f"{t_from!r} ({a} µs); the store spans {start}..{end} µs")
+    return a, b
+
+
+def _plain(v: np.ndarray) -> list:
+    if v.dtype.kind == "f":
+        return [None if x != x else x for x in v.tolist()]  # NaN is not JSON
+    return v.tolist()
+
+
+@app.command()
+def query(
+    store: StoreArg,
+    t_from: FromOpt = "start",
+    t_to: ToOpt = "end",
+    names: NamesOpt = None,
+    decimate: Annotated[int | None, typer.Option(
+        "--decimate", help="Return a min/max envelope of about N buckets instead of every sample.")] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV (t_us, then one column per signal).")] = False,
+) -> None:
+    """Print a time window at full rate, or its min/max envelope with --decimate N.
+
+    JSON at full rate: {"store", "from_t_us", "to_t_us", "names", "t_us": [...],
+    "values": {name: [...]}}; with --decimate: {"bucket_us", "t_us", "n", "min": {...},
+    "max": {...}}. Without --json/--csv a short summary is printed.
+    """
+    if json_out and csv_out:
+        raise _fail("give --json or --csv, not both")
+    if decimate is not None and decimate < 1:
+        raise _fail(f"--decimate {decimate}: expected a number of buckets >= 1")
+    try:
+        reader = open_reader(store)
+        a, b = _window(reader, t_from, t_to)
+        wanted = _names(names)
+        if decimate is not None:
+            env = reader.envelope(a, b, wanted, decimate)
+            doc = {"store": store, "from_t_us": a, "to_t_us": b, "names": env.names,
+                   "bucket_us": env.bucket_us, "t_us": env.t_us.tolist(), "n": env.n.tolist(),
+                   "min": {k: _plain(v) for k, v in env.mins.items()},
+                   "max": {k: _plain(v) for k, v in env.maxs.items()}}
+            if csv_out:
+                cols = ["t_us", "n"] + [f"{k}__{m}" for k in env.names for m in ("min", "max")]
+                typer.echo(",".join(cols))
+                for i in range(len(env)):
+                    row = [env.t_us[i], env.n[i]] + [x for k in env.names
+                                                     for x in (env.mins[k][i], env.maxs[k][i])]
+                    typer.echo(",".join(repr(x.item()) if hasattr(x, "item") else str(x) for x in row))
+                return
+            if json_out:
+                typer.echo(json.dumps(doc))
+                return
+            typer.echo(f"{len(env)} buckets of {env.bucket_us / 1e6:g} s from {utc_text(a)} "
+                       f"to {utc_text(b)}")
+            for k in env.names:
+                lo = float(np.nanmin(env.mins[k])) if len(env) else float("nan")
+                hi = float(np.nanmax(env.maxs[k])) if len(env) else float("nan")
+                typer.echo(f"  {k}: min {lo!r}, max {hi!r}")
+            return
+        block = reader.window(a, b, wanted)
+    except (RecorderError, OSError) as exc:
+        raise _fail(str(exc)) from None
+    if csv_out:
+        write_csv([block], block.names, sys.stdout)
+        return
+    if json_out:
+        typer.echo(json.dumps({"store": store, "from_t_us": a, "to_t_us": b, "names": block.names,
+                               "t_us": block.t_us.tolist(),
+                               "values": {k: _plain(v) for k, v in block.columns.items()}}))
+        return
+    typer.echo(f"{len(block)} samples from {utc_text(a)} to {utc_text(b)}")
+    for k, v in block.columns.items():
+        if len(v):
+            typer.echo(f"  {k}: min {v.min().item()!r}, max {v.max().item()!r}, "
+                       f"mean {float(v.mean())!r}")
+
+
+@app.command()
+def info(store: StoreArg,
+         json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False) -> None:
+    """Print the signals, time span, sample count and gaps of a store."""
+    try:
+        reader = open_reader(store)
+        start, end = reader.time_range()
+        doc = {"store": store, "signals": [s.__dict__ for s in reader.signals()],
+               "first_t_us": start, "last_t_us": end, "first_utc": utc_text(start),
+               "last_utc": utc_text(end), "samples": reader.count(),
+               "gaps": [g.__dict__ for g in reader.gaps()]}
+        if isinstance(reader, ParquetStoreReader):
+            doc["bytes"] = sum(f.stat().st_size for f in reader.path.rglob("*") if f.is_file())
+    except (RecorderError, OSError) as exc:
+        raise _fail(str(exc)) from None
+    if json_out:
+        typer.echo(json.dumps(doc))
+        return
+    typer.echo(f"{store}: {doc['samples']} samples from {doc['first_utc']} to {doc['last_utc']}")
+    for s in doc["signals"]:
+        typer.echo(f"  {s['name']} [{s['unit']}] {s['dtype']}")
+    typer.echo(f"  {len(doc['gaps'])} gap(s), {sum(max(0, g['lost_samples']) for g in doc['gaps'])} "
+               "samples known lost")
+
+
+@app.command()
+def plot(
+    store: StoreArg,
+    out: Annotated[Path, typer.Option("-o", "--out", help="Directory for the PNG files (created).")],
+    t_from: FromOpt = "start",
+    t_to: ToOpt = "end",
+    names: NamesOpt = None,
+    window: Annotated[float, typer.Option("--window", help="Seconds at full rate for the second plot.")] = 2.0,
+    buckets: Annotated[int, typer.Option("--buckets", help="Envelope buckets of the overview.")] = 2000,
+) -> None:
+    """Write fig6_overview.png (whole window, min/max envelope) and fig7_first_2s.png
+    (the first --window seconds at full rate), like the paper's Fig. 6 and Fig. 7."""
+    if not window > 0 or buckets < 1:
+        raise _fail("--window must be > 0 seconds and --buckets >= 1")
+    from virtualstar.recorder.plots import plot_envelope, plot_window  # matplotlib: only here
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        reader = open_reader(store)
+        a, b = _window(reader, t_from, t_to)
+        wanted = _names(names)
+        signals = [s for s in reader.signals() if wanted is None or s.name in wanted]
+        if wanted and len(signals) != len(wanted):
+            have = [s.name for s in reader.signals()]
+            raise RecorderError(f"unknown signal(s) in --names; the store holds {', '.join(have)}")
+        env = reader.envelope(a, b, [s.name for s in signals], buckets)
+        p6 = plot_envelope(env, signals, out / "fig6_overview.png",
+                           title=f"{store}: min/max envelope")
+        block = reader.window(a, min(b, a + round(window * 1e6)), [s.name for s in signals])
+        p7 = plot_window(block, signals, out / f"fig7_first_{window:g}s.png",
+                         title=f"{store}: first {window:g} s at full rate")
+    except (RecorderError, OSError) as exc:
+        raise _fail(str(exc)) from None
+    typer.echo(f"wrote {p6} and {p7}")
+
+
+@app.command()
+def export(
+    store: StoreArg,
+    csv_path: Annotated[Path | None, typer.Option("--csv", help="Write a CSV file here.")] = None,
+    mat_path: Annotated[Path | None, typer.Option("--mat", help="Write a MATLAB .mat file here.")] = None,
+    t_from: FromOpt = "start",
+    t_to: ToOpt = "end",
+    names: NamesOpt = None,
+) -> None:
+    """Export a window (default: everything) to CSV and/or MATLAB .mat."""
+    if csv_path is None and mat_path is None:
+        raise _fail("give --csv FILE and/or --mat FILE")
+    try:
+        reader = open_reader(store)
+        a, b = _window(reader, t_from, t_to)
+        wanted = _names(names)
+        signals = [s for s in reader.signals() if wanted is None or s.name in wanted]
+        if wanted and len(signals) != len(wanted):
+            raise RecorderError("unknown signal(s) in --names; `vs data info STORE` lists them")
+        sel = [s.name for s in signals]
+        block = None
+        if csv_path is not None:
+            if isinstance(reader, ParquetStoreReader) and t_from == "start" and t_to == "end":
+                rows = write_csv(reader.iter_blocks(sel), sel, csv_path)
+            else:
+                block = reader.window(a, b, sel)
+                rows = write_csv([block], sel, csv_path)
+            typer.echo(f"wrote {rows} rows to {csv_path}")
+        if mat_path is not None:
+            block = block if block is not None else reader.window(a, b, sel)
+            rows = write_mat(block, signals, mat_path)
+            typer.echo(f"wrote {rows} rows to {mat_path}")
+    except (RecorderError, OSError) as exc:
+        raise _fail(str(exc)) from None

@@ -1,0 +1,87 @@
+"""`vs record`: stream controller signals over ASTCom into a store, with exact mount times."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import signal
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from astcom_client import AstcomError
+from virtualstar.recorder import RecorderError, parse_store_spec
+from virtualstar.recorder.samples import Gap
+from virtualstar.recorder.stores import TeeWriter, open_writer
+from virtualstar.recorder.subscriber import Recorder, client_connector
+
+
+def _fail(message: str, code: int = 2) -> typer.Exit:
+    typer.echo(f"vs record: error: {message}", err=True)
+    return typer.Exit(code)
+
+
+def record(
+    url: Annotated[str, typer.Argument(help="ASTCom endpoint, e.g. ws://127.0.0.1:8765 or tcp://mount:8766.")],
+    names: Annotated[list[str], typer.Argument(help="Signals to record (see `astcom list URL`).")],
+    rate: Annotated[float, typer.Option("--rate", help="Samples per second per signal (≤ the device loop rate).")] = 1000.0,
+    duration: Annotated[float | None, typer.Option(
+        "--duration", help="Stop after this many (wall-clock) seconds; default: until Ctrl-C.")] = None,
+    store: Annotated[list[str] | None, typer.Option(
+        "--store", help="parquet:DIR (default ./recording) or influx:http://127.0.0.1:8086/DB; "
+                        "repeat to write several stores at once.")] = None,
+    password: Annotated[str | None, typer.Option(
+        "--password", envvar="ASTCOM_PASSWORD", help="Endpoint password (observer is enough).")] = None,
+    spool: Annotated[Path | None, typer.Option(
+        "--spool", help="Where InfluxDB batches wait while the database is down "
+                        "(default: <tmp>/vs-record-spool/DB).")] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Record NAME... from URL at --rate into --store until --duration or Ctrl-C.
+
+    Every sample keeps its mount timestamp (t_us, integer µs). Lost samples (sequence or
+    tick gaps) and endpoint restarts are reported on stderr and kept in the store's gap
+    table; the recorder reconnects by itself.
+    """
+    if not rate > 0:
+        raise _fail(f"--rate {rate}: expected a positive number of samples per second")
+    if duration is not None and not duration > 0:
+        raise _fail(f"--duration {duration}: expected a positive number of seconds")
+    try:
+        specs = [parse_store_spec(s) for s in (store or ["parquet:recording"])]
+        writers = [open_writer(s, spool_dir=spool) for s in specs]
+    except RecorderError as exc:
+        raise _fail(str(exc)) from None
+    writer = writers[0] if len(writers) == 1 else TeeWriter(writers)
+
+    def on_gap(gap: Gap) -> None:
+        lost = "unknown number of" if gap.lost_samples < 0 else str(gap.lost_samples)
+        typer.echo(f"vs record: {gap.reason}: {lost} samples missing between t_us "
+                   f"{gap.after_t_us} and {gap.before_t_us}", err=True)
+
+    logging.basicConfig(level=logging.WARNING, format="vs record: %(message)s")
+    recorder = Recorder(client_connector(url, password=password), list(names), rate, writer,
+                        source=url, on_gap=on_gap)
+    try:
+        summary = asyncio.run(_run(recorder, duration))
+    except (RecorderError, AstcomError, OSError) as exc:
+        code = 1 if isinstance(exc, AstcomError) else 2
+        raise _fail(f"{url}: {exc}", code) from None
+    summary.store = ", ".join(str(s) for s in specs)
+    if json_out:
+        typer.echo(json.dumps(summary.as_dict()))
+        return
+    typer.echo(f"recorded {summary.samples} samples of {len(names)} signals at "
+               f"{summary.rate_hz:g} Hz into {summary.store}; lost {summary.lost} in "
+               f"{len(summary.gaps)} gap(s), {summary.reconnects} reconnect(s)")
+
+
+async def _run(recorder: Recorder, duration: float | None):
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, recorder.stop)
+    return await recorder.run(duration)
