@@ -57,6 +57,11 @@ RETRY_INTERVAL_S = 0.5  # while spooling, try the database again at most this of
 MAX_PENDING_BATCHES = 4
 CLOSE_DRAIN_S = 10.0
 QUERY_CHUNK_ROWS = 50_000
+MAX_TIME_US = (2**63 - 2) // 1000  # InfluxDB keeps nanoseconds in an int64
+
+
+def _clamp(t_us: int) -> int:
+    return max(-MAX_TIME_US, min(MAX_TIME_US, int(t_us)))
 
 
 def _escape_key(text: str) -> str:
@@ -355,7 +360,7 @@ class InfluxStoreReader:
         """Return the recorded signals (units from recorder_signals where known)."""
         units: dict[str, tuple[str, str]] = {}
         for s in self.conn.query(f"SELECT last(unit) AS unit, last(dtype) AS dtype FROM "
-                                 f"{_ident(SIGNALS_MEASUREMENT)} GROUP BY name"):
+                                 f"{_ident(SIGNALS_MEASUREMENT)} GROUP BY \"name\""):
             name = s.get("tags", {}).get("name", "")
             if s["values"]:
                 units[name] = (s["values"][0][1] or "", s["values"][0][2] or "")
@@ -395,7 +400,7 @@ class InfluxStoreReader:
         names = self._names(names)
         types = self._field_types()
         q = (f"SELECT {', '.join(_ident(n) for n in names)} FROM {_ident(MEASUREMENT)} "
-             f"WHERE time >= {int(from_t_us)}u AND time < {int(to_t_us)}u")
+             f"WHERE time >= {_clamp(from_t_us)}u AND time < {_clamp(to_t_us)}u")
         rows = [r for s in self.conn.query(q) for r in s["values"]]
         rows.sort(key=lambda r: r[0])
         t = np.array([r[0] for r in rows], dtype=np.int64)
@@ -418,8 +423,8 @@ class InfluxStoreReader:
         bucket_us = max(1, -(-(to_t_us - from_t_us) // buckets))
         sel = [f"count({_ident(names[0])})"] + [f"{f}({_ident(n)})" for n in names
                                                 for f in ("min", "max")]
-        q = (f"SELECT {', '.join(sel)} FROM {_ident(MEASUREMENT)} WHERE time >= {int(from_t_us)}u "
-             f"AND time < {int(to_t_us)}u GROUP BY time({bucket_us}u, {int(from_t_us) % bucket_us}u) "
+        q = (f"SELECT {', '.join(sel)} FROM {_ident(MEASUREMENT)} WHERE time >= {_clamp(from_t_us)}u "
+             f"AND time < {_clamp(to_t_us)}u GROUP BY time({bucket_us}u, {int(from_t_us) % bucket_us}u) "
              "fill(none)")
         rows = sorted((r for s in self.conn.query(q) for r in s["values"]), key=lambda r: r[0])
         t = np.array([r[0] for r in rows], dtype=np.int64)

@@ -188,6 +188,7 @@ class Recorder:
         self.summary = RecordingSummary(self.names, self.rate_hz)
         self._progress = asyncio.Event()
         self._stop = asyncio.Event()
+        self._error: BaseException | None = None
         self.signals: list[SignalInfo] = []
 
     def stop(self) -> None:
@@ -274,37 +275,34 @@ class Recorder:
             await asyncio.wait_for(self._stop.wait(), seconds)
 
     async def _consume(self, stream, deadline: float | None) -> bool:
-        """Feed packets to the sink; return True when the connection ended under us."""
+        """Feed packets to the sink; return True when the connection ended under us.
+
+        Packets go straight to the sink from the client's reader (a callback: no queue,
+        no await per packet); this coroutine only waits for the end, a stop or the deadline.
+        """
+        stream.on_packet(self._on_packet)
+        ender = asyncio.ensure_future(stream.__anext__())  # finishes when the stream ends
         stopper = asyncio.ensure_future(self._stop.wait())
         try:
-            while True:
-                timeout = None if deadline is None else deadline - time.monotonic()
-                if timeout is not None and timeout <= 0:
-                    return False
-                getter = asyncio.ensure_future(stream.__anext__())
-                done, _ = await asyncio.wait({getter, stopper}, timeout=timeout,
-                                             return_when=asyncio.FIRST_COMPLETED)
-                if getter not in done:
-                    getter.cancel()
-                    with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
-                        await getter
-                    self._drain(stream)
-                    return False
-                try:
-                    packet = getter.result()
-                except StopAsyncIteration:
-                    return not self._stop.is_set()
-                self.sink.accept(packet)
-                self._drain(stream)
-                self._progress.set()
+            timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
+            done, _ = await asyncio.wait({ender, stopper}, timeout=timeout,
+                                         return_when=asyncio.FIRST_COMPLETED)
+            if self._error is not None:
+                raise self._error
+            return ender in done and not self._stop.is_set()
         finally:
-            stopper.cancel()
+            for fut in (ender, stopper):
+                fut.cancel()
+            await asyncio.gather(ender, stopper, return_exceptions=True)
 
-    def _drain(self, stream) -> None:
-        """Take every packet already queued without awaiting (cheap under load)."""
-        queue = stream._queue
-        while queue:
-            self.sink.accept(queue.popleft())
+    def _on_packet(self, packet: StreamPacket) -> None:
+        if self._error is not None:
+            return
+        try:
+            self.sink.accept(packet)
+        except Exception as exc:  # e.g. a full disk: stop recording and say why
+            self._error = exc
+            self._stop.set()
         self._progress.set()
 
     def _finish_summary(self, wall_s: float) -> None:
