@@ -68,7 +68,8 @@ def record(
     try:
         summary = asyncio.run(_run(recorder, duration))
     except (RecorderError, AstcomError, OSError) as exc:
-        code = 1 if isinstance(exc, AstcomError) else 2
+        # 1: the endpoint refused (a wire error); 2: our mistake or no connection at all
+        code = 1 if isinstance(exc, AstcomError) and not isinstance(exc, ConnectionError) else 2
         raise _fail(f"{url}: {exc}", code) from None
     summary.store = ", ".join(str(s) for s in specs)
     if json_out:

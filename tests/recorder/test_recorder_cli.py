@@ -1,0 +1,134 @@
+"""`vs record`, `vs data` and `vs experiment` as a user runs them, with their errors."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from recorder_helpers import free_port
+from scipy.io import loadmat
+from typer.testing import CliRunner
+
+from virtualstar.cli.main import app
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def device_url():
+    """Serve the example device (1 kHz, real time) on a loopback TCP port."""
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "astcom_client.example_device",
+                             f"tcp://127.0.0.1:{port}", "--duration", "60"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            break
+        except OSError:
+            assert time.monotonic() < deadline and proc.poll() is None, "device did not start"
+            time.sleep(0.05)
+    yield f"tcp://127.0.0.1:{port}"
+    proc.terminate()
+    proc.wait(10)
+
+
+@pytest.fixture(scope="module")
+def recorded(device_url, tmp_path_factory):
+    store = tmp_path_factory.mktemp("rec") / "store"
+    res = runner.invoke(app, ["record", device_url, "counter", "wave.sine", "--rate", "500",
+                              "--duration", "1.2", "--store", f"parquet:{store}", "--json"])
+    assert res.exit_code == 0, res.output
+    return store, json.loads(res.stdout)
+
+
+def test_vs_record_writes_every_sample_and_reports_in_json(recorded):
+    store, doc = recorded
+    assert doc["names"] == ["counter", "wave.sine"] and doc["rate_hz"] == 500
+    assert doc["lost"] == 0 and doc["gaps"] == [] and doc["samples"] > 400
+    res = runner.invoke(app, ["data", "info", str(store), "--json"])
+    assert res.exit_code == 0, res.output
+    info = json.loads(res.stdout)
+    assert info["samples"] == doc["samples"]
+    assert [s["name"] for s in info["signals"]] == ["counter", "wave.sine"]
+
+
+def test_vs_data_query_gives_a_full_rate_window_and_an_envelope(recorded):
+    store, _ = recorded
+    res = runner.invoke(app, ["data", "query", f"parquet:{store}", "--from", "+0.1", "--to", "+0.2",
+                              "--names", "counter", "--json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)
+    assert doc["names"] == ["counter"] and len(doc["t_us"]) == 50  # 0.1 s at 500 Hz
+    assert np.all(np.diff(doc["values"]["counter"]) == 2)  # every second tick of 1 kHz
+    assert np.all(np.diff(doc["t_us"]) == 2000)
+    res = runner.invoke(app, ["data", "query", str(store), "--decimate", "4", "--json"])
+    env = json.loads(res.stdout)
+    assert 1 <= len(env["t_us"]) <= 4 and sum(env["n"]) > 400
+    assert min(env["min"]["wave.sine"]) >= -1 and max(env["max"]["wave.sine"]) <= 1
+    res = runner.invoke(app, ["data", "query", str(store), "--from", "+0", "--to", "+0.01", "--csv"])
+    lines = res.stdout.strip().splitlines()
+    assert lines[0] == "t_us,counter,wave.sine" and len(lines) == 6
+
+
+def test_vs_data_plot_and_export_write_their_files(recorded, tmp_path):
+    store, doc = recorded
+    res = runner.invoke(app, ["data", "plot", str(store), "-o", str(tmp_path / "png")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "png" / "fig6_overview.png").stat().st_size > 10_000
+    assert (tmp_path / "png" / "fig7_first_2s.png").stat().st_size > 10_000
+    res = runner.invoke(app, ["data", "export", str(store), "--csv", str(tmp_path / "a.csv"),
+                              "--mat", str(tmp_path / "a.mat")])
+    assert res.exit_code == 0, res.output
+    assert len((tmp_path / "a.csv").read_text().splitlines()) == doc["samples"] + 1
+    mat = loadmat(tmp_path / "a.mat")
+    assert mat["counter"].size == doc["samples"] and mat["wave_sine"].size == doc["samples"]
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--store", "mongo:x"], "unknown store kind 'mongo'"),
+    (["--rate", "-5"], "--rate -5.0: expected a positive"),
+    (["--duration", "0"], "--duration 0.0: expected a positive"),
+])
+def test_vs_record_rejects_bad_options_clearly(device_url, tmp_path, args, message):
+    res = runner.invoke(app, ["record", device_url, "counter", *args])
+    assert res.exit_code == 2 and message in res.stderr
+
+
+def test_vs_record_names_an_unknown_signal_and_an_unreachable_endpoint(device_url, tmp_path):
+    res = runner.invoke(app, ["record", device_url, "nope", "--duration", "1",
+                              "--store", str(tmp_path / "s")])
+    assert res.exit_code == 2 and "no signal nope" in res.stderr
+    res = runner.invoke(app, ["record", f"tcp://127.0.0.1:{free_port()}", "counter",
+                              "--duration", "1", "--store", str(tmp_path / "s")])
+    assert res.exit_code == 2 and "tcp://127.0.0.1" in res.stderr
+
+
+def test_vs_data_rejects_a_missing_store_and_bad_bounds(recorded, tmp_path):
+    store, _ = recorded
+    res = runner.invoke(app, ["data", "query", str(tmp_path / "nothing")])
+    assert res.exit_code == 2 and "does not exist" in res.stderr
+    res = runner.invoke(app, ["data", "query", str(store), "--from", "yesterday"])
+    assert res.exit_code == 2 and "--from 'yesterday'" in res.stderr
+    res = runner.invoke(app, ["data", "query", str(store), "--from", "+1", "--to", "+0.5"])
+    assert res.exit_code == 2 and "empty window" in res.stderr
+    res = runner.invoke(app, ["data", "query", str(store), "--names", "counter,bogus"])
+    assert res.exit_code == 2 and "unknown signal(s) bogus" in res.stderr
+
+
+def test_vs_experiment_sine_runs_a_short_night_and_reports_json(tmp_path):
+    res = runner.invoke(app, ["experiment", "sine", "--axis", "az", "--hours", "0.005",
+                              "--record-hz", "1000", "--out", str(tmp_path / "x"), "--json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)
+    assert doc["lost"] == 0 and doc["samples_per_signal"] >= 18_000
+    assert doc["names"] == ["axis.az.position", "axis.az.current", "axis.az.error_arcsec"]
+    assert all((tmp_path / "x" / p).exists() for p in ("fig6_overview.png", "fig7_first_2s.png"))
+    res = runner.invoke(app, ["experiment", "sine", "--axis", "ra", "--out", str(tmp_path / "y")])
+    assert res.exit_code == 2 and "expected az or el" in res.stderr
