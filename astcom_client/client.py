@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import ssl
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -34,11 +35,14 @@ from .commands import (
 )
 from .exceptions import AstcomError, ConnectionClosed, Forbidden
 from .protocol import ClientConnection, ClientState, DataReceived, Failure, Ready, Reply
+from .push_transport import PushTransport, open_push_transport
 from .registry import VariableInfo
-from .transports import Transport, client_ssl_context, open_transport
+from .transports import Transport, client_ssl_context
 from .url import parse_url
 
 __all__ = ["Client", "MessageInfo", "Stream", "StreamPacket"]
+
+log = logging.getLogger("astcom.client")
 
 DEFAULT_TIMEOUT_S = 10.0
 
@@ -151,12 +155,15 @@ class Stream:
         self.samples += packet.n
         self.packets += 1
         if self._packet_callbacks or self._sample_callbacks:
-            for cb in self._packet_callbacks:
-                cb(packet)
-            if self._sample_callbacks:
-                for t_us, row in zip(packet.t_us.tolist(), values, strict=True):
-                    for scb in self._sample_callbacks:
-                        scb(t_us, row)
+            try:
+                for cb in self._packet_callbacks:
+                    cb(packet)
+                if self._sample_callbacks:
+                    for t_us, row in zip(packet.t_us.tolist(), values, strict=True):
+                        for scb in self._sample_callbacks:
+                            scb(t_us, row)
+            except Exception:  # a user's callback must not take the connection down
+                log.exception("stream %d: a callback raised; the stream goes on", self.msg)
             return
         if len(self._queue) == self._queue.maxlen:
             dropped = self._queue.popleft()
@@ -244,8 +251,8 @@ class Client:
         where = parse_url(url)
         if where.secure and ssl_context is None:
             ssl_context = client_ssl_context(cafile)
-        transport = await open_transport(where, max_frame_bytes=max_frame_bytes,
-                                         ssl_context=ssl_context, timeout_s=timeout_s)
+        transport = await open_push_transport(where, max_frame_bytes=max_frame_bytes,
+                                              ssl_context=ssl_context, timeout_s=timeout_s)
         return await cls.open(transport, password=password, role=role, name=name,
                               timeout_s=timeout_s, max_frame_bytes=max_frame_bytes,
                               queue_packets=queue_packets)
@@ -260,7 +267,10 @@ class Client:
                                   max_str_bytes=max_frame_bytes))
         conn = ClientConnection(codec, password=password, role=role, client_name=name)
         client = cls(transport, conn, timeout_s=timeout_s, queue_packets=queue_packets)
-        client._reader = asyncio.get_running_loop().create_task(client._read_loop())
+        if isinstance(transport, PushTransport):
+            transport.start(client._on_frame, client._on_closed)
+        else:
+            client._reader = asyncio.get_running_loop().create_task(client._read_loop())
         conn.start()
         try:
             await client._flush()
@@ -418,6 +428,18 @@ class Client:
             if self._closed_error is None:
                 self._closed_error = self._last_error or error
             self._fail_all(self._closed_error)
+
+    def _on_frame(self, data: bytes) -> None:
+        """Handle one frame pushed by a PushTransport (runs inside data_received)."""
+        for event in self._conn.receive_frame(data):
+            self._dispatch(event)
+        while (frame := self._conn.next_frame()) is not None:
+            self._transport.write(frame)  # type: ignore[attr-defined]  # handshake replies
+
+    def _on_closed(self, reason: AstcomError) -> None:
+        if self._closed_error is None:
+            self._closed_error = self._last_error or reason
+        self._fail_all(self._closed_error)
 
     def _dispatch(self, event: Any) -> None:
         if isinstance(event, DataReceived):

@@ -4,7 +4,7 @@ import asyncio
 
 import numpy as np
 import pytest
-from astcom_helpers import RawPeer, memory_client, memory_session, run, served, settle
+from astcom_helpers import PASSWORDS, RawPeer, memory_client, memory_session, run, served, settle
 
 from astcom_client import InvalidValue
 from astcom_client.commands import StreamStop
@@ -180,4 +180,27 @@ def test_endpoint_drops_oldest_packets_for_a_stalled_client() -> None:
             gap_samples = 10 * sum(b - a - 1 for a, b in zip(seqs, seqs[1:], strict=False))
             assert gap_samples == stalled["dropped_samples"]
             await healthy.close()
+    run(main())
+
+
+def test_a_raising_callback_does_not_break_the_connection() -> None:
+    async def main() -> None:
+        async with served("tcp://127.0.0.1:0") as (device, endpoint, url):
+            from astcom_client import Client
+
+            client = await Client.connect(url, password=PASSWORDS["operator"])
+            stream = await client.stream(["counter"], rate_hz=RATE_HZ)
+            calls = []
+
+            def broken(packet) -> None:
+                calls.append(packet.seq)
+                raise RuntimeError("bug in user code")
+
+            stream.on_packet(broken)
+            for _ in range(3):
+                device.advance(endpoint, 20)
+                await asyncio.sleep(0.02)
+            assert calls and client.connected
+            assert await client.invoke("math.add", 1.0, 2.0) == 3.0
+            await client.close()
     run(main())
