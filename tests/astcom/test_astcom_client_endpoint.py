@@ -13,6 +13,7 @@ from astcom_client import (
     Forbidden,
     InvalidValue,
     NotWritable,
+    TooMany,
     UnknownName,
 )
 
@@ -137,6 +138,24 @@ def test_every_command_works_over_a_real_loopback_socket(scheme: str) -> None:
                 assert np.all(np.diff(packet.column("counter")) == 2)
                 await stream.stop()
                 assert (await client.stats())["clients"] == 1
-            await asyncio.sleep(0.05)
-            assert endpoint.stats()["clients"] == 0
+            while endpoint.stats()["clients"]:  # the session ends after the client's BYE
+                await asyncio.sleep(0.01)
+    run(main())
+
+
+@pytest.mark.parametrize("scheme", ["ws", "tcp"])
+def test_a_socket_client_learns_why_it_is_refused_or_dropped(scheme: str) -> None:
+    async def main() -> None:
+        async with served(f"{scheme}://127.0.0.1:0", max_clients=1) as (_, endpoint, url):
+            with pytest.raises(AuthenticationFailed):
+                await Client.connect(url, password="wrong")
+            while endpoint.stats()["clients"]:  # the refused session is still ending
+                await asyncio.sleep(0.01)
+            first = await Client.connect(url, password=PASSWORDS["observer"])
+            with pytest.raises(TooMany, match="at most 1"):
+                await Client.connect(url, password=PASSWORDS["observer"])
+            await endpoint.close()
+            with pytest.raises(ConnectionError):
+                await first.read(["counter"])
+            assert not first.connected
     run(main())
