@@ -1,0 +1,136 @@
+"""Benchmark: the whole-night experiment (goal: 12 h of 10 kHz control, 3 signals at 1 kHz,
+in ≤ 10 min; store ≤ 0.5 GB; 2-s window query ≤ 50 ms; whole-night overview ≤ 2 s).
+
+Runs `vs experiment sine` (emulator in this process, simulated time, recording through
+the ASTCom stream path into Parquet), then measures the store and the two queries. Each
+figure is printed beside a reference measured in the same run:
+  * store size — the same samples as raw float64/int64, and as CSV (the first hour is
+    written as CSV and scaled to the whole run);
+  * 2-s window — reading the whole hourly file that holds the window with pyarrow;
+  * overview — min/max computed from every sample (the whole store read block by block).
+
+    .venv/bin/python benchmarks/bench_recorder_night.py [--hours 12] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from virtualstar.recorder.decimation import envelope
+from virtualstar.recorder.experiment import SineExperiment, run_sine_experiment
+from virtualstar.recorder.export import write_csv
+from virtualstar.recorder.parquet_store import ParquetStoreReader
+
+GOAL_WALL_S = 600.0
+GOAL_STORE_BYTES = 0.5e9
+GOAL_WINDOW_S = 0.050
+GOAL_OVERVIEW_S = 2.0
+
+
+def _size(path: Path) -> int:
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+
+
+def _row(what: str, ours: str, goal: str, reference: str) -> None:
+    print(f"{what:<26} {ours:>14} {goal:>12}   {reference}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hours", type=float, default=12.0, help="simulated hours (paper: 12)")
+    parser.add_argument("--out", type=Path, default=None, help="keep the store and plots here")
+    args = parser.parse_args()
+    out = args.out or Path(tempfile.mkdtemp(prefix="bench-night-"))
+    scale = 12.0 / args.hours
+    try:
+        last = [0.0]
+
+        def progress(sim_s: float, total_s: float, speed: float) -> None:
+            if time.monotonic() - last[0] > 30:
+                last[0] = time.monotonic()
+                print(f"  … {sim_s / 3600:.2f} h of {total_s / 3600:.2f} h simulated, ×{speed:.0f}",
+                      flush=True)
+
+        result = asyncio.run(run_sine_experiment(SineExperiment(hours=args.hours), out,
+                                                 on_progress=progress))
+        store = result.store
+        reader = ParquetStoreReader(store)
+        n = reader.count()
+        names = reader.signals()
+        store_bytes = _size(store)
+        raw_bytes = n * (8 + 8 * len(names))
+        t0, t1 = reader.time_range()
+
+        # CSV reference: the first hour (or the whole run if shorter), scaled to the run
+        csv_path = out / "first_hour.csv"
+        first = reader.window(t0, t0 + 3_600_000_000)
+        write_csv([first], first.names, csv_path)
+        csv_bytes = csv_path.stat().st_size * n / max(1, len(first))
+        csv_path.unlink()
+        del first
+
+        # 2-s window in the middle of the night, fresh reader each time (cold metadata)
+        mid = (t0 + t1) // 2
+        times = []
+        for k in range(7):
+            a = mid + k * 97_000_000
+            s = time.perf_counter()
+            block = ParquetStoreReader(store).window(a, a + 2_000_000)
+            times.append(time.perf_counter() - s)
+            assert len(block) >= 1999
+        t_window = statistics.median(times)
+        f_mid = next(f for f in reader.sample_files
+                     if pq.ParquetFile(f).metadata.row_group(0).column(0).statistics.min <= mid
+                     <= pq.ParquetFile(f).metadata.row_group(
+                         pq.ParquetFile(f).metadata.num_row_groups - 1).column(0).statistics.max)
+        s = time.perf_counter()
+        whole = pq.read_table(f_mid)
+        t_file = time.perf_counter() - s
+        del whole
+
+        s = time.perf_counter()
+        env = ParquetStoreReader(store).envelope(t0, t1 + 1, None, 2000)
+        t_overview = time.perf_counter() - s
+        s = time.perf_counter()
+        parts = [envelope(b.t_us, b.columns, env.bucket_us, t0)
+                 for b in reader.iter_blocks(batch_rows=1 << 20)]
+        t_full = time.perf_counter() - s
+        full_max = max(float(np.max(p.maxs[names[1].name])) for p in parts)
+        assert np.isclose(float(np.max(env.maxs[names[1].name])), full_max)
+
+        rec = result.recording
+        print(f"sine experiment: {args.hours:g} h simulated, {len(names)} signals at "
+              f"{rec.rate_hz:g} Hz, {n} samples per signal ({n * len(names)} values), "
+              f"lost {rec.lost}, {result.ticks} ticks of 10 kHz control")
+        print(f"{'':<26} {'ours':>14} {'goal':>12}   reference (same run)")
+        _row("wall time", f"{result.wall_s:.1f} s", f"{GOAL_WALL_S / scale:.0f} s",
+             f"emulator step+publish {result.timings_s['emulator_step']:.1f} s, recorder/loop "
+             f"{result.timings_s['loop'] - result.timings_s['emulator_step']:.1f} s, plots "
+             f"{result.timings_s.get('plots', 0):.1f} s; ×{result.speed:.0f} real time")
+        _row("store size", f"{store_bytes / 1e6:.1f} MB", f"{GOAL_STORE_BYTES / scale / 1e6:.0f} MB",
+             f"raw int64+float64 {raw_bytes / 1e6:.1f} MB, CSV ≈ {csv_bytes / 1e6:.1f} MB "
+             f"({store_bytes / n:.2f} B per row of t_us + {len(names)} values)")
+        _row("2-s window (2000 rows)", f"{t_window * 1e3:.1f} ms", f"{GOAL_WINDOW_S * 1e3:.0f} ms",
+             f"reading its whole hourly file: {t_file * 1e3:.0f} ms")
+        _row("whole-night overview", f"{t_overview * 1e3:.0f} ms", f"{GOAL_OVERVIEW_S * 1e3:.0f} ms",
+             f"min/max from every sample: {t_full * 1e3:.0f} ms ({len(env)} buckets of "
+             f"{env.bucket_us / 1e6:g} s)")
+        if args.hours != 12:
+            print(f"(goals for wall time and size scaled to {args.hours:g} h; the full run: --hours 12)")
+        print(f"plots: {', '.join(str(p) for p in result.plots)}")
+    finally:
+        if args.out is None:
+            shutil.rmtree(out, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
