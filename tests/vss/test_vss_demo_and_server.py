@@ -1,0 +1,99 @@
+"""`vs demo --json`, `vs server` as a process, and TimeS putting a mount clock on UTC."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from typer.testing import CliRunner
+from vss_rig import Rig
+
+from virtualstar.cli.main import app
+from virtualstar.vss_client import call_server
+
+runner = CliRunner()
+
+
+def test_demo_json_reports_slew_sidereal_and_satellite_phases_and_writes_a_plot(tmp_path):
+    res = runner.invoke(app, ["demo", "--json", "--speed", "40", "--sidereal", "5",
+                              "--out", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)
+    names = [p["name"] for p in doc["phases"]]
+    for word in ("slew", "sidereal", "satellite"):
+        assert any(word in n for n in names), names
+    for p in doc["phases"]:
+        assert p["rms_arcsec"] >= 0 and p["peak_arcsec"] >= p["rms_arcsec"]
+    sat = next(p for p in doc["phases"] if "satellite" in p["name"])
+    assert sat["duration_s"] > 300  # the whole pass, from 5 deg to 5 deg
+    assert sat["rms_arcsec"] <= 2.0
+    png = Path(doc["plot"])
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_timesync_puts_a_mount_clock_three_seconds_off_back_on_utc():
+    now_us = time.time_ns() // 1000
+    rig = Rig(start_us=now_us - 3_000_000, speed=1.0, timesync_period_s=0.5).start()
+    try:
+        deadline = time.monotonic() + 8.0
+        st = {}
+        while time.monotonic() < deadline:
+            st = call_server(rig.url, "status")
+            ts = st["time_sync"]
+            if ts["syncs"] and ts["offset_us"] is not None and abs(ts["offset_us"]) < 50_000:
+                break
+            time.sleep(0.2)
+        ts = st["time_sync"]
+        assert ts["mode"] == "sync" and ts["armed"] >= 1 and ts["syncs"] >= 1
+        # the mount clock now reads UTC (to the host's and the loop's jitter)
+        assert abs(ts["offset_us"]) < 50_000, ts
+        assert abs(st["mount_time_us"] - time.time_ns() // 1000) < 200_000
+    finally:
+        rig.close()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_vs_server_with_the_embedded_emulator_serves_clients_until_terminated():
+    port = _free_port()
+    url = f"ws://127.0.0.1:{port}"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
+         "--emulator", "--speed", "10", "--start", "2024-05-18T19:40:00Z", "--listen", url],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        line = proc.stdout.readline()
+        assert url in line, (line, proc.stderr.read() if proc.poll() is not None else "")
+        for _ in range(100):
+            res = runner.invoke(app, ["status", "--server", url, "--json"])
+            if res.exit_code == 0 and json.loads(res.stdout)["connected"]:
+                break
+            time.sleep(0.05)
+        st = json.loads(res.stdout)
+        assert st["simulated"] and st["speed"] == 10
+        assert st["mount_time_utc"].startswith("2024-05-18T19:4")
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    assert "stopped" in out
+
+
+def test_vs_server_refuses_contradictory_options():
+    res = runner.invoke(app, ["server", "--emulator", "--mount", "ws://127.0.0.1:1"])
+    assert res.exit_code == 2 and "either --emulator or --mount" in res.stderr
+    res = runner.invoke(app, ["server", "--mount", "ws://127.0.0.1:1", "--speed", "5"])
+    assert res.exit_code == 2 and "only apply to --emulator" in res.stderr
+    res = runner.invoke(app, ["server", "--emulator", "--start", "yesterday"])
+    assert res.exit_code == 2 and "ISO" in res.stderr
