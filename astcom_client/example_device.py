@@ -62,6 +62,7 @@ class ExampleDevice:
         self.power = Power()
         self.state = _State()
         self.calls = 0
+        self._counter_base = 0
         self.collection = self._build_collection(n_extra_signals)
 
     def _build_collection(self, n_extra: int) -> Collection:
@@ -111,8 +112,6 @@ class ExampleDevice:
         self.calls += 1
         reached, self._counter_base = self.tick, self.tick
         return reached
-
-    _counter_base = 0
 
     @staticmethod
     def _fail() -> None:
