@@ -141,6 +141,8 @@ class Stream:
         self._sample_callbacks.append(callback)
 
     def _receive(self, data: DataFrame) -> None:
+        if data.period_ticks != self.period_ticks:
+            return  # still in flight from this message's previous rate
         values, arrays = self._assemble(data)
         lost = 0
         if self._next_tick is not None and data.first_tick > self._next_tick:

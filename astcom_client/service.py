@@ -141,6 +141,8 @@ class StreamGroup:
         start = -(-first_tick // k) * k  # first tick on the absolute k-grid
         if start >= first_tick + n_ticks:
             return
+        if self.fill and start != self.packet_tick + self.fill * k:
+            self._flush(codec, self.fill)  # the device skipped ticks: no packet spans a gap
         rows = np.arange(start - first_tick, n_ticks, k)
         current = [self._current_row(g, trace is None) for g in self.groups]
         done = 0
@@ -160,7 +162,7 @@ class StreamGroup:
             self.fill += take
             done += take
             if self.fill == self.spp:
-                self._flush(codec)
+                self._flush(codec, self.spp)
 
     def _current_row(self, group: _Group, include_traced: bool) -> np.ndarray | None:
         getters = group.getters if include_traced else group.untraced
@@ -172,14 +174,14 @@ class StreamGroup:
             row[pos:pos + width] = np.ravel(value) if width > 1 else value
         return row
 
-    def _flush(self, codec: Codec) -> None:
+    def _flush(self, codec: Codec, n: int) -> None:
+        arrays = [g.buf if n == self.spp else g.buf[:n] for g in self.groups]
         frame = codec.encode(data_frame(self.message.msg, self.seq, self.packet_tick,
-                                        self.packet_t_us, self.period_us, self.k, self.spp,
-                                        [g.buf for g in self.groups]))
+                                        self.packet_t_us, self.period_us, self.k, n, arrays))
         self.seq += 1
         self.fill = 0
         for conn in self.subscribers.values():
-            conn.push_stream(frame, self.spp)
+            conn.push_stream(frame, n)
 
 
 @dataclass

@@ -204,3 +204,20 @@ def test_a_raising_callback_does_not_break_the_connection() -> None:
             assert await client.invoke("math.add", 1.0, 2.0) == 3.0
             await client.close()
     run(main())
+
+
+def test_a_gap_in_the_device_ticks_ends_the_packet_and_shows_as_lost_samples() -> None:
+    async def main() -> None:
+        async with memory_session() as (device, endpoint, client):
+            stream = await client.stream(["counter"], rate_hz=RATE_HZ)  # 20 samples per packet
+            device.advance(endpoint, 30)
+            device.tick += 100  # the device skips 100 ticks (e.g. a paused simulation)
+            device.advance(endpoint, 30)
+            await settle()
+            packets = list(stream._queue)
+        ticks = [p.ticks.tolist() for p in packets]
+        assert ticks[0] == list(range(20)) and ticks[1] == list(range(20, 30))
+        assert ticks[2] == list(range(130, 150)) and packets[2].lost == 100
+        for packet in packets:  # counter == tick everywhere: no packet spans the gap
+            np.testing.assert_array_equal(packet.column("counter"), packet.ticks)
+    run(main())
