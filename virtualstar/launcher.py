@@ -30,17 +30,25 @@ class EmbeddedEmulator:
 async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
                          url: str = "ws://127.0.0.1:0", az_deg: float = 0.0, el_deg: float = 20.0,
                          params: dict[str, float] | None = None,
-                         password: str | None = None) -> EmbeddedEmulator:
+                         password: str | None = None,
+                         geometry_arcsec: dict[str, float] | None = None,
+                         seeing_arcsec: float | None = None) -> EmbeddedEmulator:
     """Start the emulator on this event loop and return where it listens.
 
     speed: 1 real time, X times real time (simulated time); start_us: mount time at
-    start (µs since 1970 UTC, None = now). The hidden geometry is the perfect one.
+    start (µs since 1970 UTC, None = now); geometry_arcsec: the hidden TPOINT terms
+    ({"ia": 120.0, ...}, default perfect); seeing_arcsec: guide-camera noise.
     """
-    from mount_emulator import EmulatorConfig, MountEmulator
+    from mount_emulator import EmulatorConfig, Geometry, MountEmulator
 
+    extra = {}
+    if geometry_arcsec:
+        extra["geometry"] = Geometry.from_mapping(geometry_arcsec, where="geometry_arcsec")
+    if seeing_arcsec is not None:
+        extra["seeing_arcsec"] = seeing_arcsec
     config = EmulatorConfig(speed=speed, start_us=start_us, az_deg=az_deg, el_deg=el_deg,
                             params=dict(params or {}),
-                            passwords={"operator": password} if password else None)
+                            passwords={"operator": password} if password else None, **extra)
     emulator = MountEmulator(config)
     emulator.model.run(0)  # compile (or load) the step now, not inside the served loop
     bound = await emulator.start(url)

@@ -110,3 +110,18 @@ def test_tracking_follows_the_star_on_the_sky_while_the_server_tracks(rig):
     assert math.hypot(d_ra, d_dec) < 15.0  # proper motion since 1991.25 is ~7"
     res = runner.invoke(app, ["stop", "--server", rig.url, "--json"])
     assert res.exit_code == 0 and json.loads(res.stdout)["mount_state"] == "holding"
+
+
+def test_watch_prints_live_status_lines_and_park_stows_the_mount_with_drives_off(rig):
+    res = runner.invoke(app, ["watch", "--count", "2", "--interval", "0.1", "--json",
+                              "--server", rig.url])
+    assert res.exit_code == 0, res.output
+    lines = [json.loads(x) for x in res.stdout.splitlines() if x.strip()]
+    statuses = [x["status"] for x in lines if "status" in x]
+    assert len(statuses) == 2 and all(s["connected"] for s in statuses)
+    res = runner.invoke(app, ["park", "--server", rig.url, "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["kind"] == "park"
+    values, _ = rig.run(rig.mount_read(["axis.el.position_deg", "mount.state_name"]))
+    assert abs(values["axis.el.position_deg"] - 85.0) < 1 / 3600
+    assert values["mount.state_name"] == "OFF"

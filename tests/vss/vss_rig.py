@@ -24,11 +24,13 @@ class Rig:
     """Emulator (simulated time) + VSS, started on a private event loop."""
 
     def __init__(self, *, start_us: int, site: Site | None = None, speed: float = SPEED,
+                 emulator_options: dict[str, Any] | None = None,
                  **telescope_options: Any) -> None:
         self.start_us = start_us
         self.site = site
         self.speed = speed
         self.options = telescope_options
+        self.emulator_options = emulator_options or {}
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
         self.thread.start()
@@ -42,7 +44,8 @@ class Rig:
 
     def start(self, listen: str = "ws://127.0.0.1:0") -> Rig:
         async def go() -> None:
-            self.emulator = await start_emulator(speed=self.speed, start_us=self.start_us)
+            self.emulator = await start_emulator(speed=self.speed, start_us=self.start_us,
+                                                 **self.emulator_options)
             await self.start_server(listen)
 
         self.run(go())
