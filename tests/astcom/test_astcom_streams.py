@@ -221,3 +221,25 @@ def test_a_gap_in_the_device_ticks_ends_the_packet_and_shows_as_lost_samples() -
         for packet in packets:  # counter == tick everywhere: no packet spans the gap
             np.testing.assert_array_equal(packet.column("counter"), packet.ticks)
     run(main())
+
+
+def test_a_second_connection_can_carry_the_stream_alone_with_the_shared_message_id() -> None:
+    async def main() -> None:
+        async with memory_session() as (device, endpoint, control):
+            streamer = await memory_client(endpoint, name="recorder")
+            names = ["counter", "wave.sine"]
+            assert (await control.define(names)).msg == (await streamer.define(names)).msg
+            stream = await streamer.stream(names, rate_hz=500)
+            await control.write({"wave.amplitude": 2.0})  # requests on the first connection
+            device.advance(endpoint, 100)
+            await settle()
+            assert stream.samples == 50
+            stats = await control.stats()
+            by_name = {c["name"]: c for c in stats["per_client"]}
+            assert by_name["recorder"]["streams"] == 1 and by_name["astcom-client"]["streams"] == 0
+            await streamer.undefine(names)
+            assert endpoint.stats()["messages"] == 2  # still held by the first connection
+            await control.undefine(names)
+            assert endpoint.stats()["messages"] == 1  # ["wave.amplitude"] from the write
+            await streamer.close()
+    run(main())
