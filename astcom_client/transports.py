@@ -1,8 +1,9 @@
 """Thin asyncio byte pumps: each moves whole frames between a socket and the sans-I/O core.
 
-WebSocket (`websockets`): one binary WebSocket message per frame. TCP: length-prefixed
-frames (`framing`). TLS wraps either (`wss://`, `tls://`) through Python's `ssl`. A
-`memory_pair` joins a client and an endpoint in one process without sockets.
+Endpoint side: WebSocket (`websockets`): one binary WebSocket message per frame; TCP:
+length-prefixed frames (`framing`); TLS wraps either (`wss://`, `tls://`) through
+Python's `ssl`. Client side sockets: `push_transport`. A `memory_pair` joins a client
+and an endpoint in one process without sockets.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ from collections.abc import Awaitable, Callable
 from typing import Protocol
 
 import websockets
-from websockets.asyncio.client import connect as ws_connect
 from websockets.asyncio.server import ServerConnection as WsServerConnection
 from websockets.asyncio.server import serve as ws_serve
 
@@ -30,7 +30,6 @@ __all__ = [
     "WebSocketTransport",
     "client_ssl_context",
     "memory_pair",
-    "open_transport",
     "server_ssl_context",
     "start_server",
 ]
@@ -227,22 +226,3 @@ async def start_server(url: str | EndpointUrl, on_connection: Callable[[Transpor
             await asyncio.wait_for(tcp_server.wait_closed(), 5.0)
 
     return ServerHandle(str(EndpointUrl(where.scheme, where.host, port)), close_tcp)
-
-
-async def open_transport(url: str | EndpointUrl, *, max_frame_bytes: int,
-                         ssl_context: ssl.SSLContext | None = None,
-                         timeout_s: float = 10.0) -> Transport:
-    """Connect to `url`; raise ConnectionClosed (a ConnectionError) when it cannot."""
-    where = parse_url(url) if isinstance(url, str) else url
-    ctx = (ssl_context or client_ssl_context()) if where.secure else None
-    try:
-        if where.websocket:
-            ws = await ws_connect(str(where) if where.path == "/" else str(where), ssl=ctx,
-                                  max_size=max_frame_bytes, compression=None,
-                                  open_timeout=timeout_s, proxy=None)
-            return WebSocketTransport(ws)
-        reader, writer = await asyncio.wait_for(
-            asyncio.open_connection(where.host, where.port, ssl=ctx), timeout_s)
-        return TcpTransport(reader, writer, max_frame_bytes)
-    except (OSError, TimeoutError, websockets.InvalidHandshake, websockets.InvalidURI) as exc:
-        raise ConnectionClosed(f"cannot connect to {where}: {exc}") from None
