@@ -165,6 +165,7 @@ class Endpoint:
             if waker:
                 waker.set()
         for task in list(self._sessions):
+            # wait_for cancels a session still stuck on a peer that stopped reading.
             with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError, Exception):
                 await asyncio.wait_for(task, 2.0)
 
@@ -219,7 +220,10 @@ class Endpoint:
                 if conn.role:
                     timer.cancel()
                 # Replies go out from here, without a hop through the writer task (latency).
-                await self._send_control(conn, transport, control_lock)
+                try:
+                    await self._send_control(conn, transport, control_lock)
+                except ConnectionClosed:
+                    break
                 if conn.state is ServerState.CLOSED:
                     wake.set()
         finally:
@@ -270,7 +274,7 @@ class Endpoint:
                 wake.clear()
                 if conn.has_control:
                     await self._send_control(conn, transport, control_lock)
-                while (frame := conn.next_frame()) is not None:
+                while (frame := conn.next_stream()) is not None:
                     await transport.send(frame)
                 if conn.state is ServerState.CLOSED:
                     await self._send_control(conn, transport, control_lock)

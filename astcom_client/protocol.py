@@ -284,6 +284,12 @@ class ServerConnection:
             return self._stream.popleft()[0]
         return None
 
+    def next_stream(self) -> bytes | None:
+        """Return the next stream packet to send, or None."""
+        if self._stream and self.state is not ServerState.CLOSED:
+            return self._stream.popleft()[0]
+        return None
+
     def next_control(self) -> bytes | None:
         """Return the next reply frame to send, or None (stream packets stay queued)."""
         return self._control.popleft() if self._control else None
