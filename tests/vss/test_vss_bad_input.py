@@ -31,6 +31,8 @@ BAD_FRAMES = [
     ('{"id": 11, "cmd": "set_mode", "params": {"mode": "sleepy"}}', "bad_request", "'active'"),
     ('{"id": 12, "cmd": "load_model", "params": {"path": "/nonexistent/model.json"}}',
      "bad_request", "cannot load pointing model"),
+    ('{"id": 13, "cmd": "slew", "params": {"star": "Canopus"}}', "unreachable",
+     "below the elevation limit"),  # dec -52.7 never rises at latitude 52.4
 ]
 
 
@@ -95,3 +97,14 @@ def test_a_tle_without_the_named_satellite_lists_what_it_holds(rig, tmp_path):
     assert "ISS" in res.stderr
     res = runner.invoke(app, ["status", "--server", rig.url, "--json"])
     assert res.exit_code == 0 and json.loads(res.stdout)["connected"]
+
+
+def test_a_satellite_pass_beyond_the_allowed_wait_is_refused_with_its_start(rig):
+    from catalogs import sample_tle_path
+    from virtualstar.vss_client import VssRequestError, call_server
+
+    tle = sample_tle_path("stations").read_text(encoding="utf-8")
+    with pytest.raises(VssRequestError) as info:
+        call_server(rig.url, "track", {"tle": tle, "sat": "ISS", "max_wait_s": 10})
+    assert info.value.code == "unreachable"
+    assert "more than the 10 s allowed" in info.value.message

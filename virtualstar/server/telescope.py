@@ -40,10 +40,12 @@ from virtualstar.astro import (
     Satellite,
     Site,
     UtcTimes,
+    observe_mount_times,
     parse_radec,
     plan_slew,
     resolve_target,
     satellite_passes,
+    unwrap_azimuth,
 )
 from virtualstar.astro.exceptions import AstroError
 
@@ -465,6 +467,11 @@ class Telescope:
         self._phase(op, "joining" if phase == "tracking" else phase)
         return ramp.join_us, feeder
 
+    def _prep_s(self, slew_s: float) -> float:
+        """Return the mount seconds needed before a path can be joined after a slew of `slew_s`."""
+        cfg = self.config
+        return slew_s * 1.05 + 3.0 + cfg.start_lead_s + cfg.ramp_s
+
     async def _settle(self, op: Operation, join_us: int, slew_start_us: int) -> dict[str, Any]:
         await self.wait_until(join_us + int(self.config.settle_s * 1e6), op)
         s = self.errors.stats(join_us, join_us + int(self.config.settle_s * 1e6))
@@ -570,8 +577,7 @@ class Telescope:
 
         async def body(op: Operation) -> dict[str, Any]:
             await self._prepare()
-            az, _el, now = await self._positions()
-            need_s = 120.0  # slew + run-up before the pass, mount seconds
+            az, el, now = await self._positions()
             start = UtcTimes.from_unix_us(now)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -581,17 +587,23 @@ class Telescope:
             for p in passes:
                 if p.set is None:
                     continue
+                rise_us = int(p.rise.utc.to_unix_us()[0]) if p.rise else now
                 set_us = int(p.set.utc.to_unix_us()[0])
-                if set_us > now + int((need_s + 30.0) * 1e6):
+                begin = max(rise_us, now + int(self._prep_s(0.0) * 1e6))
+                if begin + 30_000_000 > set_us:
+                    continue
+                # time to slew from here to where the pass starts, run-up included
+                o = observe_mount_times(sat, np.array([begin], np.int64), cfg.site, self._eop)
+                to_az = float(unwrap_azimuth(o.az_rad, limits=self.limits, current_az_rad=az)[0])
+                slew_s = plan_slew(az, el, to_az, float(o.el_rad[0]), self.limits).duration_s
+                begin = max(begin, now + int(self._prep_s(slew_s) * 1e6))
+                if begin + 30_000_000 <= set_us:  # at least 30 s of the pass left to track
                     chosen = p
                     break
             if chosen is None:
                 raise TargetUnreachable(f"{sat.name} has no pass above "
                                         f"{self.limits.el_min_deg:g} deg in the next "
                                         f"{cfg.pass_search_s / 3600:g} h")
-            rise_us = int(chosen.rise.utc.to_unix_us()[0]) if chosen.rise else now
-            set_us = int(chosen.set.utc.to_unix_us()[0])
-            begin = max(rise_us, now + int(need_s * 1e6))
             if max_wait_s is not None and begin - now > max_wait_s * 1e6:
                 raise TargetUnreachable(f"the next pass of {sat.name} begins in "
                                         f"{(begin - now) / 1e6:.0f} s, more than the "

@@ -85,11 +85,25 @@ class TrackingErrorHistory:
         self.last_t_us = int(t[-1])
         self.last_sky_arcsec = float(math.sqrt(sky2[-1]))
 
-    def stats(self, from_us: int | None = None, to_us: int | None = None) -> ErrorStats:
-        """Return RMS and peak over bins whose start lies in [from_us, to_us)."""
+    def _select(self, from_us: int | None, to_us: int | None) -> list[list[float]]:
+        """Return the bins whose start lies in [from_us, to_us), oldest first.
+
+        Recent windows (the common case) are found scanning from the newest bin.
+        """
         lo = -(2**62) if from_us is None else int(from_us) // self.bin_us
         hi = 2**62 if to_us is None else -(-int(to_us) // self.bin_us)
-        sel = [b for b in self._bins if lo <= b[0] < hi]
+        sel = []
+        for b in reversed(self._bins):
+            if b[0] < lo:
+                break
+            if b[0] < hi:
+                sel.append(b)
+        sel.reverse()
+        return sel
+
+    def stats(self, from_us: int | None = None, to_us: int | None = None) -> ErrorStats:
+        """Return RMS and peak over bins whose start lies in [from_us, to_us)."""
+        sel = self._select(from_us, to_us)
         n = sum(b[1] for b in sel)
         if n == 0:
             return ErrorStats(0, math.nan, math.nan, math.nan, math.nan,
@@ -111,9 +125,7 @@ class TrackingErrorHistory:
     def series(self, from_us: int | None = None, to_us: int | None = None,
                max_points: int = 5000) -> dict[str, list]:
         """Return per-bin (t_us, rms, peak) in arcsec, decimated to at most `max_points`."""
-        lo = -(2**62) if from_us is None else int(from_us) // self.bin_us
-        hi = 2**62 if to_us is None else -(-int(to_us) // self.bin_us)
-        sel = [b for b in self._bins if lo <= b[0] < hi]
+        sel = self._select(from_us, to_us)
         step = max(1, math.ceil(len(sel) / max_points))
         out: dict[str, list] = {"t_us": [], "rms_arcsec": [], "peak_arcsec": []}
         for k in range(0, len(sel), step):
