@@ -132,3 +132,19 @@ def test_vs_experiment_sine_runs_a_short_night_and_reports_json(tmp_path):
     assert all((tmp_path / "x" / p).exists() for p in ("fig6_overview.png", "fig7_first_2s.png"))
     res = runner.invoke(app, ["experiment", "sine", "--axis", "ra", "--out", str(tmp_path / "y")])
     assert res.exit_code == 2 and "expected az or el" in res.stderr
+
+
+def test_vs_record_into_influxdb_and_vs_data_reads_it_back(device_url, influx, tmp_path):
+    store = f"influx:{influx.url}/cli"
+    res = runner.invoke(app, ["record", device_url, "counter", "--rate", "200", "--duration", "0.8",
+                              "--store", store, "--spool", str(tmp_path / "spool"), "--json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)
+    res = runner.invoke(app, ["data", "query", store, "--json"])
+    assert res.exit_code == 0, res.output
+    back = json.loads(res.stdout)
+    assert len(back["t_us"]) == doc["samples"] > 100
+    assert np.all(np.diff(back["values"]["counter"]) == 5)  # every 5th tick of 1 kHz
+    assert back["t_us"][0] == doc["first_t_us"] and back["t_us"][-1] == doc["last_t_us"]
+    res = runner.invoke(app, ["data", "info", store, "--json"])
+    assert json.loads(res.stdout)["samples"] == doc["samples"]
