@@ -34,10 +34,12 @@ class SimDevice:
                                     start_t_us=start_us)
         self.endpoint = Endpoint(self.device.collection,
                                  EndpointConfig(loop_rate_hz=loop_rate_hz, **config))
+        self.transports = []
 
     async def connect(self) -> Client:
-        return await Client.open(self.endpoint.connect_in_memory(maxsize=256),
-                                 queue_packets=65_536)
+        transport = self.endpoint.connect_in_memory(maxsize=256)
+        self.transports.append(transport)  # a test may cut a connection by closing it
+        return await Client.open(transport, queue_packets=65_536)
 
     def advance(self, n_ticks: int) -> None:
         self.device.advance(self.endpoint, n_ticks)

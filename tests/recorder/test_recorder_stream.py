@@ -83,6 +83,37 @@ def test_dropped_packets_are_reported_as_gaps_of_exactly_the_missing_samples(tmp
         assert gap.before_t_us == dev.device.t_us_of(int(run[-1]) + 1)
 
 
+def test_a_cut_connection_is_reconnected_and_its_hole_counted_exactly(tmp_path):
+    dev = SimDevice()
+
+    async def main():
+        rec = Recorder(dev.connect, ["counter"], 1000.0, ParquetStoreWriter(tmp_path / "s"),
+                       reconnect_delay_s=0.01)
+        task = asyncio.create_task(rec.run())
+        while rec.sink.session == "":
+            await asyncio.sleep(0)
+        await _advance(dev, rec, 1.0, block=100)
+        await dev.transports[0].close()  # the network drops; the device keeps ticking
+        while rec.summary.reconnects == 0:
+            dev.advance(20)
+            await asyncio.sleep(0.002)
+        await _advance(dev, rec, 1.0, block=100)
+        rec.stop()
+        return await task
+
+    summary = asyncio.run(main())
+    reader = ParquetStoreReader(tmp_path / "s")
+    stored = reader.window(0, 2**62).columns["counter"]
+    missing = np.setdiff1d(np.arange(stored[0], stored[-1] + 1), stored)
+    gaps = reader.gaps()
+    assert summary.reconnects == 1 and len(gaps) == 1 and len(missing) > 0
+    assert gaps[0].reason == "reconnect"
+    assert gaps[0].lost_samples == len(missing) == summary.lost
+    np.testing.assert_array_equal(missing, np.arange(missing[0], missing[-1] + 1))
+    assert gaps[0].after_t_us == dev.device.t_us_of(int(missing[0]) - 1)
+    assert gaps[0].before_t_us == dev.device.t_us_of(int(missing[-1]) + 1)
+
+
 def test_recorder_reconnects_after_the_endpoint_restarts_and_records_the_hole(tmp_path):
     async def serve(port: int):
         device = ExampleDevice(loop_rate_hz=1000.0)
