@@ -2,7 +2,8 @@
 drifting sinusoid for hours while the recorder takes position, motor current and
 tracking error at 1 kHz through the real ASTCom stream path.
 
-The emulator runs in this process (it is the "device"); the experiment drives its
+The emulator runs in this process (started through `virtualstar.launcher`, the one
+module of virtualstar that imports `mount_emulator`); the experiment drives its
 trajectory through ASTCom itself — ``mount.power_on``, ``traj.init``,
 ``traj.push_rates``, ``traj.start`` on a control connection — instead of through the
 VirtualStar Server, and a second, in-memory ASTCom connection carries the stream to
@@ -23,6 +24,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +39,8 @@ __all__ = ["SineExperiment", "SineResult", "commanded_position", "run_sine_exper
 
 DEFAULT_START_US = 1_772_395_200_000_000  # 2026-03-01T20:00:00Z, an evening in mount time
 DRIFT_RAD_PER_MIN = 0.0095  # the paper's average axis speed
-SIM_FLUSH_INTERVAL_S = 1.0  # simulated seconds per stream packet (see _fast_endpoint)
+SIM_FLUSH_INTERVAL_S = 1.0  # simulated seconds per stream packet (see _embedded_emulator)
+STEPPED_SPEED = 1e-12  # the emulator's own loop at this speed computes nothing: we step it
 BLOCK_TICKS = 10_000  # ticks per emulator block (1 s simulated)
 LAG_BLOCKS = 3  # the emulator may run this many blocks ahead of the recorder
 POINT_INTERVAL_US = 100_000  # trajectory points every 0.1 s
@@ -133,18 +136,28 @@ class SineResult:
                 "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()}}
 
 
-def _fast_endpoint(emu) -> Endpoint:
-    """Return an Endpoint for the emulator whose packets hold 1 simulated second.
+async def _embedded_emulator(exp: SineExperiment) -> tuple[Any, Endpoint]:
+    """Start the emulator through `virtualstar.launcher` (the one module that imports it),
+    stepped by us; return (EmbeddedEmulator, the endpoint it serves its URL with).
 
-    At the default 20 ms per packet a 12-h run is 2.2 M packets, and per-packet costs
-    (encode, queue, decode) would double the run time; a packet per simulated second
-    keeps the same stream semantics (exact ticks and times) at 43 k packets.
+    The launcher starts the emulator's own loop; at `STEPPED_SPEED` × real time that loop
+    computes no tick for years, so the experiment steps the mount with the documented
+    `advance(n)` and paces it by the recorder. Its streams go through a second Endpoint
+    on the same Collection that sends one packet per simulated second: at the default
+    20 ms a 12-h run is 2.2 M packets and per-packet costs (encode, queue, decode) would
+    double the run time; 43 k packets keep the same stream semantics (exact ticks, times).
     """
-    from mount_emulator import LOOP_RATE_HZ
+    from virtualstar.launcher import start_emulator
 
-    return Endpoint(emu.collection, EndpointConfig(
-        loop_rate_hz=LOOP_RATE_HZ, name="mount-emulator", flush_interval_s=SIM_FLUSH_INTERVAL_S,
-        max_frame_bytes=1 << 24, max_array_len=1_000_000))
+    az_deg = math.degrees(exp.start_rad) if exp.axis == "az" else 0.0
+    el_deg = math.degrees(exp.start_rad) if exp.axis == "el" else exp.other_axis_deg
+    emb = await start_emulator(speed=STEPPED_SPEED, start_us=exp.start_us, az_deg=az_deg,
+                               el_deg=el_deg, seeing_arcsec=0.0, url="tcp://127.0.0.1:0")
+    served = emb.emulator.endpoint
+    emb.emulator.endpoint = Endpoint(emb.emulator.collection, EndpointConfig(
+        loop_rate_hz=served.config.loop_rate_hz, name="mount-emulator (simulated time)",
+        flush_interval_s=SIM_FLUSH_INTERVAL_S, max_frame_bytes=1 << 24, max_array_len=1_000_000))
+    return emb, served
 
 
 async def _push_until(control: Client, exp: SineExperiment, t0_us: int, pushed_to_us: int,
@@ -175,18 +188,13 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
     `on_progress(sim_s, total_s, speed)` is called about once per simulated minute.
     Raises ExperimentError when the mount faults or a sample is lost.
     """
-    from mount_emulator import EmulatorConfig, MountEmulator
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     store = out / "store"
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
-    az_deg = math.degrees(exp.start_rad) if exp.axis == "az" else 0.0
-    el_deg = math.degrees(exp.start_rad) if exp.axis == "el" else exp.other_axis_deg
-    emu = MountEmulator(EmulatorConfig(start_us=exp.start_us, speed=0.0, az_deg=az_deg,
-                                       el_deg=el_deg, seeing_arcsec=0.0))
-    emu.endpoint = _fast_endpoint(emu)
+    emb, served = await _embedded_emulator(exp)
+    emu = emb.emulator
     control = await Client.open(emu.endpoint.connect_in_memory(), name="experiment")
     writer = ParquetStoreWriter(store)
 
@@ -229,9 +237,9 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
                 await recorder.wait_for_tick(lag_tick)
             else:
                 await asyncio.sleep(0)
-            if emu.model.mount_time_us + LEAD_US // 2 > pushed:
+            if emb.mount_time_us + LEAD_US // 2 > pushed:
                 pushed = await _push_until(control, exp, t0_us, pushed,
-                                           emu.model.mount_time_us + LEAD_US)
+                                           emb.mount_time_us + LEAD_US)
             if done >= next_report:
                 next_report += report_every
                 if on_progress is not None:
@@ -252,7 +260,8 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
             recorder.stop()
             await asyncio.gather(task, return_exceptions=True)
         await control.close()
-        await emu.endpoint.close()
+        await emb.stop()
+        await served.close()
     if on_progress is not None:
         on_progress(done / 10_000, total_ticks / 10_000, done / 10_000 / max(timings["loop"], 1e-9))
     fault = state[f"axis.{exp.axis}.fault_text"]
