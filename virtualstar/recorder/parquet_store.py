@@ -34,7 +34,7 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
-from .decimation import Envelope, rebucket
+from .decimation import Envelope, envelope, rebucket
 from .exceptions import EmptyStore, QueryError, StoreError
 from .samples import Gap, SampleBlock, SignalInfo
 
@@ -219,8 +219,6 @@ class ParquetStoreWriter:
         self._write_overview(hour, table)
 
     def _write_overview(self, hour: int, table: pa.Table) -> None:
-        from .decimation import envelope
-
         assert self._overview_schema is not None
         names = [s.name for s in self.signals]
         env = envelope(table.column("t_us").to_numpy(),
@@ -373,8 +371,6 @@ class ParquetStoreReader:
         Buckets of 1 s or more come from the stored 1-s overview (edges rounded to whole
         seconds); finer ones are computed from the samples themselves.
         """
-        from .decimation import envelope
-
         names = self._names(names)
         if buckets < 1:
             raise QueryError(f"buckets must be >= 1, got {buckets}")
