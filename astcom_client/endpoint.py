@@ -12,7 +12,7 @@ import contextlib
 import itertools
 import logging
 import ssl
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,6 +21,7 @@ import numpy as np
 from .auth import Authenticator
 from .codec import Codec, CodecLimits
 from .exceptions import AstcomError, AuthTimeout, ConnectionClosed, DeviceError, TooMany
+from .origins import check_allowed_origins
 from .protocol import (
     RequestReceived,
     ServerConnection,
@@ -50,6 +51,12 @@ class EndpointConfig:
 
     `passwords` maps role ("observer", "operator") to password; None turns
     authentication off (every client is an operator: loopback tests and demos only).
+    `allowed_origins` says which web pages may open a WebSocket (the handshake's
+    `Origin` header; clients that send none, i.e. non-browser ones, are always
+    accepted): None (default) accepts pages served from loopback only
+    (http(s)://127.0.0.1, localhost, [::1], any port); otherwise a list of origins
+    `http(s)://host[:port]`, "loopback" for the default set, or "*" for any page.
+    Other pages get HTTP 403 with the reason.
     """
 
     loop_rate_hz: float = 1000.0
@@ -68,6 +75,10 @@ class EndpointConfig:
     flush_interval_s: float = 0.02  # a stream packet holds about this much time of samples
     certfile: str | None = None
     keyfile: str | None = None
+    allowed_origins: Sequence[str] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "allowed_origins", check_allowed_origins(self.allowed_origins))
 
     def limits(self) -> dict[str, Any]:
         """Return the limits announced in the HELLO reply."""
@@ -140,7 +151,8 @@ class Endpoint:
             ssl_context = server_ssl_context(self.config.certfile, self.config.keyfile)
         handle = await start_server(where, self.handle_connection,
                                     max_frame_bytes=self.config.max_frame_bytes,
-                                    ssl_context=ssl_context)
+                                    ssl_context=ssl_context,
+                                    allowed_origins=self.config.allowed_origins)
         self._servers.append(handle)
         self.urls.append(handle.url)
         log.info("ASTCom endpoint %s listening on %s", self.config.name, handle.url)

@@ -10,16 +10,20 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import ssl
 from collections.abc import Awaitable, Callable
+from http import HTTPStatus
 from typing import Protocol
 
 import websockets
 from websockets.asyncio.server import ServerConnection as WsServerConnection
 from websockets.asyncio.server import serve as ws_serve
+from websockets.http11 import Request, Response
 
 from .exceptions import ConnectionClosed, MalformedFrame
 from .framing import FrameReader, frame_bytes
+from .origins import origin_refusal
 from .url import EndpointUrl, parse_url
 
 __all__ = [
@@ -33,6 +37,8 @@ __all__ = [
     "server_ssl_context",
     "start_server",
 ]
+
+log = logging.getLogger("astcom.transports")
 
 _READ_CHUNK = 1 << 16
 _WS_CLOSE_CODES = {1000: 1000, 413: 1009, 429: 1013, 503: 1001}
@@ -187,9 +193,13 @@ class ServerHandle:
 
 
 async def start_server(url: str | EndpointUrl, on_connection: Callable[[Transport], Awaitable[None]],
-                       *, max_frame_bytes: int, ssl_context: ssl.SSLContext | None = None
-                       ) -> ServerHandle:
-    """Listen on `url` and run `on_connection(transport)` for every accepted connection."""
+                       *, max_frame_bytes: int, ssl_context: ssl.SSLContext | None = None,
+                       allowed_origins: tuple[str, ...] | None = None) -> ServerHandle:
+    """Listen on `url` and run `on_connection(transport)` for every accepted connection.
+
+    WebSocket handshakes from a browser page whose `Origin` is not allowed (see
+    `origins.origin_refusal`; None: loopback pages only) get HTTP 403 and a reason.
+    """
     where = parse_url(url) if isinstance(url, str) else url
     if where.secure and ssl_context is None:
         raise ValueError(f"{where.scheme}:// needs a certificate and key (certfile/keyfile)")
@@ -198,8 +208,16 @@ async def start_server(url: str | EndpointUrl, on_connection: Callable[[Transpor
         async def ws_handler(ws: WsServerConnection) -> None:
             await on_connection(WebSocketTransport(ws))
 
+        def check_origin(connection: WsServerConnection, request: Request) -> Response | None:
+            reason = origin_refusal(request.headers.get_all("Origin"), allowed_origins)
+            if reason is None:
+                return None
+            log.warning("WebSocket handshake from %s: %s", connection.remote_address, reason)
+            return connection.respond(HTTPStatus.FORBIDDEN, reason + "\n")
+
         server = await ws_serve(ws_handler, where.host, where.port, ssl=ctx,
-                                max_size=max_frame_bytes, compression=None)
+                                max_size=max_frame_bytes, compression=None,
+                                process_request=check_origin)
         port = server.sockets[0].getsockname()[1]
 
         async def close_ws() -> None:
