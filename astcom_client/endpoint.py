@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .auth import Authenticator
+from .auth import Authenticator, Role
 from .codec import Codec, CodecLimits
 from .exceptions import AstcomError, AuthTimeout, ConnectionClosed, DeviceError, TooMany
 from .origins import check_allowed_origins
@@ -62,7 +62,8 @@ class EndpointConfig:
     loop_rate_hz: float = 1000.0
     passwords: Mapping[str, str] | None = None
     name: str = "astcom"
-    max_clients: int = 32
+    max_clients: int = 32  # authenticated connections
+    max_pending: int = 8  # connections not yet authenticated (they never take a client's slot)
     max_frame_bytes: int = 1 << 20
     max_depth: int = 16
     max_array_len: int = 100_000
@@ -106,7 +107,8 @@ class Endpoint:
                                  cfg.max_streams_per_client, cfg.max_array_len,
                                  cfg.flush_interval_s))
         self._options = ServerOptions(Authenticator(cfg.passwords), self.codec, cfg.name,
-                                      cfg.loop_rate_hz, cfg.queue_packets, cfg.limits())
+                                      cfg.loop_rate_hz, cfg.queue_packets, cfg.limits(),
+                                      admit=self._admit)
         self._ids = itertools.count(1)
         self._wakers: dict[int, asyncio.Event] = {}
         self._servers: list[ServerHandle] = []
@@ -194,9 +196,9 @@ class Endpoint:
             self._sessions.add(task)
         conn = ServerConnection(self._options, client_id=next(self._ids))
         try:
-            if len(self.service.connections) >= self.config.max_clients:
-                conn.close(TooMany.code, f"too many clients: this endpoint accepts at most "
-                                         f"{self.config.max_clients}")
+            refusal = self._admit() or self._admit_pending()
+            if refusal is not None:
+                conn.close(TooMany.code, refusal)
                 await self._send_pending(conn, transport)
                 return
             await self._session(conn, transport)
@@ -207,6 +209,33 @@ class Endpoint:
                 await transport.close(conn.close_code or 1000, conn.close_reason)
             if task is not None:
                 self._sessions.discard(task)
+
+    def _counts(self) -> tuple[int, int]:
+        """Return (authenticated, pending) open connections."""
+        authenticated = pending = 0
+        for conn in self.service.connections.values():
+            if conn.state is ServerState.CLOSED:
+                continue
+            if conn.role is Role.NONE:
+                pending += 1
+            else:
+                authenticated += 1
+        return authenticated, pending
+
+    def _admit(self) -> str | None:
+        """Return why one more authenticated client is refused, or None (at AUTH and at the door)."""
+        if self._counts()[0] >= self.config.max_clients:
+            return f"too many clients: this endpoint accepts at most {self.config.max_clients}"
+        return None
+
+    def _admit_pending(self) -> str | None:
+        # Unauthenticated peers get their own, smaller pool: holding it full until
+        # auth_timeout_s cannot lock authenticated clients out of theirs.
+        if self._counts()[1] >= self.config.max_pending:
+            return (f"too many connections waiting to authenticate: this endpoint accepts at most "
+                    f"{self.config.max_pending} (each has {self.config.auth_timeout_s:g} s); "
+                    "retry shortly")
+        return None
 
     async def _session(self, conn: ServerConnection, transport: Transport) -> None:
         wake = asyncio.Event()

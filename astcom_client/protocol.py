@@ -11,6 +11,7 @@ from __future__ import annotations
 import hmac
 import os
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
@@ -45,6 +46,7 @@ from .exceptions import (
     MalformedFrame,
     ProtocolError,
     StateError,
+    TooMany,
     error_from_code,
 )
 
@@ -144,6 +146,9 @@ class ServerOptions:
     loop_rate_hz: float = 1000.0
     queue_packets: int = 256
     limits: dict[str, Any] = field(default_factory=dict)
+    # Called just before a connection becomes authenticated; returns why it is refused
+    # (ERR 429, then closed) or None. The endpoint counts its authenticated clients here.
+    admit: Callable[[], str | None] | None = None
 
 
 class ServerConnection:
@@ -218,6 +223,8 @@ class ServerConnection:
                                       f"this endpoint speaks {PROTOCOL_VERSION}")
         self.peer_name = hello.client[:64]
         auth = self.options.authenticator
+        if not auth.required:
+            self._admit()
         self._nonce = new_nonce() if auth.required else b""
         self.state = ServerState.AWAIT_AUTH if auth.required else ServerState.READY
         if not auth.required:
@@ -244,10 +251,17 @@ class ServerConnection:
         if role is Role.NONE:
             self.state = ServerState.CLOSED
             raise AuthenticationFailed("authentication failed: wrong password")
+        self._admit()
         self.role = role
         self.state = ServerState.READY
         self.send_result(seq, {"role": role.label, "proof": proof})
         return []
+
+    def _admit(self) -> None:
+        refusal = self.options.admit() if self.options.admit is not None else None
+        if refusal is not None:
+            self.state = ServerState.CLOSED
+            raise TooMany(refusal)
 
     def _fail(self, seq: int | None, exc: AstcomError, *, close: bool) -> list[Any]:
         self.send_error(seq, exc)

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .auth import Role
 from .codec import Codec, TimestampUs
 from .commands import (
     Command,
@@ -385,6 +386,7 @@ class EndpointService:
                    for c in self.connections.values()]
         return {
             "clients": len(self.connections),
+            "pending": sum(1 for c in self.connections.values() if c.role is Role.NONE),
             "streams": sum(len(s) for s in self._streams_of.values()),
             "sampling_groups": len(self.groups),
             "messages": len(self.messages),

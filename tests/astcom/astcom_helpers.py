@@ -95,13 +95,17 @@ class RawPeer:
 
     async def login(self, password: str = PASSWORDS["operator"]) -> list[Any]:
         """Say HELLO and AUTH; return the AUTH reply."""
+        hello = await self.request("HELLO", {"version": "1.0", "client": "raw"})
+        return await self.auth(hello[2]["nonce"], password)
+
+    async def auth(self, nonce: bytes, password: str = PASSWORDS["operator"]) -> list[Any]:
+        """Send AUTH answering the HELLO reply's `nonce`; return the reply."""
         import os
 
         from astcom_client.auth import client_mac
 
-        hello = await self.request("HELLO", {"version": "1.0", "client": "raw"})
         cnonce = os.urandom(16)
-        mac = client_mac(password, hello[2]["nonce"], cnonce)
+        mac = client_mac(password, nonce, cnonce)
         return await self.request("AUTH", {"cnonce": cnonce, "mac": mac})
 
 
