@@ -39,7 +39,11 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
     start (µs since 1970 UTC, None = now); geometry_arcsec: the hidden TPOINT terms
     ({"ia": 120.0, ...}, default perfect); seeing_arcsec: guide-camera noise.
     """
-    from mount_emulator import EmulatorConfig, Geometry, MountEmulator
+    from mount_emulator import EmulatorConfig, Geometry, MountEmulator, MountModel
+
+    # compile (or load) the step before the emulator takes its start time: in real time
+    # its clock then starts within milliseconds of UTC, not a compile later
+    MountModel(start_us=0).run(0)
 
     extra = {}
     if geometry_arcsec:
@@ -50,6 +54,5 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
                             params=dict(params or {}),
                             passwords={"operator": password} if password else None, **extra)
     emulator = MountEmulator(config)
-    emulator.model.run(0)  # compile (or load) the step now, not inside the served loop
     bound = await emulator.start(url)
     return EmbeddedEmulator(bound, emulator)

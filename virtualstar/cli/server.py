@@ -64,6 +64,7 @@ def server(
         the_site = site_from_options(site_file=site_file, site_text=site)
     except AstroError as exc:
         raise fail(str(exc)) from None
+    _warn_once_about_earth_orientation(start_us)
     try:
         asyncio.run(_serve(emulator, speed, start_us, mount, password, mapping, listen, the_site,
                            pointing_model, passive))
@@ -71,6 +72,22 @@ def server(
         raise fail(str(exc)) from None
     except OSError as exc:
         raise fail(f"cannot listen on {listen}: {exc.strerror or exc}", 1) from None
+
+
+def _warn_once_about_earth_orientation(start_us: int | None) -> None:
+    """Say once (not at every trajectory chunk) when UT1/polar motion are predictions."""
+    import time
+    import warnings
+
+    from virtualstar.astro import EarthOrientation, EarthOrientationWarning
+
+    warnings.filterwarnings("ignore", category=EarthOrientationWarning)
+    mjd = (start_us if start_us is not None else time.time_ns() // 1000) / 86_400e6 + 40587.0
+    eop = EarthOrientation.from_astropy_iers_data()
+    if mjd > eop.measured_until_mjd:
+        typer.echo(f"warning: the mount time lies {mjd - eop.measured_until_mjd:.0f} days after "
+                   "the last measured IERS value: predicted UT1-UTC and polar motion are used "
+                   "(update astropy-iers-data for arcsecond-accurate satellites)", err=True)
 
 
 async def _serve(emulator, speed, start_us, mount, password, mapping, listen, site,
