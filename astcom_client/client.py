@@ -37,6 +37,7 @@ from .exceptions import AstcomError, ConnectionClosed, Forbidden
 from .protocol import ClientConnection, ClientState, DataReceived, Failure, Ready, Reply
 from .push_transport import PushTransport, open_push_transport
 from .registry import VariableInfo
+from .timing import sample_offsets_us
 from .transports import Transport, client_ssl_context
 from .url import parse_url
 
@@ -83,8 +84,8 @@ class StreamPacket:
 
     @property
     def t_us(self) -> np.ndarray:
-        """Return the sample times, int64 µs."""
-        return self.first_t_us + np.round(np.arange(self.n) * self.period_us).astype(np.int64)
+        """Return the sample times, int64 µs (the exact rounding rule of the spec, §6)."""
+        return self.first_t_us + sample_offsets_us(self.period_us, self.n)
 
     @property
     def ticks(self) -> np.ndarray:

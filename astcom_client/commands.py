@@ -229,7 +229,7 @@ class DataFrame:
 
     ``["DATA", msg, seq, first_tick, first_t_us, period_us, period_ticks, n, arrays]``:
     sample i (0 ≤ i < n) was taken at tick ``first_tick + i * period_ticks`` and time
-    ``first_t_us + round(i * period_us)``; ``arrays`` holds one 2-D array (n × columns)
+    ``first_t_us + round_half_up(i * period_us)`` (see timing.py); ``arrays`` holds one 2-D array (n × columns)
     per dtype group of the stream's layout.
     """
 

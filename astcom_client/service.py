@@ -41,6 +41,7 @@ from .exceptions import (
 )
 from .protocol import ServerConnection
 from .registry import Collection, Function, Variable
+from .timing import round_half_up
 
 __all__ = ["EndpointService", "PendingInvoke", "ServiceLimits"]
 
@@ -87,11 +88,11 @@ class StreamGroup:
     """One message sampled every `k` ticks, shared by all connections streaming it at that rate."""
 
     def __init__(self, message: MessageDef, k: int, samples_per_packet: int,
-                 tick_period_us: float) -> None:
+                 loop_rate_hz: float) -> None:
         self.message = message
         self.k = k
         self.spp = samples_per_packet
-        self.period_us = k * tick_period_us
+        self.period_us = k * 1e6 / loop_rate_hz  # as the spec writes it, to the last bit
         self.subscribers: dict[int, ServerConnection] = {}
         self.seq = 0
         self.fill = 0
@@ -151,7 +152,7 @@ class StreamGroup:
             if self.fill == 0:
                 tick = first_tick + int(rows[done])
                 self.packet_tick = tick
-                self.packet_t_us = first_t_us + round((tick - first_tick) * tick_period_us)
+                self.packet_t_us = first_t_us + round_half_up((tick - first_tick) * tick_period_us)
             take = min(len(rows) - done, self.spp - self.fill)
             chunk = rows[done:done + take]
             for group, row in zip(self.groups, current, strict=True):
@@ -347,7 +348,7 @@ class EndpointService:
             n_columns = sum(v.spec.n_columns for v in message.variables)
             spp = round(self.loop_rate_hz / k * self.limits.flush_interval_s)
             spp = max(1, min(spp, self.limits.max_array_len // max(1, n_columns)))
-            group = StreamGroup(message, k, spp, self.tick_period_us)
+            group = StreamGroup(message, k, spp, self.loop_rate_hz)
             self.groups[(cmd.msg, k)] = group
         old = streams.get(cmd.msg)
         if old is not None and old is not group:
@@ -410,7 +411,7 @@ class EndpointService:
         if n_ticks <= 0:
             return
         self.tick = first_tick + n_ticks - 1
-        self.t_us = first_t_us + round((n_ticks - 1) * self.tick_period_us)
+        self.t_us = first_t_us + round_half_up((n_ticks - 1) * self.tick_period_us)
         for group in list(self.groups.values()):
             group.sample(first_tick, first_t_us, n_ticks, self.tick_period_us, trace, self.codec)
 
