@@ -383,7 +383,12 @@ class Client:
         return stream
 
     async def ping(self) -> dict[str, Any]:
-        """Return the endpoint's clock and tick (PING)."""
+        """Return the endpoint's clocks (PING).
+
+        `t_us`: the endpoint host's wall clock (UTC) when it answered, a TimestampUs;
+        `tick`: the last tick the device computed (-1 before the first); `tick_t_us`: the
+        mount time of that tick, int µs (None before the first tick).
+        """
         return await self._request(Ping())
 
     async def stats(self) -> dict[str, Any]:

@@ -373,7 +373,10 @@ class EndpointService:
             self.groups.pop((group.message.msg, group.k), None)
 
     def _ping(self, conn: ServerConnection, cmd: Ping) -> dict[str, Any]:
-        return {"t_us": TimestampUs(self.clock_us()), "tick": self.tick}
+        # t_us: the endpoint host's wall clock now; tick_t_us: the device (mount) time of the
+        # last computed tick. Both, so a client can estimate either offset (spec §4, PING).
+        return {"t_us": TimestampUs(self.clock_us()), "tick": self.tick,
+                "tick_t_us": self.t_us if self.tick >= 0 else None}
 
     def _stats(self, conn: ServerConnection, cmd: Stats) -> dict[str, Any]:
         return self.stats()

@@ -1,6 +1,7 @@
 """A Client and an Endpoint agree on every command, in memory and over real sockets."""
 
 import asyncio
+import time
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from astcom_client import (
     Forbidden,
     InvalidValue,
     NotWritable,
+    TimestampUs,
     TooMany,
     UnknownName,
 )
@@ -158,4 +160,20 @@ def test_a_socket_client_learns_why_it_is_refused_or_dropped(scheme: str) -> Non
             with pytest.raises(ConnectionError):
                 await first.read(["counter"])
             assert not first.connected
+    run(main())
+
+
+def test_ping_gives_the_host_wall_clock_and_the_mount_time_of_the_last_tick() -> None:
+    async def main() -> None:
+        t0_us = 1_000_000_000_000_000  # mount time far from the wall clock (2001)
+        async with memory_session() as (_, endpoint, client):
+            first = await client.ping()
+            assert first["tick"] == -1 and first["tick_t_us"] is None
+            endpoint.publish(0, t0_us, 10)  # loop 1000 Hz: tick 9 at t0 + 9 ms
+            before_us = time.time_ns() // 1000
+            reply = await client.ping()
+            after_us = time.time_ns() // 1000
+            assert reply["tick"] == 9 and reply["tick_t_us"] == t0_us + 9_000
+            assert isinstance(reply["t_us"], TimestampUs)
+            assert before_us <= reply["t_us"].t_us <= after_us  # the host's clock, not the mount's
     run(main())
