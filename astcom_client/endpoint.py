@@ -315,8 +315,15 @@ class Endpoint:
                 wake.clear()
                 if conn.has_control:
                     await self._send_control(conn, transport, control_lock)
-                while (frame := conn.next_stream()) is not None:
-                    await transport.send(frame)
+                # Each packet goes out under the lock of the replies, taken per packet: a reply
+                # waits for at most one packet, and a stream's first packet cannot overtake
+                # the STREAM_START reply still being sent (spec §6: never DATA before it).
+                while True:
+                    async with control_lock:
+                        frame = conn.next_stream()
+                        if frame is None:
+                            break
+                        await transport.send(frame)
                 if conn.state is ServerState.CLOSED:
                     await self._send_control(conn, transport, control_lock)
                     break
