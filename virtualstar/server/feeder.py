@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .exceptions import MountFault
+from .exceptions import MountFault, OperationAborted
 from .mount_link import MountLink
 from .trajectories import Path
 
@@ -64,13 +64,15 @@ class Feeder:
     """Feeds one path to the mount; create one per trajectory."""
 
     def __init__(self, link: MountLink, config: FeederConfig, path: Path, first_us: int,
-                 *, fault_code: int) -> None:
+                 *, fault_code: int, tracking_code: int) -> None:
         self.link = link
         self.config = config
         self.path = path
         self.step_us = config.step_us
         self.next_us = int(first_us)
         self.fault_code = fault_code
+        self.tracking_code = tracking_code
+        self.started = False  # set once the mount was told to follow the buffer
         self.stats = FeederStats()
         self.done = False
         self.task: asyncio.Task | None = None
@@ -79,8 +81,13 @@ class Feeder:
         """Top up the buffer once; return the mount time read (µs)."""
         v = await self.link.read(["mount_time", "free_points", "mount_state"])
         now = int(v["mount_time"])
-        if int(v["mount_state"]) == self.fault_code:
+        state = int(v["mount_state"])
+        if state == self.fault_code:
             raise MountFault("the mount went to FAULT while tracking")
+        if self.started and state != self.tracking_code:
+            raise OperationAborted(f"the mount stopped following the trajectory (state "
+                                   f"{self.link.mapping.state_name(state)}): stopped by another "
+                                   "client, or a buffer underrun")
         st = self.stats
         if st.pushed:
             lead = st.last_point_us - now

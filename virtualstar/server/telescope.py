@@ -143,6 +143,7 @@ class Telescope:
         self.timesync = TimeSync(link, simulated=config.simulated,
                                  period_s=config.timesync_period_s)
         self.active = config.active
+        self.timesync.active = config.active
         self.model = None
         self.model_source = ""
         self.limits = MountLimits()
@@ -167,7 +168,7 @@ class Telescope:
                        loop.create_task(self.timesync.run(), name="vss-timesync")]
 
     async def close(self) -> None:
-        """Stop everything (tracking continues on the mount until its buffer runs out)."""
+        """Stop everything: a running operation is aborted and the mount brought to rest."""
         if self.op is not None and self.op.task is not None:
             self.op.task.cancel()
             with contextlib.suppress(BaseException):
@@ -418,48 +419,57 @@ class Telescope:
     async def _acquire_and_follow(self, op: Operation, path, *, slew_start_us: int,
                                   join_us: int | None = None, end_us: int | None = None,
                                   phase: str = "tracking") -> tuple[int, Feeder]:
-        """Slew to the run-up of `path`, start the trajectory; return (join time, feeder)."""
+        """Slew to the run-up of `path`, start the trajectory; return (join time, feeder).
+
+        join_us: the earliest join (a satellite pass start); None joins as soon as the
+        slew allows. When a slow host makes a slew or the priming late, the join is
+        planned again from where the mount is (a pass is then joined a little later).
+        """
         cfg = self.config
         lead = cfg.start_lead_s
         for _attempt in range(4):
             az, el, now = await self._positions()
-            if join_us is None:
-                guess_s = 0.0
-                for _ in range(3):
-                    j = now + int((guess_s + lead + cfg.ramp_s) * 1e6)
-                    p = path.sample(np.array([j], np.int64))
-                    rest_az = p.az_rad[0] - 0.5 * p.az_rate_rad_s[0] * cfg.ramp_s
-                    rest_el = p.el_rad[0] - 0.5 * p.el_rate_rad_s[0] * cfg.ramp_s
-                    plan = plan_slew(az, el, rest_az, rest_el, self.limits)
-                    guess_s = plan.duration_s * 1.05 + 1.5
-                join = now + int((guess_s + lead + cfg.ramp_s) * 1e6)
-            else:
-                join = join_us
+            guess_s = 0.0
+            for _ in range(3):
+                j = now + int((guess_s + lead + cfg.ramp_s) * 1e6)
+                if join_us is not None:
+                    j = max(j, join_us)
+                p = path.sample(np.array([j], np.int64))
+                rest_az = p.az_rad[0] - 0.5 * p.az_rate_rad_s[0] * cfg.ramp_s
+                rest_el = p.el_rad[0] - 0.5 * p.el_rate_rad_s[0] * cfg.ramp_s
+                guess_s = plan_slew(az, el, rest_az, rest_el, self.limits).duration_s * 1.05 + 1.5
+            join = now + int((guess_s + lead + cfg.ramp_s) * 1e6)
+            if join_us is not None:
+                join = max(join, join_us)
+            if end_us is not None and join > end_us - 10_000_000:
+                raise TargetUnreachable("too little of the path is left to join it")
             ramp = RampIn(path, join, cfg.ramp_s)
             await self._goto(op, float(ramp.rest_rad[0]), float(ramp.rest_rad[1]))
             now = await self.mount_time_us()
-            if now + int(lead * 1e6) < ramp.begin_us:
-                break
-            if join_us is not None:
-                raise TargetUnreachable("the slew to the start of the pass ended too late")
+            if now + int(lead * 1e6) >= ramp.begin_us:
+                continue  # the slew ended too late: plan again from here
+            op.info["join_us"] = ramp.join_us
+            if ramp.begin_us - now > cfg.feed_lead_s * 1e6:
+                self._phase(op, "waiting", start_utc=_iso(ramp.begin_us))
+                self._begun(op)
+                await self.wait_until(ramp.begin_us - int((cfg.feed_lead_s - lead) * 1e6), op)
+            await self.link.call("traj_init")
+            fcfg = FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=cfg.feed_lead_s,
+                                min_lead_s=min(0.5, lead / 2), speed=cfg.speed)
+            feeder = Feeder(self.link, fcfg, _Until(ramp, end_us), ramp.begin_us,
+                            fault_code=self.codes["fault"], tracking_code=self.codes["tracking"])
+            await feeder.cycle()
+            if feeder.stats.rejected or feeder.stats.first_point_us != ramp.begin_us:
+                # the host stalled past the start of the run-up: never start half-way up a
+                # ramp; the mount has not been told to follow, so plan again
+                log.warning("operation %s: trajectory primed too late, planning again", op.id)
+                continue
+            break
         else:
-            raise TargetUnreachable("could not catch up with the target after 4 slews")
-        op.info["join_us"] = ramp.join_us
-        if ramp.begin_us - now > cfg.feed_lead_s * 1e6:
-            self._phase(op, "waiting", start_utc=_iso(ramp.begin_us))
-            self._begun(op)
-            await self.wait_until(ramp.begin_us - int((cfg.feed_lead_s - lead) * 1e6), op)
-        await self.link.call("traj_init")
-        fcfg = FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=cfg.feed_lead_s,
-                            min_lead_s=min(0.5, lead / 2), speed=cfg.speed)
-        feeder = Feeder(self.link, fcfg, _Until(ramp, end_us), ramp.begin_us,
-                        fault_code=self.codes["fault"])
-        await feeder.cycle()
-        if feeder.stats.rejected or feeder.stats.first_point_us != ramp.begin_us:
-            # the host stalled past the start of the run-up: never start half-way up a ramp
-            raise OperationAborted("the trajectory could not be primed in time (host too slow "
-                                   "for this simulation speed?)")
+            raise TargetUnreachable("could not catch up with the target after 4 attempts "
+                                    "(host too slow for this simulation speed?)")
         await self.link.call("traj_start")
+        feeder.started = True
         self.feeder = feeder
         # the feeder runs from here on, also while the caller waits for the landing
         feeder.task = asyncio.get_running_loop().create_task(feeder.run(), name="vss-feeder")
@@ -621,7 +631,8 @@ class Telescope:
                             "max_az_rate_deg_s": plan.max_az_rate_deg_s})
             self._phase(op, "pass planned")
             join, feeder = await self._acquire_and_follow(op, plan.path, slew_start_us=now,
-                                                          join_us=begin, phase="waiting")
+                                                          join_us=begin, end_us=set_us,
+                                                          phase="waiting")
             self._begun(op)
             self._phase(op, "tracking", tracking_from_us=join)
             reason = await self._run_feeder_until(op, feeder, set_us)
@@ -654,6 +665,7 @@ class Telescope:
         if mode not in ("active", "passive"):
             raise BadRequest(f"mode {mode!r}: expected 'active' or 'passive'")
         self.active = mode == "active"
+        self.timesync.active = self.active  # a passive server sends the mount nothing
         self.emit("mode", {"mode": mode})
         return {"mode": mode}
 

@@ -47,10 +47,11 @@ class TimeSync:
         self.simulated = simulated
         self.period_s = period_s
         self.status = TimeSyncStatus("verify" if simulated else "sync")
+        self.active = True  # False: measure only (a passive server commands nothing)
 
     async def sync_once(self) -> None:
         """Arm the next UTC second (real time) and measure the offset."""
-        if not self.simulated:
+        if not self.simulated and self.active:
             for _ in range(10):
                 frac = time.time_ns() // 1000 % 1_000_000
                 if ARM_WINDOW_US[0] <= frac <= ARM_WINDOW_US[1]:
