@@ -52,14 +52,14 @@ def test_a_pass_through_the_zenith_is_tracked_to_its_end_through_the_keyhole(zen
     assert info["culmination_el_deg"] > 88.0
     assert info["keyhole"] is True
     # sample the encoders during the pass (mount time from the same read)
-    names = ["axis.az.position", "axis.el.position", "axis.el.error_arcsec", "traj.ref_el"]
+    names = ["axis.az.position", "axis.el.position", "axis.az.error_arcsec",
+             "axis.el.error_arcsec", "traj.ref_az", "traj.ref_el"]
     samples = []
     deadline = time.monotonic() + 90.0
     while time.monotonic() < deadline:
         values, t_us = rig.run(rig.mount_read(names))
         if info["pass_start_us"] + 2e6 < t_us < info["pass_end_us"] - 2e6:
-            samples.append((t_us, values[names[0]], values[names[1]], values[names[2]],
-                            values[names[3]]))
+            samples.append((t_us, *(values[n] for n in names)))
         if t_us > info["pass_end_us"]:
             break
         time.sleep(0.05)
@@ -69,7 +69,8 @@ def test_a_pass_through_the_zenith_is_tracked_to_its_end_through_the_keyhole(zen
     assert op["info"]["ended"] == "the path ended"
     assert op["info"]["tracking_rms_arcsec"] < 2.0
     assert len(samples) >= 10
-    t_us, az, el, el_err, ref_el = (np.array(c) for c in zip(*samples, strict=True))
+    t_us, az, el, az_err, el_err, ref_az, ref_el = (np.array(c) for c in zip(*samples,
+                                                                               strict=True))
     # skyfield's apparent direction: light time and aberration, like a real observation
     earth = _de421()["earth"]
     observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, 0.0)
@@ -78,15 +79,17 @@ def test_a_pass_through_the_zenith_is_tracked_to_its_end_through_the_keyhole(zen
     import erfa
 
     sep = np.degrees(erfa.seps(az, el, azi.radians, alt.radians)) * 3600.0
-    # the commanded elevation is the satellite's (the keyhole only bends the azimuth) ...
-    ref_d = np.degrees(ref_el - alt.radians) * 3600.0
-    assert np.abs(ref_d).max() < 0.5, ref_d
-    # ... and the encoders sit on it to within the mount's own following error, which
-    # peaks at culmination (elevation acceleration ~ω²/miss distance, several deg/s²)
-    d_el = np.degrees(el - alt.radians) * 3600.0
-    assert np.all(np.abs(d_el) <= np.abs(el_err) + 0.5), (d_el, el_err)
-    assert np.median(np.abs(d_el)) < 0.5
-    assert sep.max() < info["keyhole_max_error_arcsec"] + np.abs(el_err).max() + 5.0, (sep, info)
+    ref_sep = np.degrees(erfa.seps(ref_az, ref_el, azi.radians, alt.radians)) * 3600.0
+    servo = np.hypot(az_err * np.cos(el), el_err)  # the mount's own following error
+    # the commanded path is the satellite's, except inside the keyhole, where it stays
+    # within the deviation the server announced ...
+    far = np.degrees(alt.radians) < 60.0
+    assert far.sum() >= 5
+    assert ref_sep[far].max() < 0.5, ref_sep[far]
+    assert ref_sep.max() <= info["keyhole_max_error_arcsec"] + 0.5
+    # ... and the encoders sit on the commanded path within the mount's following error
+    assert np.all(sep <= ref_sep + servo + 0.5), (sep, ref_sep, servo)
+    assert np.median(sep[far]) < 0.5
     underruns = rig.run(rig.mount_read(["traj.underruns"]))[0]["traj.underruns"]
     assert underruns == 0
 

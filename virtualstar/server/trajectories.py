@@ -45,6 +45,7 @@ __all__ = [
     "ramp_start",
 ]
 
+_ONE_ARCSEC_RAD = math.pi / 180.0 / 3600.0
 _RATE_STEP_S = 0.05  # step of the finite difference that carries pointing-model corrections into rates
 
 
@@ -212,7 +213,9 @@ def plan_satellite_pass(sat: Satellite, site: Site, start_us: int, end_us: int, 
     the pass does not fit in the cable wrap), then limited in rate near the zenith
     by `plan_keyhole`, whose rate-limited path is then smoothed by a moving
     average long enough to keep the azimuth acceleration under `accel_limit_deg_s2`
-    (the plan bounds rates only); elevation is followed exactly.
+    (the plan bounds rates only). Elevation is followed exactly, except around a
+    keyhole, where its cusp at culmination is smoothed the same way. The on-sky
+    distance this costs is reported as `keyhole_max_error_arcsec`.
     """
     n = int(math.ceil((end_us - start_us) / (step_s * 1e6))) + 1
     t = start_us + np.round(np.arange(n) * step_s * 1e6).astype(np.int64)
@@ -224,13 +227,25 @@ def plan_satellite_pass(sat: Satellite, site: Site, start_us: int, end_us: int, 
     t_s = (t - t[0]) * 1e-6
     plan = plan_keyhole(t_s, az, obs.el_rad, track_rate_limit_deg_s)
     az_cmd, az_rate = plan.az_rad, obs.az_rate_rad_s
+    el_cmd, el_rate = obs.el_rad, obs.el_rate_rad_s
     if plan.limited:
         width_s = 2.0 * track_rate_limit_deg_s / accel_limit_deg_s2
-        az_cmd = _moving_average(plan.az_rad, max(1, int(round(width_s / step_s))))
+        n_az = max(1, int(round(width_s / step_s)))
+        # smooth only around the keyhole (tapering off outside): elsewhere the path is exact
+        inside = np.abs(plan.az_rad - az) > _ONE_ARCSEC_RAD
+        w_az = _taper(inside, 2 * n_az)
+        az_cmd = plan.az_rad + w_az * (_moving_average(plan.az_rad, n_az) - plan.az_rad)
         az_rate = np.gradient(az_cmd, t_s)
+        # so close to the zenith the elevation has a cusp (acceleration ~ ω²/miss
+        # distance): smooth it the same way
+        el_width_s = 2.0 * math.degrees(float(np.abs(obs.el_rate_rad_s).max())) / accel_limit_deg_s2
+        n_el = max(1, int(round(el_width_s / step_s)))
+        w_el = _taper(inside, n_az + n_el)
+        el_cmd = obs.el_rad + w_el * (_moving_average(obs.el_rad, n_el) - obs.el_rad)
+        el_rate = np.gradient(el_cmd, t_s)
     # what the sky sees of the commanded path (keyhole and smoothing), arcsec
-    sky_err = float(np.max(erfa.seps(az_cmd, obs.el_rad, az, obs.el_rad))) * 206264.80624709636
-    enc = observed_to_encoder(model, az_cmd, obs.el_rad, az_rate, obs.el_rate_rad_s)
+    sky_err = float(np.max(erfa.seps(az_cmd, el_cmd, az, obs.el_rad))) * 206264.80624709636
+    enc = observed_to_encoder(model, az_cmd, el_cmd, az_rate, el_rate)
     return PassPlan(TablePath(Points(t, *enc)), plan.limited, sky_err,
                     plan.max_true_az_rate_deg_s, float(np.degrees(obs.el_rad.max())))
 
@@ -243,3 +258,14 @@ def _moving_average(x: np.ndarray, n: int) -> np.ndarray:
     padded = np.concatenate([np.full(half, x[0]), x, np.full(n - 1 - half, x[-1])])
     kernel = np.full(n, 1.0 / n)
     return np.convolve(padded, kernel, mode="valid")
+
+
+def _taper(mask: np.ndarray, n: int) -> np.ndarray:
+    """Return 1 where `mask` is set, falling linearly to 0 over `n` samples on each side."""
+    if not mask.any():
+        return np.zeros(mask.shape)
+    idx = np.arange(mask.size)
+    hits = np.flatnonzero(mask)
+    dist = np.minimum(np.abs(idx - hits[0]), np.abs(idx - hits[-1]))
+    dist[hits[0]:hits[-1] + 1] = 0
+    return np.clip(1.0 - dist / max(n, 1), 0.0, 1.0)
