@@ -3,7 +3,9 @@ store with their exact mount timestamps, query and plot them, and run the whole-
 sine experiment on the emulator.
 
 Stores: hourly Parquet files (`ParquetStoreWriter`/`ParquetStoreReader`, the default)
-and InfluxDB 1.x over HTTP (`InfluxStoreWriter`/`InfluxStoreReader`).
+and InfluxDB 1.x over HTTP (`InfluxStoreWriter`/`InfluxStoreReader`). The experiment
+(`virtualstar.recorder.experiment`) and the plots (`virtualstar.recorder.plots`, matplotlib)
+are imported on their own.
 """
 
 from .decimation import Envelope, envelope, rebucket
@@ -16,8 +18,11 @@ from .exceptions import (
     StoreError,
     StoreSpecError,
 )
+from .export import write_csv, write_mat
+from .influx_store import InfluxConnection, InfluxStoreReader, InfluxStoreWriter
 from .parquet_store import ParquetStoreReader, ParquetStoreWriter
 from .samples import Gap, SampleBlock, SignalInfo
+from .stores import TeeWriter, open_reader, open_writer
 from .storespec import StoreSpec, parse_store_spec
 from .subscriber import Recorder, RecordingSummary, SampleSink, client_connector
 
@@ -26,7 +31,10 @@ __all__ = [
     "Envelope",
     "ExperimentError",
     "Gap",
+    "InfluxConnection",
     "InfluxError",
+    "InfluxStoreReader",
+    "InfluxStoreWriter",
     "ParquetStoreReader",
     "ParquetStoreWriter",
     "QueryError",
@@ -39,8 +47,13 @@ __all__ = [
     "StoreError",
     "StoreSpec",
     "StoreSpecError",
+    "TeeWriter",
     "client_connector",
     "envelope",
+    "open_reader",
+    "open_writer",
     "parse_store_spec",
     "rebucket",
+    "write_csv",
+    "write_mat",
 ]

@@ -41,8 +41,8 @@ DEFAULT_START_US = 1_772_395_200_000_000  # 2026-03-01T20:00:00Z, an evening in 
 DRIFT_RAD_PER_MIN = 0.0095  # the paper's average axis speed
 SIM_FLUSH_INTERVAL_S = 1.0  # simulated seconds per stream packet (see _embedded_emulator)
 STEPPED_SPEED = 1e-12  # the emulator's own loop at this speed computes nothing: we step it
-BLOCK_TICKS = 10_000  # ticks per emulator block (1 s simulated)
-LAG_BLOCKS = 3  # the emulator may run this many blocks ahead of the recorder
+BLOCK_TICKS = 2_000  # ticks per emulator block (0.2 s simulated): its trace stays in cache
+LAG_PACKETS = 3  # the emulator may run this many stream packets ahead of the recorder
 POINT_INTERVAL_US = 100_000  # trajectory points every 0.1 s
 PUSH_POINTS = 1000  # points per traj.push_rates call (100 s)
 LEAD_US = 200_000_000  # keep the trajectory buffer this far ahead of mount time
@@ -220,6 +220,8 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
         total_ticks = (exp.duration_us + START_DELAY_US) // 100
         first_tick = emu.ticks_run
         done = 0
+        packet_ticks = round(SIM_FLUSH_INTERVAL_S * 10_000)
+        lag_ticks = LAG_PACKETS * packet_ticks + BLOCK_TICKS
         report_every = 60 * 10_000
         next_report = report_every
         loop_start = time.perf_counter()
@@ -232,7 +234,8 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
             done += n
             if task.done():
                 break
-            lag_tick = first_tick + done - LAG_BLOCKS * BLOCK_TICKS
+            # a packet leaves the endpoint only when full: allow a few packets of lag
+            lag_tick = first_tick + done - lag_ticks
             if lag_tick > 0:
                 await recorder.wait_for_tick(lag_tick)
             else:
