@@ -6,7 +6,10 @@ a bare ASTCom client that only counts samples subscribe to the same signals at t
 time. The device's `counter` signal is the tick number, so the samples really missing
 from the store are counted independently of what the recorder reports.
 
-    .venv/bin/python benchmarks/bench_recorder_loss.py [--seconds 10]
+    .venv/bin/python benchmarks/bench_recorder_loss.py [--seconds 10] [--influx http://127.0.0.1:8086]
+
+With --influx the recorder writes to that InfluxDB (database vs_bench_loss) instead of
+Parquet, and the samples really missing are counted from what InfluxDB returns.
 """
 
 from __future__ import annotations
@@ -22,7 +25,14 @@ import time
 import numpy as np
 
 from astcom_client import Client
-from virtualstar.recorder import ParquetStoreReader, ParquetStoreWriter, Recorder
+from virtualstar.recorder import (
+    InfluxConnection,
+    InfluxStoreReader,
+    InfluxStoreWriter,
+    ParquetStoreReader,
+    ParquetStoreWriter,
+    Recorder,
+)
 from virtualstar.recorder.subscriber import client_connector
 
 CASES = [(1000.0, 16), (10_000.0, 4)]  # (loop and record rate Hz, signals)
@@ -67,8 +77,8 @@ async def _reference(url: str, names: list[str], rate_hz: float, seconds: float)
         return count[0], count[1]
 
 
-async def _case(url: str, names: list[str], rate_hz: float, seconds: float, store: str):
-    rec = Recorder(client_connector(url), names, rate_hz, ParquetStoreWriter(store))
+async def _case(url: str, names: list[str], rate_hz: float, seconds: float, writer):
+    rec = Recorder(client_connector(url), names, rate_hz, writer)
     ref = asyncio.create_task(_reference(url, names, rate_hz, seconds))
     summary = await rec.run(seconds)
     return summary, await ref
@@ -77,6 +87,7 @@ async def _case(url: str, names: list[str], rate_hz: float, seconds: float, stor
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="recording length per case")
+    parser.add_argument("--influx", default=None, help="record into this InfluxDB 1.x instead")
     args = parser.parse_args()
     print(f"{'case':<16} {'recorded':>10} {'lost (reported)':>16} {'missing (counter)':>18} "
           f"{'reference client':>17} {'ref lost':>9}  goal")
@@ -87,9 +98,16 @@ def main() -> None:
             names = ["counter", "wave.sine", "wave.cosine", "pair.diff"] + [
                 f"extra.s{i:02d}" for i in range(n_signals - 4)]
             with tempfile.TemporaryDirectory() as tmp:
+                if args.influx:
+                    conn = InfluxConnection(args.influx, "vs_bench_loss")
+                    conn.query('DROP DATABASE "vs_bench_loss"', write=True)
+                    writer, reader = InfluxStoreWriter(conn, spool_dir=tmp), InfluxStoreReader(conn)
+                else:
+                    writer, reader = ParquetStoreWriter(tmp), None
                 summary, (ref_n, ref_lost) = asyncio.run(
-                    _case(url, names, rate_hz, args.seconds, tmp))
-                counter = ParquetStoreReader(tmp).window(0, 2**62, ["counter"]).columns["counter"]
+                    _case(url, names, rate_hz, args.seconds, writer))
+                reader = reader or ParquetStoreReader(tmp)
+                counter = reader.window(0, 2**62, ["counter"]).columns["counter"]
                 missing = int(counter[-1] - counter[0] + 1 - len(np.unique(counter)))
         finally:
             proc.terminate()
@@ -98,8 +116,9 @@ def main() -> None:
         label = f"{rate_hz / 1000:g} kHz × {n_signals}"
         print(f"{label:<16} {summary.samples:>10} {summary.lost:>16} {missing:>18} "
               f"{ref_n:>17} {ref_lost:>9}  0 lost")
+    store = f"InfluxDB {args.influx}" if args.influx else "Parquet"
     print(f"result: {'zero loss' if worst == 0 else f'LOSS: {worst} samples'} "
-          f"({args.seconds:g} s per case, device in real time over ws://127.0.0.1)")
+          f"({args.seconds:g} s per case into {store}, device in real time over ws://127.0.0.1)")
 
 
 if __name__ == "__main__":
