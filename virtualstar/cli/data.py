@@ -158,8 +158,11 @@ def plot(
     window: Annotated[float, typer.Option("--window", help="Seconds at full rate for the second plot.")] = 2.0,
     buckets: Annotated[int, typer.Option("--buckets", help="Envelope buckets of the overview.")] = 2000,
 ) -> None:
-    """Write fig6_overview.png (whole window, min/max envelope) and fig7_first_2s.png
-    (the first --window seconds at full rate), like the paper's Fig. 6 and Fig. 7."""
+    """Write PNGs like the paper's Fig. 6 (envelope) and Fig. 7 (first seconds at full rate).
+
+    OUT/fig6_overview.png: min/max envelope of the window; OUT/fig7_first_2s.png: its first
+    --window seconds, every sample.
+    """
     if not window > 0 or buckets < 1:
         raise _fail("--window must be > 0 seconds and --buckets >= 1")
     from virtualstar.recorder.plots import plot_envelope, plot_window  # matplotlib: only here
