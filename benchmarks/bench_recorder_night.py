@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import resource
 import shutil
 import statistics
 import tempfile
@@ -63,6 +64,7 @@ def main() -> None:
 
         result = asyncio.run(run_sine_experiment(SineExperiment(hours=args.hours), out,
                                                  on_progress=progress))
+        peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: KiB
         store = result.store
         reader = ParquetStoreReader(store)
         n = reader.count()
@@ -131,6 +133,8 @@ def main() -> None:
         _row("store size", f"{store_bytes / 1e6:.1f} MB", f"{GOAL_STORE_BYTES / scale / 1e6:.0f} MB",
              f"raw int64+float64 {raw_bytes / 1e6:.1f} MB, CSV ≈ {csv_bytes / 1e6:.1f} MB "
              f"({store_bytes / n:.2f} B per row of t_us + {len(names)} values)")
+        _row("peak memory (whole run)", f"{peak_rss / 1e6:.0f} MB", "bounded",
+             f"the samples themselves: {raw_bytes / 1e6:.0f} MB raw")
         _row("2-s window (2000 rows)", f"{t_window * 1e3:.1f} ms", f"{GOAL_WINDOW_S * 1e3:.0f} ms",
              f"reading its whole hourly file: {t_file * 1e3:.0f} ms")
         _row("whole-night overview", f"{t_overview * 1e3:.0f} ms", f"{GOAL_OVERVIEW_S * 1e3:.0f} ms",
