@@ -22,6 +22,7 @@ from vss_rig import Rig
 from catalogs import load_tle_file, sample_tle_path
 from virtualstar.astro import Site, UtcTimes
 from virtualstar.cli.main import app
+from virtualstar.vss_client import call_server
 
 runner = CliRunner()
 OVERHEAD_UTC = (2024, 5, 18, 20, 0, 0)
@@ -63,8 +64,7 @@ def test_a_pass_through_the_zenith_is_tracked_to_its_end_through_the_keyhole(zen
         if t_us > info["pass_end_us"]:
             break
         time.sleep(0.05)
-    res = runner.invoke(app, ["status", "--server", rig.url, "--json"])
-    op = json.loads(res.stdout)["operation"]
+    op = call_server(rig.url, "wait")  # the track ends at set, then the mount comes to rest
     assert op["phase"] == "done", op
     assert op["info"]["ended"] == "the path ended"
     assert op["info"]["tracking_rms_arcsec"] < 2.0

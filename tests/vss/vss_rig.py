@@ -20,6 +20,52 @@ from virtualstar.server import build_server
 SPEED = 20.0
 
 
+class TcpProxy:
+    """Forward TCP connections to (host, port); `cut()` breaks every open one, as a network would."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.target = (host, port)
+        self.server: asyncio.base_events.Server | None = None
+        self.writers: set[asyncio.StreamWriter] = set()
+        self.port = 0
+
+    async def start(self) -> int:
+        self.server = await asyncio.start_server(self._handle, "127.0.0.1", 0)
+        self.port = self.server.sockets[0].getsockname()[1]
+        return self.port
+
+    async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            up_reader, up_writer = await asyncio.open_connection(*self.target)
+        except OSError:
+            writer.close()
+            return
+        self.writers |= {writer, up_writer}
+
+        async def pump(src: asyncio.StreamReader, dst: asyncio.StreamWriter) -> None:
+            try:
+                while data := await src.read(65536):
+                    dst.write(data)
+                    await dst.drain()
+            except (ConnectionError, OSError):
+                pass
+            finally:
+                dst.close()
+
+        await asyncio.gather(pump(reader, up_writer), pump(up_reader, writer))
+        self.writers -= {writer, up_writer}
+
+    def cut(self) -> None:
+        for w in list(self.writers):
+            w.transport.abort()
+        self.writers.clear()
+
+    async def close(self) -> None:
+        self.cut()
+        if self.server is not None:
+            self.server.close()
+
+
 class Rig:
     """Emulator (simulated time) + VSS, started on a private event loop."""
 
@@ -36,6 +82,7 @@ class Rig:
         self.thread.start()
         self.emulator = None
         self.server = None
+        self.proxy: TcpProxy | None = None
         self.url = ""
 
     def run(self, coro, timeout_s: float = 120.0):
@@ -52,8 +99,12 @@ class Rig:
         return self
 
     async def start_server(self, listen: str = "ws://127.0.0.1:0") -> str:
-        self.server = build_server(mount_url=self.emulator.url, site=self.site, speed=self.speed,
-                                   **self.options)
+        if self.proxy is None:  # the VSS reaches the mount through a proxy that can cut the line
+            host, port = self.emulator.url.rsplit("/", 1)[-1].rsplit(":", 1)
+            self.proxy = TcpProxy(host, int(port))
+            await self.proxy.start()
+        self.server = build_server(mount_url=f"ws://127.0.0.1:{self.proxy.port}", site=self.site,
+                                   speed=self.speed, **self.options)
         self.url = await self.server.start(listen)
         for _ in range(400):
             if self.server.telescope.link.connected and self.server.telescope.errors.samples:
@@ -75,6 +126,8 @@ class Rig:
         async def stop() -> None:
             if self.server is not None:
                 await self.server.close()
+            if self.proxy is not None:
+                await self.proxy.close()
             if self.emulator is not None:
                 await self.emulator.stop()
 
