@@ -188,7 +188,6 @@ class Recorder:
         self.summary = RecordingSummary(self.names, self.rate_hz)
         self._progress = asyncio.Event()
         self._stop = asyncio.Event()
-        self._error: BaseException | None = None
         self.signals: list[SignalInfo] = []
 
     def stop(self) -> None:
@@ -277,33 +276,38 @@ class Recorder:
     async def _consume(self, stream, deadline: float | None) -> bool:
         """Feed packets to the sink; return True when the connection ended under us.
 
-        Packets go straight to the sink from the client's reader (a callback: no queue,
-        no await per packet); this coroutine only waits for the end, a stop or the deadline.
+        Packets are taken in order from the stream's queue (the client fills it from the
+        moment the stream starts, so none slips past). On stop or deadline the stream is
+        stopped and what it already queued is still stored.
         """
-        stream.on_packet(self._on_packet)
-        ender = asyncio.ensure_future(stream.__anext__())  # finishes when the stream ends
         stopper = asyncio.ensure_future(self._stop.wait())
         try:
-            timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
-            done, _ = await asyncio.wait({ender, stopper}, timeout=timeout,
-                                         return_when=asyncio.FIRST_COMPLETED)
-            if self._error is not None:
-                raise self._error
-            return ender in done and not self._stop.is_set()
+            while True:
+                timeout = None if deadline is None else deadline - time.monotonic()
+                if timeout is not None and timeout <= 0:
+                    break
+                getter = asyncio.ensure_future(stream.__anext__())
+                done, _ = await asyncio.wait({getter, stopper}, timeout=timeout,
+                                             return_when=asyncio.FIRST_COMPLETED)
+                if getter not in done:
+                    getter.cancel()
+                    await asyncio.gather(getter, return_exceptions=True)
+                    break
+                try:
+                    packet = getter.result()
+                except StopAsyncIteration:
+                    return not self._stop.is_set()
+                self.sink.accept(packet)
+                self._progress.set()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(stream.stop(), 2.0)
+            async for packet in stream:  # what was queued before the stop
+                self.sink.accept(packet)
+            self._progress.set()
+            return False
         finally:
-            for fut in (ender, stopper):
-                fut.cancel()
-            await asyncio.gather(ender, stopper, return_exceptions=True)
-
-    def _on_packet(self, packet: StreamPacket) -> None:
-        if self._error is not None:
-            return
-        try:
-            self.sink.accept(packet)
-        except Exception as exc:  # e.g. a full disk: stop recording and say why
-            self._error = exc
-            self._stop.set()
-        self._progress.set()
+            stopper.cancel()
+            await asyncio.gather(stopper, return_exceptions=True)
 
     def _finish_summary(self, wall_s: float) -> None:
         s = self.summary
