@@ -96,7 +96,8 @@ def test_a_tle_without_the_named_satellite_lists_what_it_holds(rig, tmp_path):
     assert res.exit_code == 1
     assert "ISS" in res.stderr
     res = runner.invoke(app, ["status", "--server", rig.url, "--json"])
-    assert res.exit_code == 0 and json.loads(res.stdout)["connected"]
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["connected"]
 
 
 def test_a_satellite_pass_beyond_the_allowed_wait_is_refused_with_its_start(rig):

@@ -109,7 +109,8 @@ def test_tracking_follows_the_star_on_the_sky_while_the_server_tracks(rig):
     d_dec = (st["radec"]["dec_deg"] - vega.dec_deg) * 3600
     assert math.hypot(d_ra, d_dec) < 15.0  # proper motion since 1991.25 is ~7"
     res = runner.invoke(app, ["stop", "--server", rig.url, "--json"])
-    assert res.exit_code == 0 and json.loads(res.stdout)["mount_state"] == "holding"
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["mount_state"] == "holding"
 
 
 def test_watch_prints_live_status_lines_and_park_stows_the_mount_with_drives_off(rig):
