@@ -47,7 +47,7 @@ __all__ = [
 ]
 
 PARQUET_FORMAT = "virtualstar-recorder/1"
-DEFAULT_ROW_GROUP_ROWS = 1 << 18  # ≈ 4.4 min at 1 kHz: big for zstd, small for a 2-s query
+DEFAULT_ROW_GROUP_ROWS = 1 << 16  # ≈ 65 s at 1 kHz: big enough for zstd (+0.4 % vs 4×), fast 2-s queries
 DEFAULT_ZSTD_LEVEL = 3
 HOUR_US = 3_600_000_000
 OVERVIEW_BUCKET_US = 1_000_000
