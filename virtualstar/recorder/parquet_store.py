@@ -89,6 +89,7 @@ class ParquetStoreWriter:
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="parquet-writer")
         self._pending: list[Future[None]] = []
         self._open: dict[str, tuple[int, pq.ParquetWriter, Path]] = {}
+        self._overview_parts: list[pa.Table] = []  # this hour's 1-s envelope, written at its end
         self._closed = False
 
     # -- session -------------------------------------------------------------------------
@@ -216,9 +217,9 @@ class ParquetStoreWriter:
         table = pa.Table.from_arrays(columns, schema=self._schema)
         self._writer("samples", hour, self._schema).write_table(table, row_group_size=len(t_us))
         self.rows_written += len(t_us)
-        self._write_overview(hour, table)
+        self._overview_parts.append(self._overview_table(table))
 
-    def _write_overview(self, hour: int, table: pa.Table) -> None:
+    def _overview_table(self, table: pa.Table) -> pa.Table:
         assert self._overview_schema is not None
         names = [s.name for s in self.signals]
         env = envelope(table.column("t_us").to_numpy(),
@@ -226,14 +227,23 @@ class ParquetStoreWriter:
         arrays: list[Any] = [pa.array(env.t_us, pa.int64()), pa.array(env.n, pa.int64())]
         for n in names:
             arrays += [pa.array(env.mins[n]), pa.array(env.maxs[n])]
-        ov = pa.Table.from_arrays(arrays, schema=self._overview_schema)
-        self._writer("overview", hour, self._overview_schema).write_table(ov)
+        return pa.Table.from_arrays(arrays, schema=self._overview_schema)
+
+    def _write_overview(self, hour: int) -> None:
+        """Write the hour's 1-s envelope as one row group (it is small: 3600 rows)."""
+        if self._overview_parts:
+            assert self._overview_schema is not None
+            table = pa.concat_tables(self._overview_parts)
+            self._overview_parts = []
+            self._writer("overview", hour, self._overview_schema).write_table(table)
 
     def _writer(self, kind: str, hour: int, schema: pa.Schema) -> pq.ParquetWriter:
         current = self._open.get(kind)
         if current is not None and current[0] == hour:
             return current[1]
         if current is not None:
+            if kind == "samples":
+                self._write_overview(current[0])
             self._close_one(kind)
         final = self.path / kind / f"{_hour_label(hour)}-{self.session}.parquet"
         temp = final.with_name(final.name + ".inprogress")
@@ -261,6 +271,8 @@ class ParquetStoreWriter:
             self.files.append(final)
 
     def _close_all(self) -> None:
+        if "samples" in self._open:
+            self._write_overview(self._open["samples"][0])
         for kind in list(self._open):
             self._close_one(kind)
 
@@ -298,34 +310,53 @@ class ParquetStoreReader:
             hint = (" (a recording is still writing it: *.inprogress files are finished at the "
                     "end of each hour)" if any((self.path / "samples").glob("*.inprogress")) else "")
             raise EmptyStore(f"{self.path} holds no sample files (samples/*.parquet){hint}")
+        self._signals: list[SignalInfo] | None = None
+
+    def _read_schema(self, files: list[Path]) -> pa.Schema:
         try:
-            schemas = [pq.read_schema(f) for f in self.sample_files]
-            self.schema = pa.unify_schemas(schemas)
+            return pa.unify_schemas([pq.read_schema(f) for f in files])
         except (OSError, pa.ArrowInvalid) as exc:
             raise StoreError(f"cannot read the Parquet files of {self.path}: {exc}") from None
-        self._dataset: ds.Dataset | None = None
 
     @property
-    def dataset(self) -> ds.Dataset:
-        if self._dataset is None:
-            self._dataset = ds.dataset([str(f) for f in self.sample_files], schema=self.schema,
-                                       format="parquet")
-        return self._dataset
+    def schema(self) -> pa.Schema:
+        """Return the store's columns: t_us and every signal (from recording.json)."""
+        fields = [pa.field("t_us", pa.int64())]
+        fields += [pa.field(s.name, pa.from_numpy_dtype(np.dtype(s.dtype)),
+                            metadata={"unit": s.unit}) for s in self.signals()]
+        return pa.schema(fields)
 
     def signals(self) -> list[SignalInfo]:
         """Return the recorded signals with their units and dtypes."""
-        out = []
-        for f in self.schema:
-            if f.name == "t_us":
-                continue
-            unit = (f.metadata or {}).get(b"unit", b"").decode()
-            out.append(SignalInfo(f.name, unit, np.dtype(f.type.to_pandas_dtype()).name))
-        return out
+        if self._signals is None:
+            listed = self.meta.get("signals")
+            if listed:
+                self._signals = [SignalInfo(d["name"], d.get("unit", ""), d.get("dtype", "float64"))
+                                 for d in listed]
+            else:  # no recording.json: ask the files themselves
+                self._signals = [
+                    SignalInfo(f.name, (f.metadata or {}).get(b"unit", b"").decode(),
+                               np.dtype(f.type.to_pandas_dtype()).name)
+                    for f in self._read_schema(self.sample_files) if f.name != "t_us"]
+        return self._signals
+
+    def _files(self, files: list[Path], from_t_us: int, to_t_us: int) -> list[Path]:
+        """Return the files whose hour (from their name) overlaps [from, to)."""
+        keep = []
+        for f in files:
+            hour = _hour_of(f)
+            if hour is None or (hour * HOUR_US < to_t_us and (hour + 1) * HOUR_US > from_t_us):
+                keep.append(f)
+        return keep
 
     def time_range(self) -> tuple[int, int]:
         """Return (first, last) sample time in the store, µs."""
         lo, hi = None, None
+        hours = [h for h in map(_hour_of, self.sample_files) if h is not None]
+        ends = ({min(hours), max(hours)} if len(hours) == len(self.sample_files) else None)
         for f in self.sample_files:
+            if ends is not None and _hour_of(f) not in ends:
+                continue  # an hourly file lies between the first and the last hour's
             md = pq.ParquetFile(f).metadata
             for i in range(md.num_row_groups):
                 st = md.row_group(i).column(0).statistics
@@ -342,7 +373,7 @@ class ParquetStoreReader:
         return sum(pq.ParquetFile(f).metadata.num_rows for f in self.sample_files)
 
     def _names(self, names: list[str] | None) -> list[str]:
-        have = [f.name for f in self.schema if f.name != "t_us"]
+        have = [s.name for s in self.signals()]
         if not names:
             return have
         unknown = [n for n in names if n not in have]
@@ -355,7 +386,9 @@ class ParquetStoreReader:
         """Return every sample with from_t_us <= t_us < to_t_us, sorted by time."""
         names = self._names(names)
         flt = (ds.field("t_us") >= from_t_us) & (ds.field("t_us") < to_t_us)
-        table = self.dataset.to_table(columns=["t_us", *names], filter=flt)
+        files = self._files(self.sample_files, from_t_us, to_t_us)
+        dataset = ds.dataset([str(f) for f in files], schema=self.schema, format="parquet")
+        table = dataset.to_table(columns=["t_us", *names], filter=flt)
         t = table.column("t_us").to_numpy()
         cols = {n: table.column(n).to_numpy(zero_copy_only=False) for n in names}
         if len(t) > 1 and np.any(np.diff(t) < 0):
@@ -382,7 +415,11 @@ class ParquetStoreReader:
             return envelope(block.t_us, block.columns, bucket_us, from_t_us)
         bucket_us = -(-bucket_us // OVERVIEW_BUCKET_US) * OVERVIEW_BUCKET_US
         cols = ["t_us", "n"] + [f"{n}__{m}" for n in names for m in ("min", "max")]
-        ov = ds.dataset([str(f) for f in self.overview_files], format="parquet")
+        ov_files = self._files(self.overview_files, from_t_us, to_t_us)
+        if not ov_files:
+            return rebucket(envelope(np.empty(0, np.int64), {n: np.empty(0) for n in names},
+                                     OVERVIEW_BUCKET_US), bucket_us)
+        ov = ds.dataset([str(f) for f in ov_files], format="parquet")
         lo = from_t_us // OVERVIEW_BUCKET_US * OVERVIEW_BUCKET_US
         table = ov.to_table(columns=cols, filter=(ds.field("t_us") >= lo)
                             & (ds.field("t_us") < to_t_us))
@@ -418,6 +455,15 @@ class ParquetStoreReader:
                     else:
                         cols[n] = np.full(len(t), np.nan)
                 yield SampleBlock(t, cols)
+
+
+def _hour_of(path: Path) -> int | None:
+    """Return the mount-time hour (hours since 1970) in a file's name, None if it has none."""
+    try:
+        when = datetime.strptime(path.name[:12], "%Y%m%dT%HZ").replace(tzinfo=UTC)
+    except ValueError:
+        return None
+    return int(when.timestamp()) // 3600
 
 
 def _first_t(path: Path) -> int:
