@@ -66,7 +66,7 @@ def test_a_pass_through_the_zenith_is_tracked_to_its_end_through_the_keyhole(zen
         time.sleep(0.05)
     op = call_server(rig.url, "wait")  # the track ends at set, then the mount comes to rest
     assert op["phase"] == "done", op
-    assert op["info"]["ended"] == "the path ended"
+    assert op["info"]["ended"] == "the pass ended"
     assert op["info"]["tracking_rms_arcsec"] < 2.0
     assert len(samples) >= 10
     t_us, az, el, az_err, el_err, ref_az, ref_el = (np.array(c) for c in zip(*samples,

@@ -62,7 +62,7 @@ from .feeder import Feeder, FeederConfig
 from .mount_link import MountLink
 from .timesync import TimeSync
 from .tracking_errors import TrackingErrorHistory
-from .trajectories import RampIn, TargetPath, plan_satellite_pass
+from .trajectories import RampIn, RampOut, TargetPath, plan_satellite_pass
 
 __all__ = ["Operation", "Telescope", "TelescopeConfig"]
 
@@ -190,9 +190,17 @@ class Telescope:
                 self._abort(MountUnavailable("lost the connection to the mount"))
 
     async def _on_connected(self) -> None:
+        for attempt in range(5):  # a loaded host may time a first request out: try again
+            try:
+                await self._read_limits()
+                await self._start_error_stream()
+                break
+            except VssError as exc:
+                log.warning("after connecting (attempt %d): %s", attempt + 1, exc)
+                await asyncio.sleep(0.2)
+                if not self.link.connected:
+                    return
         try:
-            await self._read_limits()
-            await self._start_error_stream()
             if self._resume is not None and self.active:
                 resume, self._resume = self._resume, None
                 op = await resume()
@@ -456,7 +464,7 @@ class Telescope:
             await self.link.call("traj_init")
             fcfg = FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=cfg.feed_lead_s,
                                 min_lead_s=min(0.5, lead / 2), speed=cfg.speed)
-            feeder = Feeder(self.link, fcfg, _Until(ramp, end_us), ramp.begin_us,
+            feeder = Feeder(self.link, fcfg, ramp, ramp.begin_us,
                             fault_code=self.codes["fault"], tracking_code=self.codes["tracking"])
             await feeder.cycle()
             if feeder.stats.rejected or feeder.stats.first_point_us != ramp.begin_us:
@@ -489,27 +497,28 @@ class Telescope:
                 "landing_rms_arcsec": s.rms_arcsec, "landing_peak_arcsec": s.peak_arcsec,
                 "slew_from_us": slew_start_us, "landed_us": join_us}
 
-    async def _run_feeder_until(self, op: Operation, feeder: Feeder, end_us: int | None) -> str:
-        """Let the feeder run until its path ends or the mount clock reaches `end_us`."""
+    async def _run_feeder_until(self, op: Operation, feeder: Feeder, end_us: int | None,
+                                end_reason: str = "duration elapsed") -> str:
+        """Let the feeder run until the mount clock reaches `end_us` or the path ends."""
         task = feeder.task
         reason = ""
         try:
             while not reason:
+                now = await self.mount_time_us()
+                if end_us is not None and now >= end_us:
+                    reason = end_reason
+                    break
                 if task.done():
                     exc = task.exception()
                     if isinstance(exc, TargetUnreachable):
                         reason = f"the target left the limits: {exc}"
                     elif exc is not None:
                         raise exc
-                    else:
+                    elif end_us is None:
                         reason = "the path ended"
-                    # let the points already buffered play out
-                    await self.wait_until(feeder.stats.last_point_us - 200_000)
-                    break
-                now = await self.mount_time_us()
-                if end_us is not None and now >= end_us:
-                    reason = "duration elapsed"
-                    break
+                    if reason:  # let the points already buffered play out
+                        await self.wait_until(feeder.stats.last_point_us - 200_000)
+                        break
                 op.info["feeder"] = feeder.stats.as_dict()
                 await asyncio.sleep(min(0.25, max(0.01, 1.0 / self.config.speed)))
         finally:
@@ -630,12 +639,14 @@ class Telescope:
                             "keyhole_max_error_arcsec": plan.keyhole_max_error_arcsec,
                             "max_az_rate_deg_s": plan.max_az_rate_deg_s})
             self._phase(op, "pass planned")
-            join, feeder = await self._acquire_and_follow(op, plan.path, slew_start_us=now,
+            # run out to rest after set, and hold: stopping a little late costs nothing
+            path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.speed))
+            join, feeder = await self._acquire_and_follow(op, path, slew_start_us=now,
                                                           join_us=begin, end_us=set_us,
                                                           phase="waiting")
             self._begun(op)
             self._phase(op, "tracking", tracking_from_us=join)
-            reason = await self._run_feeder_until(op, feeder, set_us)
+            reason = await self._run_feeder_until(op, feeder, set_us, "the pass ended")
             track_to = await self.mount_time_us()
             await self._halt()
             s = self.errors.stats(join, track_to)
@@ -734,18 +745,6 @@ class Telescope:
                                   site.height_m, float(xp[0]), float(yp[0]), site.pressure_hpa,
                                   site.temperature_c, site.humidity, site.wavelength_um)
         return math.degrees(float(ra)) % 360.0, math.degrees(float(dec))
-
-
-class _Until:
-    """A path cut at `end_us` (None: as long as the path goes)."""
-
-    def __init__(self, path, end_us: int | None) -> None:
-        self.path = path
-        ends = [e for e in (path.end_us, end_us) if e is not None]
-        self.end_us = min(ends) if ends else None
-
-    def sample(self, t_us: np.ndarray):
-        return self.path.sample(t_us)
 
 
 def _iso(t_us: int) -> str:

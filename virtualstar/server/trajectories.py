@@ -38,6 +38,7 @@ __all__ = [
     "Path",
     "Points",
     "RampIn",
+    "RampOut",
     "TablePath",
     "TargetPath",
     "observed_to_encoder",
@@ -190,6 +191,40 @@ class RampIn:
             tail = self.path.sample(t[late])
             pos[late, 0], pos[late, 1] = tail.az_rad, tail.el_rad
             vel[late, 0], vel[late, 1] = tail.az_rate_rad_s, tail.el_rate_rad_s
+        return Points(t, pos[:, 0], pos[:, 1], vel[:, 0], vel[:, 1])
+
+
+class RampOut:
+    """A finite path followed by a constant-deceleration run-out to rest, then a hold.
+
+    The mount is told to stop while it is still running out or holding, never after its
+    buffer ran dry: a late stop on a slow host costs nothing.
+    """
+
+    def __init__(self, path: Path, duration_s: float, hold_s: float) -> None:
+        if path.end_us is None:
+            raise ValueError("only a finite path can run out")
+        self.path = path
+        self.stop_us = int(path.end_us)
+        self.duration_s = duration_s
+        self.end_us = self.stop_us + int(round((duration_s + hold_s) * 1e6))
+        e = path.sample(np.array([self.stop_us], np.int64))
+        self._p = np.array([e.az_rad[0], e.el_rad[0]])
+        self._v = np.array([e.az_rate_rad_s[0], e.el_rate_rad_s[0]])
+
+    def sample(self, t_us: np.ndarray) -> Points:
+        t = np.asarray(t_us, np.int64)
+        early = t <= self.stop_us
+        if early.all():
+            return self.path.sample(t)
+        dt = np.clip((t - self.stop_us) * 1e-6, 0.0, self.duration_s)[:, None]
+        dec = self._v / self.duration_s
+        pos = self._p + self._v * dt - 0.5 * dec * dt**2
+        vel = self._v - dec * dt
+        if early.any():
+            head = self.path.sample(t[early])
+            pos[early, 0], pos[early, 1] = head.az_rad, head.el_rad
+            vel[early, 0], vel[early, 1] = head.az_rate_rad_s, head.el_rate_rad_s
         return Points(t, pos[:, 0], pos[:, 1], vel[:, 0], vel[:, 1])
 
 
