@@ -88,6 +88,7 @@ def test_window_query_returns_exactly_the_half_open_interval(tmp_path):
     got = reader.window(a, b, ["counter"])
     np.testing.assert_array_equal(got.columns["counter"], block.columns["counter"][1234:5678])
     assert got.names == ["counter"]
+    assert len(reader.window(START_US - 7_200_000_000, START_US - 3_600_000_000)) == 0
     with pytest.raises(QueryError, match="unknown signal.*holds"):
         reader.window(a, b, ["nope"])
 
