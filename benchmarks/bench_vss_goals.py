@@ -63,7 +63,7 @@ async def run() -> dict:
             await vs.request("track", {"tle": tle, "sat": "ISS"})
             op = await vs.request("wait", {})
             i = op["info"]
-            phases["satellite"] = (i["tracking_from_us"], i["tracking_to_us"] - 500_000,
+            phases["satellite"] = (i["tracking_from_us"], min(i["tracking_to_us"], i["pass_end_us"]),
                                    i["culmination_el_deg"])
     finally:
         await stream.stop()

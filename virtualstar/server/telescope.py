@@ -647,7 +647,7 @@ class Telescope:
             self._begun(op)
             self._phase(op, "tracking", tracking_from_us=join)
             reason = await self._run_feeder_until(op, feeder, set_us, "the pass ended")
-            track_to = await self.mount_time_us()
+            track_to = min(await self.mount_time_us(), set_us)  # not the run-out after set
             await self._halt()
             s = self.errors.stats(join, track_to)
             return {"ended": reason, "tracking_to_us": track_to, "tracking_rms_arcsec": s.rms_arcsec,
