@@ -101,6 +101,9 @@ class TypeSpec:
         if self.shape is None and self.base in NUMERIC_DTYPES:
             if self.base == "bool":
                 return bool(value)
+            if self.base == "f32":
+                # a device may back an f32 by float64 state: send what a stream packs
+                return float(np.float32(value))
             if self.base[0] == "f":
                 return float(value)
             return int(value)

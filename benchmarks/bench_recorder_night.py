@@ -8,7 +8,9 @@ figure is printed beside a reference measured in the same run:
     written as CSV and scaled to the whole run);
   * 2-s window — reading the whole hourly file that holds the window with pyarrow;
   * overview — min/max computed from every sample (the whole store read block by block);
-  * wall time — the bare compiled emulator step for the same ticks, without streams.
+  * wall time — the bare compiled emulator step tracking the same sine for 10 M ticks
+    (scaled to the run), without streams, then with the per-tick trace of the 3 recorded
+    columns in the endpoint's full-width trace array and in a 3-column array.
 
     .venv/bin/python benchmarks/bench_recorder_night.py [--hours 12] [--out DIR]
 """
@@ -42,6 +44,60 @@ def _size(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
+def _step_references(exp: SineExperiment, ticks: int) -> dict[str, float]:
+    """Return seconds for `ticks` ticks of the bare step tracking `exp` (10 M ticks, scaled).
+
+    Without a trace; with the 3 recorded columns traced per tick into an array as wide as
+    the emulator's trace (what `MountEmulator.advance` hands the endpoint); into 3 columns.
+    """
+    import math
+
+    from mount_emulator import EmulatorConfig, MountEmulator
+    from mount_emulator import layout as L
+    from virtualstar.recorder.experiment import BLOCK_TICKS, commanded_position
+
+    emu = MountEmulator(EmulatorConfig(speed=0.0, start_us=exp.start_us,
+                                       az_deg=math.degrees(exp.start_rad),
+                                       el_deg=exp.other_axis_deg))
+    model = emu.model
+    model.power_on()
+    model.run(200)
+    model.traj_init()
+    t0 = model.mount_time_us + 200_000
+    last = [t0 - 100_000]
+
+    def push() -> None:
+        while last[0] < model.mount_time_us + 200_000_000:
+            t = last[0] + 100_000 + np.arange(1000, dtype=np.int64) * 100_000
+            p, r = commanded_position(exp, t, t0)
+            model.traj_push(t, p, np.full(len(t), math.radians(exp.other_axis_deg)), r,
+                            np.zeros(len(t)))
+            last[0] = int(t[-1])
+
+    push()
+    model.traj_start()
+    src = np.array([L.STATE_INDEX[n] for n in exp.names], dtype=np.int64)
+    width = emu.collection.trace_width
+    wide_dst = np.array([emu.collection.variable(n).trace_column for n in exp.names],
+                        dtype=np.int64)
+    narrow_dst = np.arange(len(src), dtype=np.int64)
+    n_blocks = 10_000_000 // BLOCK_TICKS
+    out = {}
+    for label, cols, dst in (("bare", 0, None), ("wide", width, wide_dst),
+                             ("narrow", len(src), narrow_dst)):
+        s = time.perf_counter()
+        for _ in range(n_blocks):
+            if dst is None:
+                model.run(BLOCK_TICKS)
+            else:
+                model.run(BLOCK_TICKS, np.empty((BLOCK_TICKS, cols)), src, dst)
+            if model.mount_time_us + 100_000_000 > last[0]:
+                push()
+        out[label] = (time.perf_counter() - s) * ticks / (n_blocks * BLOCK_TICKS)
+    assert model.state[L.G_TRAJ_UNDERRUNS] == 0
+    return out
+
+
 def _row(what: str, ours: str, goal: str, reference: str) -> None:
     print(f"{what:<26} {ours:>14} {goal:>12}   {reference}")
 
@@ -70,7 +126,8 @@ def main() -> None:
         n = reader.count()
         names = reader.signals()
         store_bytes = _size(store)
-        raw_bytes = n * (8 + 8 * len(names))
+        raw_bytes = n * (8 + sum(np.dtype(s.dtype).itemsize for s in names))
+        raw64_bytes = n * (8 + 8 * len(names))
         t0, t1 = reader.time_range()
 
         # CSV reference: the first hour (or the whole run if shorter), scaled to the run
@@ -110,15 +167,8 @@ def main() -> None:
         full_max = max(float(np.max(p.maxs[names[1].name])) for p in parts)
         assert np.isclose(float(np.max(env.maxs[names[1].name])), full_max)
 
-        # where the time goes: the bare compiled step, no streams (10 M ticks, scaled)
-        from mount_emulator import MountModel
-
-        model = MountModel(start_us=0)
-        model.power_on()
-        model.run(10_000)
-        s = time.perf_counter()
-        model.run(10_000_000)
-        t_step = (time.perf_counter() - s) * result.ticks / 10_000_000
+        # where the time goes: the bare compiled step tracking the same sine, no streams
+        steps = _step_references(SineExperiment(hours=args.hours), result.ticks)
 
         rec = result.recording
         print(f"sine experiment: {args.hours:g} h simulated, {len(names)} signals at "
@@ -127,11 +177,14 @@ def main() -> None:
         print(f"{'':<26} {'ours':>14} {'goal':>12}   reference (same run)")
         _row("wall time", f"{result.wall_s:.1f} s", f"{GOAL_WALL_S / scale:.0f} s",
              f"emulator advance (step + stream sampling) {result.timings_s['emulator_step']:.1f} s "
-             f"[bare step alone ≈ {t_step:.1f} s], recorder/loop "
+             f"[bare tracking step ≈ {steps['bare']:.1f} s; with the 3 columns traced per tick "
+             f"≈ {steps['wide']:.1f} s in a full-width trace, {steps['narrow']:.1f} s in 3 columns], "
+             f"recorder/loop "
              f"{result.timings_s['loop'] - result.timings_s['emulator_step']:.1f} s, plots "
              f"{result.timings_s.get('plots', 0):.1f} s; ×{result.speed:.0f} real time")
         _row("store size", f"{store_bytes / 1e6:.1f} MB", f"{GOAL_STORE_BYTES / scale / 1e6:.0f} MB",
-             f"raw int64+float64 {raw_bytes / 1e6:.1f} MB, CSV ≈ {csv_bytes / 1e6:.1f} MB "
+             f"raw as streamed {raw_bytes / 1e6:.1f} MB (all float64: {raw64_bytes / 1e6:.1f} MB), "
+             f"CSV ≈ {csv_bytes / 1e6:.1f} MB "
              f"({store_bytes / n:.2f} B per row of t_us + {len(names)} values)")
         _row("peak memory (whole run)", f"{peak_rss / 1e6:.0f} MB", "bounded",
              f"the samples themselves: {raw_bytes / 1e6:.0f} MB raw")

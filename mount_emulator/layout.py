@@ -13,6 +13,13 @@ of ``AXIS_STRIDE`` slots each. Inside a block the per-axis constants (``A_*``
 for state, ``P_*`` for parameters) are offsets from the block start, so an axis
 slot is ``STATE_AXIS0 + axis * AXIS_STRIDE + A_POS``. Integers (states, bits,
 counters) are stored as float64 holding an exact integer.
+
+Every slot also carries its ASTCom wire type (`Slot.type`): positions, angles in
+rad, rates, times, ticks and parameters are ``f64``/``i64``; quantities the real
+controller *measures* (currents from its ADC, temperatures, voltages, powers and
+energies, torque from the current, the arcsecond error signals) are ``f32``, as a
+single-precision MCU reports them. The state array itself stays float64: the
+endpoint rounds to f32 when it reads or streams such a slot.
 """
 
 from __future__ import annotations
@@ -49,8 +56,9 @@ class Slot:
     unit: str
     doc: str
     default: float = 0.0
-    kind: str = "signal"  # signal (f64) | status (i64) | parameter (f64, rw)
+    kind: str = "signal"  # signal (f64 or f32) | status (i64) | parameter (f64, rw)
     traced: bool = False  # may be streamed per tick
+    type: str = "f64"  # ASTCom wire type: f64, f32 (measured quantities) or i64 (status)
 
 
 # ---------------------------------------------------------------- global state
@@ -354,16 +362,32 @@ _AXIS_PARAMS = [
     (P_FRIC_FF, "friction_ff", "N*m", "Coulomb friction feed-forward of the controller (an estimate)"),
 ]
 
+# Measured quantities, reported in single precision like the real MCU's ADC and sensor
+# readings (1e-7 relative, far below their noise); everything else keeps f64/i64.
+_MEASURED_GLOBAL = {"power.bus_voltage", "power.supply_power", "power.chopper_power",
+                    "power.regen_energy"}
+_MEASURED_AXIS = {"error_arcsec", "error_peak_arcsec", "load_error_arcsec", "twist_arcsec",
+                  "current", "current_cmd", "torque", "power", "temperature"}
+
 STATE_SIZE = STATE_AXIS0 + len(AXES) * AXIS_STRIDE
 PARAM_SIZE = PARAM_AXIS0 + len(AXES) * AXIS_STRIDE
 
 
+def _wire_type(kind: str, measured: bool) -> str:
+    if kind == "status":
+        return "i64"
+    return "f32" if measured else "f64"
+
+
 def _build_state_slots() -> list[Slot]:
-    slots = [Slot(n, i, u, d, kind=k, traced=k == "signal") for i, n, u, d, k in _GLOBAL_STATE]
+    slots = [Slot(n, i, u, d, kind=k, traced=k == "signal",
+                  type=_wire_type(k, n in _MEASURED_GLOBAL))
+             for i, n, u, d, k in _GLOBAL_STATE]
     for a, axis in enumerate(AXES):
         base = STATE_AXIS0 + a * AXIS_STRIDE
         slots += [
-            Slot(f"axis.{axis}.{n}", base + i, u, d, kind=k, traced=k == "signal")
+            Slot(f"axis.{axis}.{n}", base + i, u, d, kind=k, traced=k == "signal",
+                 type=_wire_type(k, n in _MEASURED_AXIS))
             for i, n, u, d, k in _AXIS_STATE
         ]
     return slots

@@ -64,7 +64,8 @@ def build_collection(emu: MountEmulator) -> tuple[Collection, dict[int, int]]:
             var = coll.add_variable(slot.name, "i64", unit=slot.unit, doc=slot.doc,
                                     get=lambda i=slot.index: int(state[i]), traced=True)
         else:
-            var = coll.add_slot(slot.name, state, slot.index, type="f64", unit=slot.unit,
+            # f32 slots stay float64 in the state array; the endpoint rounds on read/stream
+            var = coll.add_slot(slot.name, state, slot.index, type=slot.type, unit=slot.unit,
                                 doc=slot.doc, traced=True)
         column_to_state[var.trace_column] = slot.index
     for slot in L.PARAM_SLOTS:

@@ -243,3 +243,37 @@ def test_a_second_connection_can_carry_the_stream_alone_with_the_shared_message_
             assert endpoint.stats()["messages"] == 1  # ["wave.amplitude"] from the write
             await streamer.close()
     run(main())
+
+
+def test_an_f32_slot_backed_by_float64_state_reads_and_streams_in_single_precision() -> None:
+    from astcom_client import Client, Collection, Endpoint, EndpointConfig
+
+    async def main() -> None:
+        state = np.zeros(2)  # the device keeps float64, as the mount emulator does
+        coll = Collection()
+        coll.add_slot("a.position", state, 0, type="f64", traced=True)
+        coll.add_slot("a.current", state, 1, type="f32", unit="A", traced=True)
+        endpoint = Endpoint(coll, EndpointConfig(loop_rate_hz=1000.0, passwords=None))
+        client = await Client.open(endpoint.connect_in_memory())
+        try:
+            state[:] = [0.1, 0.1]
+            read = await client.read(["a.position", "a.current"])
+            both = await client.stream(["a.position", "a.current"], rate_hz=RATE_HZ)
+            alone = await client.stream(["a.current"], rate_hz=RATE_HZ)
+            trace = np.empty((40, 2))
+            trace[:, 0] = trace[:, 1] = 1.0 / 3.0 + np.arange(40) * 0.1
+            endpoint.publish(0, 0, 40, trace)
+            await settle()
+            mixed, single = await both.get(1.0), await alone.get(1.0)
+        finally:
+            await client.close()
+            await endpoint.close()
+        assert read["a.position"] == 0.1
+        assert read["a.current"] == float(np.float32(0.1)) != 0.1
+        expected = trace[:len(mixed.t_us), 1].astype(np.float32)
+        assert mixed.column("a.current").dtype == np.float32
+        assert mixed.column("a.current").tobytes() == expected.tobytes()
+        assert mixed.column("a.position").tobytes() == trace[:len(mixed.t_us), 0].tobytes()
+        assert single.values.dtype == np.float32
+        assert single.values[:, 0].tobytes() == expected.tobytes()
+    run(main())

@@ -22,6 +22,7 @@ from mount_emulator.cli import app
 from mount_emulator.config import EmulatorConfig
 from mount_emulator.emulator import MountEmulator
 from mount_emulator.geometry import Geometry
+from mount_emulator.model import MountModel
 
 BIN = Path(sys.executable).parent
 VSS_NAMES = [
@@ -61,6 +62,69 @@ def test_physical_quantities_are_registered_as_floats_not_integers():
     assert {"axis.az.target", "axis.el.manual_rate"} <= {i.name for i in physical}
     wrong = [(i.name, i.type) for i in physical if not i.type.startswith("f")]
     assert not wrong, wrong
+
+
+MEASURED_UNITS = {"A", "V", "W", "J", "degC", "arcsec", "N*m"}
+
+
+def test_measured_quantities_are_single_precision_and_positions_times_parameters_stay_double():
+    # The MCU reports ADC/sensor readings and arcsec errors as f32; angles, rates, times,
+    # ticks and parameters keep f64/i64 (docs/mount-emulator.md, "Wire types").
+    emu = MountEmulator(_config())
+    infos = {i.name: i for i in emu.collection.infos() if i.kind != "function"}
+    traced = [v for v in emu.collection if getattr(v, "trace_column", None) is not None]
+    measured = {v.name for v in traced if v.unit in MEASURED_UNITS}
+    assert {"axis.az.current", "axis.el.temperature", "power.bus_voltage", "power.supply_power",
+            "power.regen_energy", "axis.az.error_arcsec", "axis.el.load_error_arcsec"} <= measured
+    assert {v.name for v in traced if v.type == "f32"} == measured
+    doubles = {"rad", "rad/s", "rad/s^2", "deg", "deg/s", "us", "rad*s"}
+    wrong = [(v.name, v.type) for v in traced if v.unit in doubles and v.type == "f32"]
+    assert not wrong, wrong
+    assert infos["time.mount_us"].type == "i64" and infos["mount.tick"].type == "i64"
+    params = [i for i in infos.values() if i.kind == "parameter"]
+    assert len(params) > 80 and {i.type for i in params} == {"f64"}
+
+
+def test_f32_signals_read_and_stream_the_float64_state_rounded_to_single_precision():
+    names = ["axis.az.position", "axis.az.current", "axis.az.error_arcsec"]
+
+    async def main():
+        emu = MountEmulator(_config(speed=0.0))  # not started: we step it ourselves
+        emu.model.power_on()
+        emu.model.slew(math.radians(0.5), math.radians(20.2))
+        client = await Client.open(emu.endpoint.connect_in_memory())
+        try:
+            stream = await client.stream(names, rate_hz=1000.0)
+            first_tick = int(emu.model.state[0]) + 1
+            for _ in range(3):
+                emu.advance(400)
+            read = await client.read(names)
+            for _ in range(20):
+                await asyncio.sleep(0)
+            packet = await stream.get(2.0)
+        finally:
+            await client.close()
+            await emu.endpoint.close()
+        return first_tick, read, packet
+
+    first_tick, read, packet = asyncio.run(main())
+    # the truth: an identical model stepped directly, float64 state, no ASTCom involved
+    twin = MountModel(start_us=START_US, az_rad=0.0, el_rad=math.radians(20.0),
+                      params=MountEmulator(_config()).model.params)
+    twin.power_on()
+    twin.slew(math.radians(0.5), math.radians(20.2))
+    twin_record = twin.record(1200, names)
+    rows = packet.ticks - first_tick
+    truth = twin_record[rows]
+    assert packet.column("axis.az.position").dtype == np.float64
+    assert packet.column("axis.az.position").tobytes() == truth[:, 0].tobytes()
+    for j, name in enumerate(names[1:], start=1):
+        col = packet.column(name)
+        assert col.dtype == np.float32
+        assert col.tobytes() == truth[:, j].astype(np.float32).tobytes()
+    assert np.abs(truth[:, 1]).max() > 0.1  # the slew really drew current
+    assert read["axis.az.current"] == float(np.float32(twin_record[-1, 1]))
+    assert read["axis.az.position"] == twin_record[-1, 0]
 
 
 def test_a_fractional_slew_target_reads_back_unrounded():

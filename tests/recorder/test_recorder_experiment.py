@@ -6,6 +6,7 @@ import asyncio
 import math
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from virtualstar.recorder import ParquetStoreReader
@@ -55,6 +56,21 @@ def test_sine_experiment_position_follows_the_commanded_drifting_sine(run):
     assert np.abs(err - off_arcsec).max() < 0.01
     current = block.columns["axis.az.current"]
     assert np.isfinite(current).all() and np.abs(current).max() < 10.0  # below the limit
+
+
+def test_sine_experiment_stores_each_signal_in_the_type_the_emulator_streams(run):
+    from mount_emulator import layout
+
+    exp, result = run
+    wire = {s.name: s.type for s in layout.STATE_SLOTS}
+    # position in rad stays f64; motor current and the arcsec error are the MCU's f32
+    assert [wire[n] for n in exp.names] == ["f64", "f32", "f32"]
+    reader = ParquetStoreReader(result.store)
+    assert [s.dtype for s in reader.signals()] == ["float64", "float32", "float32"]
+    block = reader.window(0, 2**62)
+    assert [block.columns[n].dtype for n in exp.names] == [np.float64, np.float32, np.float32]
+    schema = pq.read_schema(reader.sample_files[0])
+    assert [str(schema.field(n).type) for n in exp.names] == ["double", "float", "float"]
 
 
 def test_sine_experiment_writes_both_figures(run):

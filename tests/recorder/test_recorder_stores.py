@@ -26,7 +26,9 @@ from virtualstar.recorder.timeparse import parse_time_bound
 
 SIGNALS = [SignalInfo("axis.az.position", "rad", "float64"),
            SignalInfo("axis.az.current", "A", "float64"),
+           SignalInfo("axis.az.error_arcsec", "arcsec", "float32"),  # the emulator's f32 wire type
            SignalInfo("counter", "", "int64")]
+F32 = np.finfo(np.float32)
 
 
 def _synthetic(n: int, period_us: int = 1000, seed: int = 1) -> SampleBlock:
@@ -36,7 +38,10 @@ def _synthetic(n: int, period_us: int = 1000, seed: int = 1) -> SampleBlock:
     pos = np.cumsum(rng.normal(0, 1e-6, n)) + rng.random(n) * 1e-12
     cur = rng.normal(0, 1, n)
     cur[:4] = [np.finfo(float).tiny, -0.0, 1e308, 5e-324]
+    err = rng.normal(0, 0.05, n).astype(np.float32)
+    err[:4] = [F32.tiny, -0.0, F32.max, F32.smallest_subnormal]
     return SampleBlock(t, {"axis.az.position": pos, "axis.az.current": cur,
+                           "axis.az.error_arcsec": err,
                            "counter": np.arange(n, dtype=np.int64) * 3 - 7})
 
 
@@ -78,6 +83,29 @@ def test_parquet_files_are_standard_and_use_the_compact_encodings(tmp_path):
     assert "DELTA_BINARY_PACKED" in encodings["counter"]
     assert "BYTE_STREAM_SPLIT" in encodings["axis.az.position"]
     assert col.column(0).compression == "ZSTD"
+
+
+def test_a_float32_signal_is_stored_as_float32_and_round_trips_bit_exactly(tmp_path):
+    block = _synthetic(70_000)
+    _write(tmp_path / "s", block, row_group_rows=30_000)
+    reader = ParquetStoreReader(tmp_path / "s")
+    name = "axis.az.error_arcsec"
+    assert {s.name: s.dtype for s in reader.signals()}[name] == "float32"
+    f = reader.sample_files[0]
+    assert str(pq.read_schema(f).field(name).type) == "float"  # arrow float32, not a widened copy
+    rg = pq.ParquetFile(f).metadata.row_group(0)
+    col = next(rg.column(i) for i in range(rg.num_columns) if rg.column(i).path_in_schema == name)
+    assert col.physical_type == "FLOAT"
+    assert "BYTE_STREAM_SPLIT" in col.encodings
+    back = reader.window(int(block.t_us[0]), int(block.t_us[-1]) + 1, [name])
+    assert back.columns[name].dtype == np.float32
+    assert back.columns[name].tobytes() == block.columns[name].tobytes()  # -0.0, subnormals
+    a = int(block.t_us[0]) // 1_000_000 * 1_000_000
+    env = reader.envelope(a, int(block.t_us[-1]) + 1, [name], buckets=7)  # from the 1-s overview
+    expected = _envelope_by_masks(block.t_us, block.columns[name], a, env.bucket_us)
+    assert env.mins[name].dtype == np.float32
+    np.testing.assert_array_equal(env.mins[name], [e[2] for e in expected])
+    np.testing.assert_array_equal(env.maxs[name], [e[3] for e in expected])
 
 
 def test_window_query_returns_exactly_the_half_open_interval(tmp_path):
@@ -156,6 +184,9 @@ def test_csv_and_mat_exports_keep_values_and_times_exact(tmp_path):
         data = list(csv.DictReader(f))
     assert [int(r["t_us"]) for r in data] == block.t_us.tolist()
     assert [float(r["axis.az.current"]) for r in data] == block.columns["axis.az.current"].tolist()
+    err = np.array([float(r["axis.az.error_arcsec"]) for r in data])  # the exact float32 values
+    assert err.astype(np.float32).tobytes() == block.columns["axis.az.error_arcsec"].tobytes()
+    np.testing.assert_array_equal(err, block.columns["axis.az.error_arcsec"])
     assert [int(r["counter"]) for r in data] == block.columns["counter"].tolist()
     write_mat(block, SIGNALS, tmp_path / "x.mat")
     mat = loadmat(tmp_path / "x.mat")
@@ -164,6 +195,9 @@ def test_csv_and_mat_exports_keep_values_and_times_exact(tmp_path):
     np.testing.assert_array_equal(mat[mat_name("axis.az.position")].ravel(),
                                   block.columns["axis.az.position"])
     np.testing.assert_array_equal(mat["counter"].ravel(), block.columns["counter"])
+    err_mat = mat[mat_name("axis.az.error_arcsec")].ravel()
+    assert err_mat.dtype == np.float32  # MATLAB single
+    assert err_mat.tobytes() == block.columns["axis.az.error_arcsec"].tobytes()
     assert [str(x[0]) for x in mat["names"].ravel()] == [s.name for s in SIGNALS]
 
 

@@ -346,6 +346,7 @@ class InfluxStoreReader:
     def __init__(self, conn: InfluxConnection) -> None:
         self.conn = conn
         self._fields: dict[str, str] | None = None
+        self._float_dtypes: dict[str, str] | None = None
 
     def _field_types(self) -> dict[str, str]:
         if self._fields is None:
@@ -369,6 +370,13 @@ class InfluxStoreReader:
             unit, dtype = units.get(name, ("", ""))
             out.append(SignalInfo(name, unit, dtype or ("int64" if ftype == "integer" else "float64")))
         return out
+
+    def _float_dtype(self, name: str) -> str:
+        """Return the recorded float dtype of `name` (float32 signals come back as float32)."""
+        if self._float_dtypes is None:
+            self._float_dtypes = {s.name: s.dtype for s in self.signals()
+                                  if s.dtype in ("float32", "float64")}
+        return self._float_dtypes.get(name, "float64")
 
     def _names(self, names: list[str] | None) -> list[str]:
         have = list(self._field_types())
@@ -409,7 +417,9 @@ class InfluxStoreReader:
             if types.get(n) == "integer":
                 cols[n] = np.array([r[j] for r in rows], dtype=np.int64)
             else:
-                cols[n] = np.array([np.nan if r[j] is None else r[j] for r in rows], dtype=np.float64)
+                # InfluxDB holds float64; a float32 signal's values are exact float32 values
+                cols[n] = np.array([np.nan if r[j] is None else r[j] for r in rows],
+                                   dtype=np.float64).astype(self._float_dtype(n))
         return SampleBlock(t, cols)
 
     def envelope(self, from_t_us: int, to_t_us: int, names: list[str] | None = None,
