@@ -12,9 +12,12 @@ app = typer.Typer(
 from virtualstar.cli import data as _data  # noqa: E402
 from virtualstar.cli import demo as _demo  # noqa: E402
 from virtualstar.cli import experiment as _experiment  # noqa: E402
+from virtualstar.cli import mode as _mode  # noqa: E402
+from virtualstar.cli import model as _model  # noqa: E402
 from virtualstar.cli import panel as _panel  # noqa: E402
 from virtualstar.cli import park as _park  # noqa: E402
 from virtualstar.cli import passes as _passes  # noqa: E402
+from virtualstar.cli import pointing_run as _pointing_run  # noqa: E402
 from virtualstar.cli import record as _record  # noqa: E402
 from virtualstar.cli import server as _server  # noqa: E402
 from virtualstar.cli import slew as _slew  # noqa: E402
@@ -36,6 +39,9 @@ app.command("stop")(_stop.stop)
 app.command("park")(_park.park)
 app.command("watch")(_watch.watch)
 app.command("demo")(_demo.demo)
+app.command("pointing-run")(_pointing_run.pointing_run)
+app.command("mode")(_mode.mode)
+app.add_typer(_model.app, name="model")
 app.add_typer(_data.app, name="data")
 app.add_typer(_experiment.app, name="experiment")
 

@@ -49,6 +49,11 @@ class TrackParams(TargetParams):
 
 
 @dataclass(frozen=True)
+class SampleParams(TargetParams):
+    settle_s: float = 2.0
+
+
+@dataclass(frozen=True)
 class StopParams:
     reset_faults: bool = False
 
@@ -209,6 +214,18 @@ def _satellite(tle: str, name: str | None):
         raise BadRequest(str(exc)) from None
 
 
+async def _pointing_sample(t: Telescope, p: SampleParams) -> Any:
+    target, name, fixed = parse_target({k: v for k, v in dataclasses.asdict(p).items()
+                                        if k != "settle_s"})
+    if fixed is not None:
+        from virtualstar.astro import FixedAltAz
+
+        target = FixedAltAz(fixed[0] % 360.0, fixed[1])
+    op = await t.pointing_sample(target, name, settle_s=p.settle_s)
+    done = await _result(op, wait_done=True)
+    return {"id": done["id"], **done["info"]["sample"]}
+
+
 async def _stop(t: Telescope, p: StopParams) -> Any:
     return await t.stop(reset_faults=p.reset_faults)
 
@@ -258,6 +275,10 @@ COMMANDS: dict[str, Command] = {
     "track": Command(TrackParams, _track, "Track a sky target or a satellite pass; answers "
                      "when tracking has begun (satellite: when the pass is planned), or at the "
                      "end with wait=true."),
+    "pointing_sample": Command(SampleParams, _pointing_sample, "Point at a target, hold, and "
+                               "measure the star's offset with the guide camera (needs the "
+                               "guide_measure role); answers with star, encoder, offset and "
+                               "on-axis places."),
     "stop": Command(StopParams, _stop, "Stop the operation, bring the mount to rest; "
                     "reset_faults=true also clears latched faults."),
     "reset_faults": Command(NoParams, _reset, "Stop and clear the mount's latched faults."),

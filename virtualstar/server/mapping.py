@@ -20,6 +20,7 @@ from .exceptions import MappingError
 __all__ = [
     "DEFAULT_MAPPING_NAME",
     "FUNCTION_ROLES",
+    "OPTIONAL_FUNCTION_ROLES",
     "OPTIONAL_SIGNAL_ROLES",
     "REQUIRED_SIGNAL_ROLES",
     "STATE_NAMES",
@@ -43,6 +44,8 @@ FUNCTION_ROLES = (
     "power_on", "power_off", "stop", "slew", "traj_init", "traj_start", "traj_reset",
     "traj_push", "time_sync", "reset_faults",
 )
+# A mount without a guide camera simply leaves this out; `pointing_sample` then says so.
+OPTIONAL_FUNCTION_ROLES = ("guide_measure",)
 STATE_NAMES = ("off", "holding", "slewing", "tracking", "manual", "stopping", "fault")
 
 
@@ -69,7 +72,14 @@ class RoleMapping:
         return role in self.signals
 
     def function(self, role: str) -> str:
-        return self.functions[role]
+        """Return the mount's name for a function role; raise MappingError if unmapped."""
+        try:
+            return self.functions[role]
+        except KeyError:
+            raise MappingError(f"{self.source}: no function mapped for role {role!r}") from None
+
+    def has_function(self, role: str) -> bool:
+        return role in self.functions
 
     def state_name(self, code: int) -> str:
         """Return the state name of a mount state code ("unknown(7)" if unmapped)."""
@@ -91,11 +101,11 @@ class RoleMapping:
         if missing:
             raise MappingError(f"{source}: roles missing: {', '.join(missing)}")
         unknown = sorted(set(signals) - set(REQUIRED_SIGNAL_ROLES) - set(OPTIONAL_SIGNAL_ROLES))
-        unknown += sorted(set(functions) - set(FUNCTION_ROLES))
+        unknown += sorted(set(functions) - set(FUNCTION_ROLES) - set(OPTIONAL_FUNCTION_ROLES))
         if unknown:
             raise MappingError(f"{source}: unknown roles {', '.join(unknown)}; valid signal roles: "
                                f"{', '.join(REQUIRED_SIGNAL_ROLES + OPTIONAL_SIGNAL_ROLES)}; "
-                               f"function roles: {', '.join(FUNCTION_ROLES)}")
+                               f"function roles: {', '.join(FUNCTION_ROLES + OPTIONAL_FUNCTION_ROLES)}")
         codes = doc.get("state_codes")
         if not isinstance(codes, dict) or any(n not in codes for n in STATE_NAMES):
             raise MappingError(f"{source}: 'state_codes' must give an integer for each of "

@@ -51,6 +51,7 @@ from virtualstar.astro.exceptions import AstroError
 
 from .exceptions import (
     BadRequest,
+    MappingError,
     MountFault,
     MountUnavailable,
     NotActive,
@@ -70,6 +71,7 @@ log = logging.getLogger("virtualstar.server")
 
 _STATUS_ROLES = ("az_position", "el_position", "az_state", "el_state", "az_faults", "el_faults",
                  "mount_state", "mount_time", "free_points")
+_SITE_KEYS = ("lat_deg", "lon_deg", "height_m", "pressure_hpa", "temperature_c", "humidity")
 _OPTIONAL_STATUS = ("az_fault_text", "el_fault_text", "buffered_points", "underruns",
                     "late_points")
 
@@ -590,6 +592,63 @@ class Telescope:
         m = self.link.mapping
         return await self.slew_altaz(m.park_az_deg, m.park_el_deg, kind="park", power_off=True)
 
+    async def pointing_sample(self, target, name: str, *, settle_s: float = 2.0) -> Operation:
+        """Point at a sky target, hold, and measure the star's offset with the guide camera.
+
+        The mount is sent to the target's observed place at the exposure instant
+        t_exp (through the pointing model, if one is loaded) and *held* there, so the
+        encoders and the star's place given to the camera refer to the same instant
+        however long the requests take. The result (`op.info["sample"]`) gives the
+        star's observed place, the encoders, the camera offset (star − optical axis,
+        ΔA·cos E and ΔE, arcsec) and the sky place on the optical axis, which is what
+        a TPOINT record pairs with the encoders (docs/vss-api.md). Raises MappingError
+        when the mount has no guide camera (no `guide_measure` role).
+        """
+        if not self.link.mapping.has_function("guide_measure"):
+            raise MappingError(f"{self.link.mapping.source}: no 'guide_measure' function role: "
+                               "this mount has no guide camera, so pointing samples cannot be "
+                               "measured (map it to the camera's measure(star_az_deg, "
+                               "star_el_deg) -> [dx_arcsec, dy_arcsec] function)")
+        if not settle_s >= 0:
+            raise BadRequest(f"settle_s={settle_s}: expected >= 0 mount seconds")
+        cfg = self.config
+
+        async def body(op: Operation) -> dict[str, Any]:
+            await self._prepare()
+            az0, el0, start = await self._positions()
+            # where the star will be when the mount has landed and settled
+            o = observe_mount_times(target, np.array([start], np.int64), cfg.site, self._eop)
+            slew_s = plan_slew(az0, el0, float(o.az_rad[0]), float(o.el_rad[0]),
+                               self.limits).duration_s
+            t_exp = start + int((slew_s * 1.05 + 1.0 + settle_s) * 1e6)
+            o = observe_mount_times(target, np.array([t_exp], np.int64), cfg.site, self._eop)
+            star_az, star_el = math.degrees(float(o.az_rad[0])) % 360.0, math.degrees(float(o.el_rad[0]))
+            if not self.limits.el_min_deg <= star_el <= self.limits.el_max_deg:
+                raise TargetUnreachable(f"{name} is at elevation {star_el:.2f} deg, outside the "
+                                        f"limits {self.limits.el_min_deg:g}..{self.limits.el_max_deg:g} deg")
+            enc = TargetPath(FixedAltAz(star_az, star_el), cfg.site, limits=self.limits,
+                             eop=self._eop, model=self.model,
+                             current_az_rad=az0).sample(np.array([t_exp], np.int64))
+            await self._goto(op, float(enc.az_rad[0]), float(enc.el_rad[0]))
+            now = await self.mount_time_us()
+            await self.wait_until(max(now + int(settle_s * 1e6), t_exp), op)
+            v = await self.link.read(["az_position", "el_position", "mount_time"])
+            dx, dy = (float(x) for x in await self.link.call("guide_measure", star_az, star_el))
+            enc_az, enc_el = math.degrees(float(v["az_position"])), math.degrees(float(v["el_position"]))
+            # the sky place on the optical axis: the star minus its offset from the axis
+            axis_el = star_el - dy / 3600.0
+            axis_az = star_az - dx / 3600.0 / math.cos(math.radians(star_el))
+            return {"sample": {
+                "target": name, "slew_time_s": (now - start) / 1e6, "t_exp_us": t_exp, "utc": _iso(t_exp),
+                "measured_us": int(v["mount_time"]),
+                "star": {"az_deg": star_az, "el_deg": star_el},
+                "encoder": {"az_deg": enc_az, "el_deg": enc_el},
+                "offset_arcsec": {"dx": dx, "dy": dy, "total": math.hypot(dx, dy)},
+                "axis": {"az_deg": axis_az, "el_deg": axis_el},
+                "pointing_model": self.model_source or None}}
+
+        return await self.run_operation("pointing_sample", name, body)
+
     async def track_satellite(self, sat: Satellite, *, max_wait_s: float | None = None) -> Operation:
         """Wait for the next pass of `sat` above the horizon limit and track it through."""
         cfg = self.config
@@ -701,6 +760,7 @@ class Telescope:
                                "mode": "active" if self.active else "passive",
                                "simulated": self.config.simulated, "speed": self.config.speed,
                                "pointing_model": self.model_source or None,
+                               "site": {k: getattr(self.config.site, k) for k in _SITE_KEYS},
                                "operation": self.op.as_dict() if self.op else None,
                                "last_fault": self.last_fault or None,
                                "time_sync": self.timesync.status.as_dict(),
