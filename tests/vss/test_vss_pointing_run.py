@@ -130,3 +130,19 @@ def test_pointing_run_refuses_bad_arguments_with_the_reason(hidden, args, messag
     res = runner.invoke(app, ["pointing-run", *args, "--server", rig.url])
     assert res.exit_code == 2, res.output
     assert message in res.output
+
+
+def test_passive_mode_refuses_pointing_samples_and_a_star_below_the_limit_is_unreachable(hidden):
+    rig, _ = hidden
+    assert vs("mode", "passive", "--server", rig.url) == {"mode": "passive"}
+    try:
+        with pytest.raises(VssRequestError) as err:
+            call_server(rig.url, "pointing_sample", {"star": "Vega"})
+        assert err.value.code == "passive"
+    finally:
+        assert vs("mode", "active", "--server", rig.url) == {"mode": "active"}
+    with pytest.raises(VssRequestError) as err:
+        call_server(rig.url, "pointing_sample", {"az_deg": 10.0, "el_deg": 2.0})
+    assert err.value.code == "unreachable" and "elevation 2.00" in err.value.message
+    res = runner.invoke(app, ["mode", "sleepy", "--server", rig.url])
+    assert res.exit_code == 2 and "sleepy" in res.output
