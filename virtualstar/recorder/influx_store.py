@@ -19,20 +19,18 @@ import base64
 import json
 import logging
 import os
-import secrets
 import tempfile
 import time
 import urllib.error
 import urllib.parse
 import urllib.request
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .background import BackgroundWriter, new_session_id
 from .decimation import Envelope
 from .exceptions import EmptyStore, InfluxError, QueryError, StoreError
 from .samples import Gap, SampleBlock, SignalInfo
@@ -187,6 +185,12 @@ class InfluxConnection:
         return True
 
 
+def _write_error(exc: BaseException) -> BaseException:
+    if isinstance(exc, StoreError | InfluxError):
+        return exc
+    return StoreError(f"writing to InfluxDB failed: {exc}")
+
+
 class InfluxStoreWriter:
     """Write a recording session to InfluxDB in batches, spooling to disk while it is down.
 
@@ -208,8 +212,7 @@ class InfluxStoreWriter:
         self.spooled_batches = 0
         self.rejected: list[Path] = []
         self._lines: list[str] = []
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="influx-writer")
-        self._pending: list[Future[None]] = []
+        self._thread = BackgroundWriter("influx-writer", MAX_PENDING_BATCHES, _write_error)
         self._next_retry = 0.0
         self._database_ready = False
         self._closed = False
@@ -222,7 +225,7 @@ class InfluxStoreWriter:
               period_us: float = 0.0) -> str:
         """Start a session; describe the signals in recorder_signals. Never raises when down."""
         self.signals = list(signals)
-        self.session = datetime.now(UTC).strftime("%Y%m%dT%H%M%S") + "-" + secrets.token_hex(3)
+        self.session = new_session_id()
         now_us = time.time_ns() // 1000
         for s in self.signals:
             self._lines.append(
@@ -248,7 +251,7 @@ class InfluxStoreWriter:
     def flush(self) -> None:
         """Hand over what is queued and wait until it is written or spooled."""
         self._submit()
-        self._wait(0)
+        self._thread.wait(0)
 
     def close(self) -> None:
         """Write the rest; try the spool for `close_drain_s`; what stays is reported, not lost."""
@@ -257,10 +260,10 @@ class InfluxStoreWriter:
         self._closed = True
         try:
             self._submit()
-            self._pending.append(self._pool.submit(self._final_drain))
-            self._wait(0)
+            self._thread.submit(self._final_drain)
+            self._thread.wait(0)
         finally:
-            self._pool.shutdown(wait=True)
+            self._thread.shutdown()
         left = self.spooled_files()
         if left:
             log.warning("InfluxDB at %s unreachable: %d batch file(s) stay in %s and will be "
@@ -276,15 +279,7 @@ class InfluxStoreWriter:
         payload = ("\n".join(self._lines) + "\n").encode()
         n = len(self._lines)
         self._lines = []
-        self._wait(MAX_PENDING_BATCHES - 1)
-        self._pending.append(self._pool.submit(self._deliver, payload, n))
-
-    def _wait(self, keep: int) -> None:
-        while len(self._pending) > keep:
-            exc = self._pending.pop(0).exception()
-            if exc is not None:
-                raise exc if isinstance(exc, StoreError | InfluxError) else StoreError(
-                    f"writing to InfluxDB failed: {exc}")
+        self._thread.submit(self._deliver, payload, n)
 
     # -- the writer thread ---------------------------------------------------------------
     def _try(self, payload: bytes) -> bool:

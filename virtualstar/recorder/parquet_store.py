@@ -22,8 +22,6 @@ import contextlib
 import csv
 import json
 import os
-import secrets
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
@@ -34,6 +32,7 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
+from .background import BackgroundWriter, new_session_id
 from .decimation import Envelope, envelope, rebucket
 from .exceptions import EmptyStore, QueryError, StoreError
 from .samples import Gap, SampleBlock, SignalInfo
@@ -86,8 +85,7 @@ class ParquetStoreWriter:
         self._buffer: list[SampleBlock] = []
         self._buffered = 0
         self._hour: int | None = None
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="parquet-writer")
-        self._pending: list[Future[None]] = []
+        self._thread = BackgroundWriter("parquet-writer", MAX_PENDING_FLUSHES, self._store_error)
         self._open: dict[str, tuple[int, pq.ParquetWriter, Path]] = {}
         self._overview_parts: list[pa.Table] = []  # this hour's 1-s envelope, written at its end
         self._closed = False
@@ -97,7 +95,7 @@ class ParquetStoreWriter:
               period_us: float = 0.0) -> str:
         """Start a session of `signals`; return its id. Raises StoreError."""
         self.signals = list(signals)
-        self.session = datetime.now(UTC).strftime("%Y%m%dT%H%M%S") + "-" + secrets.token_hex(3)
+        self.session = new_session_id()
         try:
             (self.path / "samples").mkdir(parents=True, exist_ok=True)
             (self.path / "overview").mkdir(parents=True, exist_ok=True)
@@ -168,7 +166,7 @@ class ParquetStoreWriter:
     def flush(self) -> None:
         """Write what is buffered and wait until it is on disk (files stay open)."""
         self._flush()
-        self._wait(0)
+        self._thread.wait(0)
 
     def close(self) -> None:
         """Write the rest, close and rename every file; raise StoreError if a write failed."""
@@ -177,10 +175,10 @@ class ParquetStoreWriter:
         self._closed = True
         try:
             self._flush()
-            self._pending.append(self._pool.submit(self._close_all))
-            self._wait(0)
+            self._thread.submit(self._close_all)
+            self._thread.wait(0)
         finally:
-            self._pool.shutdown(wait=True)
+            self._thread.shutdown()
 
     def __enter__(self) -> ParquetStoreWriter:
         return self
@@ -193,17 +191,12 @@ class ParquetStoreWriter:
             return
         blocks, self._buffer, self._buffered = self._buffer, [], 0
         hour = self._hour
-        self._wait(MAX_PENDING_FLUSHES - 1)
-        self._pending.append(self._pool.submit(self._write_group, hour, blocks))
+        self._thread.submit(self._write_group, hour, blocks)
 
-    def _wait(self, keep: int) -> None:
-        while len(self._pending) > keep:
-            future = self._pending.pop(0)
-            exc = future.exception()
-            if exc is not None:
-                if isinstance(exc, StoreError):
-                    raise exc
-                raise StoreError(f"writing the store {self.path} failed: {exc}") from exc
+    def _store_error(self, exc: BaseException) -> BaseException:
+        if isinstance(exc, StoreError):
+            return exc
+        return StoreError(f"writing the store {self.path} failed: {exc}")
 
     # -- the writer thread ---------------------------------------------------------------
     def _write_group(self, hour: int, blocks: list[SampleBlock]) -> None:
