@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -105,6 +106,7 @@ def test_ut1_interpolation_bridges_a_leap_second(eop):
 
 
 def test_predicted_and_missing_earth_orientation_warn(eop):
+    eop = dataclasses.replace(eop)  # a table of its own: each table warns once per kind
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         eop.interpolate(np.array([2460400.5]), np.array([0.25]))  # measured: silent
@@ -113,3 +115,17 @@ def test_predicted_and_missing_earth_orientation_warn(eop):
         eop.interpolate(np.array([jd]), np.array([0.0]))
     with pytest.warns(EarthOrientationWarning, match="outside the IERS table"):
         eop.interpolate(np.array([2400000.5 + eop.mjd[-1] + 400]), np.array([0.0]))
+
+
+def test_a_table_warns_once_per_kind_however_often_it_is_asked(eop):
+    eop = dataclasses.replace(eop)
+    predicted = np.array([2400000.5 + eop.measured_until_mjd + 30])
+    beyond = np.array([2400000.5 + eop.mjd[-1] + 400])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(5):
+            eop.interpolate(predicted, np.zeros(1))
+            eop.interpolate(beyond, np.zeros(1))
+    kinds = [str(w.message).split(":")[0] for w in caught
+             if issubclass(w.category, EarthOrientationWarning)]
+    assert len(kinds) == 2 and len(set(kinds)) == 2

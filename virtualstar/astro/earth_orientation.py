@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import warnings
+import weakref
 from dataclasses import dataclass
 
 import erfa
@@ -74,25 +75,29 @@ class EarthOrientation:
         return dut1, xp, yp
 
     def _warn_if_not_measured(self, mjd: np.ndarray, outside: np.ndarray) -> None:
-        # Messages depend on the table only, so Python shows each once per place.
         if outside.any():
-            warnings.warn(
+            self._warn_once("outside",
                 f"a time lies outside the IERS table of {self.source} "
                 f"({_mjd_date(self.mjd[0])} .. {_mjd_date(self.mjd[-1])}): UT1-UTC and polar "
                 "motion are held at the edge value; LEO satellite positions may be off by "
-                "arcminutes. Update astropy-iers-data.",
-                EarthOrientationWarning,
-                stacklevel=3,
-            )
+                "arcminutes. Update astropy-iers-data.")
         elif float(np.max(mjd)) > self.measured_until_mjd + 1.0:
-            warnings.warn(
+            self._warn_once("predicted",
                 f"a time lies after the last measured IERS value "
                 f"({_mjd_date(self.measured_until_mjd)}, {self.source}): predicted UT1-UTC and "
                 "polar motion are used (good to a few ms and mas for weeks, worse later; "
-                "a LEO satellite may be off by arcseconds). Update astropy-iers-data.",
-                EarthOrientationWarning,
-                stacklevel=3,
-            )
+                "a LEO satellite may be off by arcseconds). Update astropy-iers-data.")
+
+    def _warn_once(self, kind: str, message: str) -> None:
+        # Once per table and kind: a server asks for every trajectory chunk, and any
+        # warnings.catch_warnings() elsewhere resets Python's own once-per-place registry.
+        said = _WARNED.setdefault(self, set())
+        if kind not in said:
+            said.add(kind)
+            warnings.warn(message, EarthOrientationWarning, stacklevel=4)
+
+
+_WARNED: weakref.WeakKeyDictionary[EarthOrientation, set[str]] = weakref.WeakKeyDictionary()
 
 
 def _mjd_date(mjd: float) -> str:
