@@ -129,11 +129,8 @@ def pointing_run(
 ) -> None:
     """Slew to N stars, measure each with the guide camera, write a TPOINT data file.
 
-    Each record: the sky place on the optical axis (observed) and the encoders (raw),
-    so `pointing-model fit FILE` gives the mount's pointing model; load it with
-    `vs model load model.json`. Any pointing model loaded in the server does not
-    change the raw readings.
-    """
+    Records pair the sky place on the optical axis (observed) with the encoders (raw). Fit them with `pointing-model fit FILE -o model.json`, then `vs model load model.json`. A model already loaded does not change the raw readings.
+    """  # noqa: E501 (one line: typer's help keeps the docstring's line breaks)
     url = server or default_server_url()
     if output.exists() and output.is_dir():
         raise fail(f"--output {output} is a directory; expected a file name such as run.dat")
