@@ -7,9 +7,10 @@ This is the only module of `virtualstar` that imports `mount_emulator`
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-__all__ = ["EmbeddedEmulator", "start_emulator"]
+__all__ = ["EmbeddedEmulator", "hidden_geometry_arcsec", "start_emulator"]
 
 
 @dataclass
@@ -25,6 +26,25 @@ class EmbeddedEmulator:
 
     async def stop(self) -> None:
         await self.emulator.stop()
+
+
+def hidden_geometry_arcsec(*, path: str | Path | None = None,
+                           seed: int | None = None) -> dict[str, float]:
+    """Return the emulator's hidden TPOINT terms (arcsec) from a TOML/JSON file or a seed.
+
+    The same rules as `mount-emulator --geometry FILE | --seed N`. Raises ValueError
+    naming the file or the option when it cannot be used.
+    """
+    from mount_emulator import Geometry
+    from mount_emulator.exceptions import ConfigError
+
+    if path is not None and seed is not None:
+        raise ValueError("give either a geometry file or a seed, not both")
+    try:
+        geometry = Geometry.from_file(path) if path is not None else Geometry.from_seed(int(seed or 0))
+    except ConfigError as exc:
+        raise ValueError(str(exc)) from None
+    return geometry.as_dict()
 
 
 async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,

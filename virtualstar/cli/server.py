@@ -25,6 +25,12 @@ def server(
         "--speed", help="With --emulator: simulated time at X times real time (1 = real time).")] = 1.0,
     start: Annotated[str | None, typer.Option(
         "--start", help="With --emulator: mount time at start, ISO-8601 UTC (default now).")] = None,
+    geometry: Annotated[Path | None, typer.Option(
+        "--geometry", help="With --emulator: hidden pointing errors (TPOINT terms, arcsec) from a "
+        "TOML or JSON file, as for mount-emulator; default a perfect mount.")] = None,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", help="With --emulator: draw hidden pointing errors (>= 100 arcsec RMS) from this "
+        "seed, as `mount-emulator --seed N` does.")] = None,
     mount: Annotated[str | None, typer.Option(
         "--mount", help="ASTCom URL of the mount, e.g. ws://mount:8765 (instead of --emulator).")] = None,
     password: Annotated[str | None, typer.Option(
@@ -52,6 +58,16 @@ def server(
         raise fail(f"--speed {speed}: expected a number of times real time, > 0 and < 1000")
     if not emulator and (speed != 1.0 or start is not None):
         raise fail("--speed and --start only apply to --emulator (a real mount runs in real time)")
+    geometry_arcsec = None
+    if geometry is not None or seed is not None:
+        if not emulator:
+            raise fail("--geometry and --seed only apply to --emulator (a real mount has its own)")
+        from virtualstar.launcher import hidden_geometry_arcsec
+
+        try:
+            geometry_arcsec = hidden_geometry_arcsec(path=geometry, seed=seed)
+        except ValueError as exc:
+            raise fail(f"--geometry/--seed: {exc}") from None
     start_us = None
     if start is not None:
         from virtualstar.astro import UtcTimes
@@ -67,7 +83,7 @@ def server(
     _warn_once_about_earth_orientation(start_us)
     try:
         asyncio.run(_serve(emulator, speed, start_us, mount, password, mapping, listen, the_site,
-                           pointing_model, passive))
+                           pointing_model, passive, geometry_arcsec))
     except VssError as exc:
         raise fail(str(exc)) from None
     except OSError as exc:
@@ -91,7 +107,7 @@ def _warn_once_about_earth_orientation(start_us: int | None) -> None:
 
 
 async def _serve(emulator, speed, start_us, mount, password, mapping, listen, site,
-                 pointing_model, passive) -> None:
+                 pointing_model, passive, geometry_arcsec=None) -> None:
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -100,7 +116,8 @@ async def _serve(emulator, speed, start_us, mount, password, mapping, listen, si
     if emulator:
         from virtualstar.launcher import start_emulator
 
-        embedded = await start_emulator(speed=speed, start_us=start_us, password=password)
+        embedded = await start_emulator(speed=speed, start_us=start_us, password=password,
+                                         geometry_arcsec=geometry_arcsec)
         mount = embedded.url
     vss = build_server(mount_url=mount, password=password, mapping_path=mapping, site=site,
                        speed=speed, active=not passive, pointing_model=pointing_model)
