@@ -102,3 +102,37 @@ def test_a_client_that_disconnects_mid_track_does_not_stop_the_tracking(rig):
     st = rig.run(scenario())
     assert st["mount_state"] == "tracking"
     assert st["operation"]["phase"] == "tracking"
+
+
+def test_a_track_whose_own_request_meets_the_cut_line_resumes_too(rig):
+    # The line can break inside one of the operation's own mount requests, which then fails
+    # with MountUnavailable before the disconnect event arrives to abort it. That order is
+    # forced here; it must resume exactly as the abort does.
+    from virtualstar.server.exceptions import MountUnavailable
+
+    telescope = rig.server.telescope
+    resumed_with = []
+
+    async def scenario():
+        async def cut_body(op):
+            raise MountUnavailable("lost the mount during a trajectory push")
+
+        async def idle_body(op):
+            return {}
+
+        async def resume():
+            resumed_with.append("resume")
+            return await telescope.run_operation("test", "resumed", idle_body)
+
+        async with await VssClient.connect(rig.url, silence_s=30.0) as vs:
+            await telescope.link.wait_connected(10)
+            op = await telescope.run_operation("test", "cut", cut_body, resume=resume)
+            await op.done
+            rig.proxy.cut()
+            resumed = await vs.next_event("resumed", 60.0)
+        return op, resumed
+
+    op, resumed = rig.run(scenario())
+    assert op.phase == "aborted"
+    assert "resumes when the mount is back" in op.info["error"]["message"]
+    assert resumed_with == ["resume"] and resumed["target"] == "resumed"

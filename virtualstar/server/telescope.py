@@ -331,24 +331,27 @@ class Telescope:
         try:
             result = await body(op)
         except asyncio.CancelledError:
-            why = op.abort_error or OperationAborted("cancelled (server shutting down)")
-            err = {"code": why.code, "message": str(why)}
-            if err["code"] == "mount_offline" and resume is not None:
-                self._resume = resume
-                err["message"] += "; the track resumes when the mount is back"
-            self._finish(op, "aborted", err)
-            await self._safe_stop_after_abort(err["code"])
-            return
+            error: VssError = op.abort_error or OperationAborted("cancelled (server shutting down)")
+            phase = "aborted"
         except VssError as exc:
-            self._finish(op, "failed", {"code": exc.code, "message": str(exc)})
-            await self._safe_stop_after_abort(exc.code)
-            return
+            error = exc
+            phase = "aborted" if exc.code == MountUnavailable.code else "failed"
         except Exception as exc:  # a bug must not kill the server: report it
             log.exception("operation %s failed", op.id)
             self._finish(op, "failed", {"code": "internal", "message": f"{type(exc).__name__}: {exc}"})
             return
-        op.info.update(result)
-        self._finish(op, "done", None)
+        else:
+            op.info.update(result)
+            self._finish(op, "done", None)
+            return
+        err = {"code": error.code, "message": str(error)}
+        if error.code == MountUnavailable.code and resume is not None:
+            # A cut line ends the operation either through its own request failing or through
+            # the abort sent on the disconnect event, whichever comes first: both must resume.
+            self._resume = resume
+            err["message"] += "; the track resumes when the mount is back"
+        self._finish(op, phase, err)
+        await self._safe_stop_after_abort(error.code)
 
     def _finish(self, op: Operation, phase: str, error: dict | None) -> None:
         for fn in op.cleanup:
