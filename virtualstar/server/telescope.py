@@ -192,6 +192,12 @@ class Telescope:
                 self._abort(MountUnavailable("lost the connection to the mount"))
 
     async def _on_connected(self) -> None:
+        try:
+            await self._after_connecting()
+        except Exception:  # a task that dies unseen would leave the track never resumed
+            log.exception("after the mount connected: setting up or resuming failed")
+
+    async def _after_connecting(self) -> None:
         for attempt in range(5):  # a loaded host may time a first request out: try again
             try:
                 await self._read_limits()
