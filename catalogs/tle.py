@@ -292,16 +292,31 @@ def load_tle_file(path: str | Path) -> list[TleRecord]:
 def select_satellite(records: list[TleRecord], query: str) -> TleRecord:
     """Return the record whose name (case-insensitive) or catalog number matches *query*.
 
-    Raises UnknownSatellite (a KeyError) with close names.
+    CelesTrak names a satellite ``NAME (ALIAS)``, e.g. ``ISS (ZARYA)``: either part alone
+    matches too. A short name shared by several records (``ISS (ZARYA)``, ``ISS (NAUKA)``:
+    modules of one docked station, at one place) picks the oldest object, the lowest
+    catalog number. Raises UnknownSatellite (a KeyError) with close names.
     """
-    q = query.strip().lower()
+    q = " ".join(query.split()).lower()
     for rec in records:
         if rec.name.strip().lower() == q or (q.isdigit() and rec.satnum == int(q)):
             return rec
+    by_part = [rec for rec in records if q in _name_parts(rec.name)]
+    if by_part:
+        return min(by_part, key=lambda rec: rec.satnum)
     import difflib
 
     close = difflib.get_close_matches(query.upper(), [r.name.upper() for r in records], n=3)
     raise UnknownSatellite(query, close)
+
+
+def _name_parts(name: str) -> set[str]:
+    """Return the lower-case short names of ``NAME (ALIAS)``: {"iss", "zarya"} for ISS (ZARYA)."""
+    head, sep, tail = name.strip().partition("(")
+    parts = {" ".join(head.split()).lower()}
+    if sep and tail.endswith(")"):
+        parts.add(" ".join(tail[:-1].split()).lower())
+    return parts - {""}
 
 
 def epoch_age_days(record: TleRecord, when_utc: datetime) -> float:

@@ -229,5 +229,22 @@ def test_select_satellite_by_name_or_number_and_suggests_on_miss():
     records = load_tle_file(sample_tle_path("visual"))
     assert select_satellite(records, "hst").satnum == 20580
     assert select_satellite(records, "20580").name == "HST"
-    with pytest.raises(UnknownSatellite, match="did you mean: AJISAI"):
-        select_satellite(records, "AJISAI")
+    assert select_satellite(records, "AJISAI").name == "AJISAI (EGS)"  # NAME of NAME (ALIAS)
+    with pytest.raises(UnknownSatellite, match=r"did you mean: AJISAI \(EGS\)"):
+        select_satellite(records, "AJISAI (EG)")
+
+
+@pytest.mark.parametrize(("query", "name"), [
+    ("ISS", "ISS (ZARYA)"), ("zarya", "ISS (ZARYA)"), (" Nauka ", "ISS (NAUKA)"),
+    ("css", "CSS (TIANHE)"), ("Wentian", "CSS (WENTIAN)"), ("ISS DEB", "ISS DEB"),
+])
+def test_a_short_celestrak_name_finds_the_station_s_oldest_object(query, name):
+    records = load_tle_file(sample_tle_path("stations"))
+    chosen = select_satellite(records, query)
+    assert chosen.name == name
+    # the rule: of the records answering to that short name, the lowest catalog number
+    same = [r for r in records if r.name == name]
+    assert chosen.satnum == min(r.satnum for r in same)
+    if query.strip().lower() in ("iss", "css"):
+        modules = [r for r in records if r.name.startswith(query.upper() + " (")]
+        assert len(modules) >= 2 and chosen.satnum == min(r.satnum for r in modules)
