@@ -49,14 +49,10 @@ def main() -> None:
     ours = best_of(lambda: sat.observe(times, SITE, eop), args.repeat)
 
     from skyfield.api import EarthSatellite, wgs84
-    from skyfield.data import iers as sf_iers
-    from skyfield.timelib import Timescale
 
-    daily_tt, daily_dt, leap_dates, leap_offsets = sf_iers.build_timescale_arrays(
-        eop.mjd, eop.ut1_utc_s)
-    ts = Timescale((daily_tt, daily_dt), leap_dates, leap_offsets)
-    sf_iers.install_polar_motion_table(
-        ts, {"utc_mjd": eop.mjd, "x_arcseconds": eop.xp_arcsec, "y_arcseconds": eop.yp_arcsec})
+    from virtualstar.astro.bodies import skyfield_context
+
+    ts = skyfield_context(eop).ts  # skyfield on the same IERS table as ours
     es = EarthSatellite.from_satrec(sat.satrec, ts)
     topos = wgs84.latlon(SITE.lat_deg, SITE.lon_deg, SITE.height_m)
     tt1, tt2 = times.tt()

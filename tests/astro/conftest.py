@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from virtualstar.astro.bodies import skyfield_context
 from virtualstar.astro.earth_orientation import EarthOrientation
 from virtualstar.astro.site import Site
 
@@ -22,24 +23,10 @@ def eop() -> EarthOrientation:
 @pytest.fixture(scope="session")
 def skyfield_ts(eop):
     """A skyfield Timescale whose UT1 and polar motion come from the astropy-iers-data table."""
-    from skyfield.data import iers as sf_iers
-    from skyfield.timelib import Timescale
-
-    daily_tt, daily_delta_t, leap_dates, leap_offsets = sf_iers.build_timescale_arrays(
-        eop.mjd, eop.ut1_utc_s)
-    ts = Timescale((daily_tt, daily_delta_t), leap_dates, leap_offsets)
-    sf_iers.install_polar_motion_table(
-        ts, {"utc_mjd": eop.mjd, "x_arcseconds": eop.xp_arcsec, "y_arcseconds": eop.yp_arcsec})
-    return ts
+    return skyfield_context(eop).ts
 
 
 @pytest.fixture(scope="session")
-def de421():
-    import warnings
-
-    from skyfield.api import Loader
-    from skyfield_data import get_skyfield_data_path
-
-    warnings.filterwarnings("ignore", message="The file finals2000A.all has expired")
-
-    return Loader(get_skyfield_data_path(), verbose=False)("de421.bsp")
+def de421(eop):
+    """DE421 from skyfield-data, loaded offline."""
+    return skyfield_context(eop).ephemeris

@@ -31,7 +31,7 @@ HORIZON_DEG = 40.0  # track only the high part of the pass: the test stays short
 
 @pytest.fixture(scope="module")
 def zenith():
-    ts = _timescale_on_our_iers()
+    ts = _skyfield().ts
     rec = next(r for r in load_tle_file(sample_tle_path("stations")) if "ISS" in r.name)
     sat = EarthSatellite(rec.line1, rec.line2, rec.name, ts)
     t = ts.utc(*OVERHEAD_UTC)
@@ -72,7 +72,7 @@ def test_a_pass_through_the_zenith_is_tracked_to_its_end_through_the_keyhole(zen
     t_us, az, el, az_err, el_err, ref_az, ref_el = (np.array(c) for c in zip(*samples,
                                                                                strict=True))
     # skyfield's apparent direction: light time and aberration, like a real observation
-    earth = _de421()["earth"]
+    earth = _skyfield().ephemeris["earth"]
     observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, 0.0)
     t = ts.from_datetimes([_dt(u) for u in t_us])
     alt, azi, _ = observer.at(t).observe(earth + sat).apparent().altaz()
@@ -94,31 +94,13 @@ def test_a_pass_through_the_zenith_is_tracked_to_its_end_through_the_keyhole(zen
     assert underruns == 0
 
 
-def _timescale_on_our_iers():
-    """Return a skyfield Timescale whose UT1 and polar motion come from astropy-iers-data
-    (a LEO direction moves by arcseconds with either)."""
-    from skyfield.data import iers as sf_iers
-    from skyfield.timelib import Timescale
-
+def _skyfield():
+    """Return skyfield on our IERS table (a LEO direction moves by arcseconds with UT1 or
+    polar motion) with DE421 from skyfield-data."""
     from virtualstar.astro import EarthOrientation
+    from virtualstar.astro.bodies import skyfield_context
 
-    eop = EarthOrientation.from_astropy_iers_data()
-    daily_tt, daily_delta_t, leap_dates, leap_offsets = sf_iers.build_timescale_arrays(
-        eop.mjd, eop.ut1_utc_s)
-    ts = Timescale((daily_tt, daily_delta_t), leap_dates, leap_offsets)
-    sf_iers.install_polar_motion_table(
-        ts, {"utc_mjd": eop.mjd, "x_arcseconds": eop.xp_arcsec, "y_arcseconds": eop.yp_arcsec})
-    return ts
-
-
-def _de421():
-    import warnings
-
-    from skyfield.api import Loader
-    from skyfield_data import get_skyfield_data_path
-
-    warnings.filterwarnings("ignore", message="The file finals2000A.all has expired")
-    return Loader(get_skyfield_data_path(), verbose=False)("de421.bsp")
+    return skyfield_context(EarthOrientation.from_astropy_iers_data())
 
 
 def _dt(t_us: int):
