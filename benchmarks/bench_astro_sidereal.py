@@ -11,7 +11,7 @@ largest difference of ours from atco13 on the common points.
 from __future__ import annotations
 
 import argparse
-import time
+import timeit
 import warnings
 
 import erfa
@@ -25,12 +25,8 @@ SITE = Site(lat_deg=52.3967, lon_deg=16.8786, height_m=85.0, pressure_hpa=1005.0
 
 
 def best_of(fn, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
+    """Return the best time of one call (seconds) over `repeat` calls."""
+    return min(timeit.repeat(fn, repeat=repeat, number=1))
 
 
 def main() -> None:
