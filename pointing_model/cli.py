@@ -22,6 +22,7 @@ from .run_files import load_run
 from .simulate import simulate_run
 from .terms import parse_term_list
 from .tpoint_format import write_tpoint
+from .tpoint_model_file import save_tpoint_model
 
 app = typer.Typer(
     name="pointing-model",
@@ -71,7 +72,8 @@ def fit(
         "--reject-sigma", help="Drop observations, worst first, while one lies more than "
         "K × sky RMS from the fit.", min=0.5)] = None,
     output: Annotated[Path | None, typer.Option(
-        "-o", "--output", help="Write the fitted model as JSON here.")] = None,
+        "-o", "--output", help="Write the fitted model here: TPOINT's model layout when the "
+        "name ends in .mod, else our JSON.")] = None,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Write residual plots (PNG) here.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the fit as JSON.")] = False,
@@ -94,7 +96,9 @@ def fit(
         run = load_run(data, radec_to_altaz=converter)
         result = (select_terms(run, reject_sigma=reject_sigma) if names is None
                   else fit_run(run, names, reject_sigma=reject_sigma))
-        if output is not None:
+        if output is not None and output.suffix.lower() == ".mod":
+            save_tpoint_model(result.model, output, caption=run.caption)
+        elif output is not None:
             result.model.save(output)
         if plot is not None:
             from .plotting import plot_residuals
@@ -107,7 +111,9 @@ def fit(
 
 
 def _format_fit(result: FitResult) -> str:
-    lines = [f"{result.source}: {result.n_obs} observations used, {result.n_rejected} rejected",
+    masked = f", {result.n_masked} masked with ';' in the file" if result.n_masked else ""
+    lines = [f"{result.source}: {result.n_obs} observations used, {result.n_rejected} rejected"
+             f"{masked}",
              f"{'term':>10} {'value″':>11} {'σ″':>8}"]
     for name, v, s in zip(result.terms, result.values_arcsec, result.sigmas_arcsec, strict=True):
         lines.append(f"{name:>10} {v:11.2f} {s:8.2f}")
@@ -243,18 +249,23 @@ def _model_argument(text: str) -> PointingModel:
 # -- apply --------------------------------------------------------------------------------
 @app.command()
 def apply(
-    model: Annotated[Path, typer.Argument(help="Model JSON file written by `fit -o`.")],
+    model: Annotated[Path, typer.Argument(
+        help="Model file: JSON written by `fit -o`, or a TPOINT model (.mod, OUTMOD layout).")],
     altaz: Annotated[str, typer.Option(
         "--altaz", help="Observed position 'AZ EL' in degrees (azimuth N through E).")],
     inverse: Annotated[bool, typer.Option(
         "--inverse", help="Treat --altaz as encoder readings and print the observed "
         "position.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    substitute: Annotated[list[str] | None, typer.Option(
+        "--substitute", help="OLD=NEW: read TPOINT term OLD as our term NEW (e.g. TX10=TX, "
+        "see docs/pointing-model.md); repeatable.")] = None,
 ) -> None:
     """Print the encoder demand for an observed position (or the reverse with --inverse)."""
     az, el = _parse_altaz(altaz)
+    mapping = _parse_substitutions(substitute or [])
     with _errors_to_exit():
-        pm = load_model(model)
+        pm = load_model(model, substitute=mapping)
         if inverse:
             out_az, out_el = pm.encoder_to_observed(az, el)
         else:
@@ -266,6 +277,17 @@ def apply(
                                "input_az_deg": az, "input_el_deg": el}))
     else:
         typer.echo(f"{key} az {out_az:.7f} el {out_el:.7f} deg")
+
+
+def _parse_substitutions(items: list[str]) -> dict[str, str]:
+    mapping = {}
+    for item in items:
+        old, sep, new = item.partition("=")
+        if not (sep and old.strip() and new.strip()):
+            raise _fail(f"--substitute {item!r}: expected OLD=NEW, e.g. --substitute TX10=TX",
+                        EXIT_USAGE)
+        mapping[old.strip().upper()] = new.strip().upper()
+    return mapping
 
 
 def _parse_altaz(text: str) -> tuple[float, float]:

@@ -70,6 +70,12 @@ class FitResult:
     source: str = "<run>"
     line_numbers: tuple[int, ...] = ()
     selection: tuple[SelectionStep, ...] = field(default=())
+    masked_lines: tuple[int, ...] = ()  # records masked with ';' in the file, never read
+
+    @property
+    def n_masked(self) -> int:
+        """Records the file masks with a leading ';' (skipped, as TPOINT does)."""
+        return len(self.masked_lines)
 
     @property
     def n_obs(self) -> int:
@@ -97,6 +103,7 @@ class FitResult:
             "raw_sky_rms_arcsec": self.raw_sky_rms_arcsec,
             "n_obs": self.n_obs,
             "n_rejected": self.n_rejected,
+            "n_masked": self.n_masked,
             "condition_number": self.condition_number,
         }
 
@@ -116,6 +123,7 @@ class FitResult:
         doc["rejected_lines"] = ([self.line_numbers[i] for i in rejected] if self.line_numbers
                                  else [int(i) + 1 for i in rejected])
         doc["high_correlations"] = [{"terms": [a, b], "r": r} for a, b, r in self.high_correlations]
+        doc["masked_lines"] = list(self.masked_lines)
         if self.selection:
             doc["selection"] = [dict(step.__dict__) for step in self.selection]
         return _json_safe(doc)
@@ -218,6 +226,7 @@ def _fit_subset(run: PointingRun, names: tuple[str, ...], x_all: np.ndarray,
         residual_e_arcsec=(res_e - pred[n_total:]) * ARCSEC_PER_RAD,
         source=run.source,
         line_numbers=run.line_numbers,
+        masked_lines=run.masked_lines,
     )
 
 

@@ -165,17 +165,28 @@ class PointingModel:
         Path(path).write_text(json.dumps(self.to_json_dict(), indent=2) + "\n", encoding="utf-8")
 
 
-def load_model(path: str | Path) -> PointingModel:
-    """Read a model JSON file; raises ModelFileError (also for unreadable or non-JSON files)."""
+def load_model(path: str | Path, *, substitute: Mapping[str, str] | None = None
+               ) -> PointingModel:
+    """Read a model file: our JSON, or TPOINT's `.mod` layout (recognised by its `T` line).
+
+    `substitute` is passed to the TPOINT reader (e.g. {"TX10": "TX"}). Raises
+    ModelFileError (also for unreadable files and files in neither format).
+    """
     source = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8", errors="replace")
     except OSError as exc:
         raise ModelFileError(source, f"cannot read: {exc.strerror or exc}") from exc
+    from .tpoint_model_file import looks_like_tpoint_model, read_tpoint_model
+
+    if looks_like_tpoint_model(text):
+        return read_tpoint_model(text.splitlines(), source, substitute=substitute)
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ModelFileError(source, f"not JSON (line {exc.lineno}: {exc.msg})") from exc
+        raise ModelFileError(source, f"not JSON (line {exc.lineno}: {exc.msg}) "
+                             "and not a TPOINT model (caption, then a 'T N_OBS SKY_RMS' line)"
+                             ) from exc
     return PointingModel.from_json_dict(doc, source)
 
 

@@ -45,6 +45,7 @@ class PointingRun:
     line_numbers: tuple[int, ...] = ()
     source: str = "<run>"
     extra: dict[str, str] = field(default_factory=dict)
+    masked_lines: tuple[int, ...] = ()  # source lines of records masked with ';' (not read)
 
     def __post_init__(self) -> None:
         arrays = [np.asarray(getattr(self, n), dtype=float).ravel()
@@ -83,7 +84,7 @@ class PointingRun:
         return PointingRun(self.obs_az_deg[idx], self.obs_el_deg[idx], self.enc_az_deg[idx],
                            self.enc_el_deg[idx], self.parameters, self.caption, self.options,
                            pick(self.aux), pick(self.comments), pick(self.line_numbers),
-                           self.source, dict(self.extra))
+                           self.source, dict(self.extra), self.masked_lines)
 
 
 def wrap_deg_180(angle_deg: np.ndarray) -> np.ndarray:

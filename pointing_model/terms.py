@@ -58,7 +58,8 @@ def _acec(a: np.ndarray, e: np.ndarray) -> Columns:
 
 
 def _aces(a: np.ndarray, e: np.ndarray) -> Columns:
-    return np.sin(a) * np.cos(e), np.zeros_like(e)  # ΔA = +ACES sin A
+    # TPOINT's ACES is its HASA, evaluated with A_T = 180° − A: ΔA = −ACES sin A
+    return -np.sin(a) * np.cos(e), np.zeros_like(e)
 
 
 def _ecec(a: np.ndarray, e: np.ndarray) -> Columns:
@@ -99,7 +100,7 @@ NAMED_TERMS: dict[str, Term] = {
 # H, result letter, then one or two factors: S(in)/C(os), coordinate A/E/Z, frequency.
 _HARMONIC = re.compile(r"^H([AESZ])((?:[SC][AEZ]\d{0,2}){1,2})$")
 _FACTOR = re.compile(r"([SC])([AEZ])(\d{0,2})")
-_RESULTS = {"A": "ΔA", "E": "ΔE", "S": "ΔA·cos E", "Z": "ΔZ = −ΔE"}
+_RESULTS = {"A": "−ΔA", "E": "ΔE", "S": "−ΔA·cos E", "Z": "ΔZ = −ΔE"}
 
 
 def _harmonic(name: str) -> Term:
@@ -119,22 +120,42 @@ def _harmonic(name: str) -> Term:
         factors.append((func, coord, freq))
 
     def columns(a: np.ndarray, e: np.ndarray) -> Columns:
+        # TPOINT evaluates harmonics in its own alt-az frame, azimuth reckoned from the
+        # south through east: A_T = π − A. Its azimuth-type results are corrections to A_T,
+        # i.e. −ΔA in our north-through-east azimuth (docs/pointing-model.md).
+        a_tpoint = np.pi - a
         value = np.ones_like(e)
         for func, coord, freq in factors:
-            angle = {"A": a, "E": e, "Z": np.pi / 2 - e}[coord] * freq
+            angle = {"A": a_tpoint, "E": e, "Z": np.pi / 2 - e}[coord] * freq
             value = value * (np.sin(angle) if func == "S" else np.cos(angle))
         zero = np.zeros_like(e)
         if result == "A":
-            return value * np.cos(e), zero
+            return -value * np.cos(e), zero
         if result == "S":
-            return value, zero
+            return -value, zero
         if result == "E":
             return zero, value
         return zero, -value  # Z: zenith distance grows as elevation falls
 
-    text = " × ".join(f"{'sin' if f == 'S' else 'cos'}({n if n > 1 else ''}{c})"
-                      for f, c, n in factors)
+    text = " × ".join(f"{'sin' if f == 'S' else 'cos'}({n if n > 1 else ''}"
+                      f"{'A_T' if c == 'A' else c})" for f, c, n in factors)
+    if "A" in (c for _, c, _ in factors):
+        text += ", A_T = 180° − A"
     return Term(name, f"harmonic: {_RESULTS[result]} = {name} × {text}", columns)
+
+
+# TPOINT terms this package knows by name but does not implement: refused with the reason,
+# never silently dropped (docs/pointing-model.md, "TPOINT terms not implemented").
+_EQUATORIAL = "an equatorial-mount term; only alt-az models are supported"
+TPOINT_TERMS_NOT_IMPLEMENTED: dict[str, str] = {
+    "TX10": ("TPOINT's TX variant whose definition is not published in a form we could verify; "
+             "on runs well above the horizon it equals TX to 0.01″ (AuxTel 2022-04: TX10 "
+             "11.92″, TX 11.93″): substitute TX explicitly (--substitute TX10=TX) if that holds for your data"),
+    "NRX": "a Nasmyth rotator term (rotator terms are not implemented)",
+    "NRY": "a Nasmyth rotator term (rotator terms are not implemented)",
+    **{name: _EQUATORIAL for name in ("IH", "ID", "CH", "NP", "MA", "ME", "FO", "DAF", "HCEC",
+                                      "HCES", "DCEC", "DCES", "PDD", "HDSD", "HDCD")},
+}
 
 
 @lru_cache(maxsize=512)
@@ -143,6 +164,8 @@ def get_term(name: str) -> Term:
     key = name.strip().upper()
     if key in NAMED_TERMS:
         return NAMED_TERMS[key]
+    if key in TPOINT_TERMS_NOT_IMPLEMENTED:
+        raise UnknownTermError(key, f"not implemented: {TPOINT_TERMS_NOT_IMPLEMENTED[key]}")
     return _harmonic(key)
 
 

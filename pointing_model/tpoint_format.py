@@ -7,7 +7,11 @@ Layout (lines starting with `!` are comments anywhere, blank lines are skipped):
     : ROTNL
     -30 14 40.3 [Y M D [T_C [P_hPa [H_m [RH [λ_um [lapse_K_m]]]]]]]   run parameters
     A_obs E_obs A_raw E_raw [aux ...] [; comment]                        one per star, degrees
+    ; A_obs E_obs A_raw E_raw ...  a record masked by a leading ';' (TPOINT skips it): read
+                                  past and counted in `PointingRun.masked_lines`
     END                           optional; anything after it is ignored
+
+A line starting with ';' that does not hold a record is a comment.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ def read_tpoint(lines: Iterable[str], source: str = "<tpoint>") -> PointingRun:
     aux: list[tuple[float, ...]] = []
     comments: list[str] = []
     line_numbers: list[int] = []
+    masked: list[int] = []
     last_line_no = 0
     for line_no, raw in enumerate(lines, start=1):
         last_line_no = line_no
@@ -60,6 +65,10 @@ def read_tpoint(lines: Iterable[str], source: str = "<tpoint>") -> PointingRun:
             continue
         if text.upper() == "END":
             break
+        if text.startswith(";"):
+            if _is_masked_record(text[1:]):
+                masked.append(line_no)
+            continue
         if text.startswith(":"):
             raise DataFormatError(source, line_no, "option line after the run-parameters line",
                                   "options (': ALTAZ') before the latitude line", line)
@@ -77,7 +86,14 @@ def read_tpoint(lines: Iterable[str], source: str = "<tpoint>") -> PointingRun:
         raise DataFormatError(source, last_line_no + 1, "no observation records", _RECORD_LAYOUT)
     data = np.array(rows, dtype=float)
     return PointingRun(data[:, 0], data[:, 1], data[:, 2], data[:, 3], params, caption,
-                       tuple(options), tuple(aux), tuple(comments), tuple(line_numbers), source)
+                       tuple(options), tuple(aux), tuple(comments), tuple(line_numbers), source,
+                       masked_lines=tuple(masked))
+
+
+def _is_masked_record(text: str) -> bool:
+    """Return True when `text` (a line after its leading ';') holds a record's four numbers."""
+    tokens = text.partition(";")[0].split()
+    return len(tokens) >= 4 and all(_is_float(t) for t in tokens[:4])
 
 
 def load_tpoint(path: str | Path) -> PointingRun:

@@ -19,3 +19,12 @@ def auxtel_path() -> Path:
     if not path.is_file():
         pytest.skip(f"AuxTel reference run not found at {path} (set {AUXTEL_ENV} to its path)")
     return path
+
+
+@pytest.fixture(scope="session")
+def auxtel_fauto_path(auxtel_path) -> Path:
+    """TPOINT's own automatic fit of the same run (`OUTMOD` layout), beside it; skip if absent."""
+    path = auxtel_path.with_name("auxtel_20220406_fauto.mod")
+    if not path.is_file():
+        pytest.skip(f"TPOINT's model of the AuxTel run not found at {path}")
+    return path

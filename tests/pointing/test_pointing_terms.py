@@ -66,17 +66,32 @@ def test_first_harmonics_equal_the_centring_and_flexure_terms(harmonic, named, s
 
 def test_harmonic_with_two_factors_multiplies_them():
     x = design_matrix(["HSCA5CE8"], AZ, EL)
-    np.testing.assert_allclose(x[:36, 0], np.cos(5 * AZ) * np.cos(8 * EL), atol=1e-15)
+    # TPOINT's azimuth for harmonics runs from the south through east: A_T = 180° − A
+    np.testing.assert_allclose(x[:36, 0], -np.cos(5 * (np.pi - AZ)) * np.cos(8 * EL), atol=1e-15)
     np.testing.assert_allclose(x[36:, 0], 0.0)
 
 
 def test_harmonic_result_letters_give_azimuth_elevation_sky_and_zenith_distance():
-    f = np.sin(2 * AZ)
+    f = np.sin(2 * (np.pi - AZ))  # sin 2A_T with A_T = 180° − A
     a, e, s, z = (design_matrix([name], AZ, EL)[:, 0] for name in ("HASA2", "HESA2", "HSSA2", "HZSA2"))
-    np.testing.assert_allclose(a[:36], f * np.cos(EL), atol=1e-15)  # ΔA, fitted as ΔA·cos E
+    np.testing.assert_allclose(a[:36], -f * np.cos(EL), atol=1e-15)  # ΔA_T = −ΔA, fitted ·cos E
     np.testing.assert_allclose(e[36:], f, atol=1e-15)
-    np.testing.assert_allclose(s[:36], f, atol=1e-15)
+    np.testing.assert_allclose(s[:36], -f, atol=1e-15)
     np.testing.assert_allclose(z[36:], -f, atol=1e-15)  # zenith distance grows as E falls
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 7, 8])
+def test_azimuth_harmonics_flip_with_the_parity_tpoint_reports(n):
+    # With A_T = 180° − A and azimuth results in A_T, a coefficient fitted in a naive
+    # north-through-east frame differs in sign from TPOINT's for: HACA n even, HASA n odd,
+    # HECA n odd, HESA n even (the pattern the issue measured on real TPOINT fits).
+    naive = {"HACA": np.cos(n * AZ) * np.cos(EL), "HASA": np.sin(n * AZ) * np.cos(EL),
+             "HECA": np.cos(n * AZ), "HESA": np.sin(n * AZ)}
+    flips = {"HACA": n % 2 == 0, "HASA": n % 2 == 1, "HECA": n % 2 == 1, "HESA": n % 2 == 0}
+    for stem, column in naive.items():
+        x = design_matrix([f"{stem}{n}"], AZ, EL)[:, 0]
+        ours = x[:36] if stem[1] == "A" else x[36:]
+        np.testing.assert_allclose(ours, -column if flips[stem] else column, atol=1e-14)  # zenith distance grows as E falls
 
 
 def test_harmonic_of_zenith_distance_uses_ninety_minus_elevation():

@@ -18,8 +18,8 @@ app = typer.Typer(help="Load or drop the pointing model the server applies to ev
 @app.command("load")
 def load(
     file: Annotated[str, typer.Argument(
-        help="Pointing model JSON (from `pointing-model fit -o model.json`). A file that exists "
-             "here is sent as an absolute path; otherwise the path is taken as the server's.")],
+        help="Pointing model: JSON (from `pointing-model fit -o model.json`) or a TPOINT "
+             ".mod file. A file that exists here is sent as an absolute path; otherwise the path is taken as the server's.")],
     server: ServerOpt = None,
     as_json: JsonOpt = False,
 ) -> None:

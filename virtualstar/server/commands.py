@@ -285,7 +285,7 @@ COMMANDS: dict[str, Command] = {
     "park": Command(ParkParams, _park, "Slew to the park position and power off."),
     "set_mode": Command(ModeParams, _mode, "mode=active (commands move the mount) or passive "
                         "(watch only)."),
-    "load_model": Command(ModelParams, _load, "Load a pointing model JSON file (server side path)."),
+    "load_model": Command(ModelParams, _load, "Load a pointing model: JSON or a TPOINT .mod file (server side path)."),
     "unload_model": Command(NoParams, _unload, "Drop the pointing model."),
     "errors": Command(ErrorsParams, _errors, "Tracking-error RMS and peak over a mount-time "
                       "window; series=true adds per-bin values."),
