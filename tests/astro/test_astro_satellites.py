@@ -42,10 +42,12 @@ def test_sgp4_reproduces_vallado_verification_output():
         sat = Satellite("ver", Satrec.twoline2rv(line1, line2))
         rows = reference[sat.satrec.satnum]
         days = rows[:, 0] / 1440.0
-        whole = np.floor(days)
-        times = UtcTimes(sat.satrec.jdsatepoch + whole,
-                         sat.satrec.jdsatepochF + (days - whole))
-        err, r, v = sat.satrec.sgp4_array(times.jd1, times.jd2)
+        # SGP4's time is a continuous UTC count (POSIX-like): build the instants that way,
+        # so that those on a day ending in a leap second are the ones Vallado propagated to
+        epoch_days, epoch_sec = sat.epoch.posix_days()
+        times = UtcTimes.from_posix_days(np.full(days.shape, epoch_days[0]),
+                                         epoch_sec[0] + days * 86400.0)
+        err, r, v = sat.satrec.sgp4_array(*times.posix_jd())
         ok = err == 0  # the file lists the rows up to the error Vallado reports
         assert ok.sum() >= len(rows) - 1
         if not ok.any():

@@ -32,7 +32,7 @@ import numpy as np
 from sgp4 import omm
 from sgp4.api import SGP4_ERRORS, Satrec
 
-from .constants import C_M_S, DAY_S
+from .constants import C_M_S, DAY_S, UNIX_EPOCH_JD
 from .earth_orientation import EarthOrientation
 from .exceptions import SatelliteError
 from .observed import Observation, observe_enu
@@ -91,16 +91,21 @@ class Satellite:
 
     @property
     def epoch(self) -> UtcTimes:
-        """Return the epoch of the elements (UTC)."""
-        return UtcTimes.from_jd(self.satrec.jdsatepoch, self.satrec.jdsatepochF)
+        """Return the epoch of the elements (UTC; SGP4 counts it continuously, POSIX-like)."""
+        whole = math.floor(self.satrec.jdsatepoch - 0.5) + 0.5  # 0h of the epoch's day
+        sec = ((self.satrec.jdsatepoch - whole) + self.satrec.jdsatepochF) * DAY_S
+        return UtcTimes.from_posix_days(np.array([round(whole - UNIX_EPOCH_JD)]), np.array([sec]))
 
     def teme_km(self, times: UtcTimes) -> tuple[np.ndarray, np.ndarray]:
         """Return SGP4 TEME position (km) and velocity (km/s), each (N,3).
 
         Raises SatelliteError when SGP4 fails at any of the times (decay, ...).
         """
-        err, r, v = self.satrec.sgp4_array(np.ascontiguousarray(times.jd1, dtype=float),
-                                           np.ascontiguousarray(times.jd2, dtype=float))
+        # SGP4 counts UTC continuously (POSIX-like, as skyfield feeds it): on a day that ends
+        # in a leap second ERFA's quasi-JD would run 1/86 400 slow all day
+        jd, fraction = times.posix_jd()
+        err, r, v = self.satrec.sgp4_array(np.ascontiguousarray(jd, dtype=float),
+                                           np.ascontiguousarray(fraction, dtype=float))
         if err.any():
             bad = np.flatnonzero(err)
             code = int(err[bad[0]])
@@ -132,18 +137,17 @@ def teme_to_topocentric(r_km: np.ndarray, v_km_s: np.ndarray, times: UtcTimes, s
     # Earth orientation on hourly nodes aligned to UTC hours: UT1-UTC and polar motion
     # are linear between the daily IERS values, so GMST (linear in UT1 to 1e-15 rad over
     # an hour) and the polar-motion matrix are linear between the nodes too.
-    ref1 = math.floor(float(times.jd1[0]) - 0.5) + 0.5  # a UTC midnight
-    ref2 = math.floor(((float(times.jd1[0]) - ref1) + float(times.jd2[0])) * 24.0) / 24.0
-    sec = times.seconds_since(ref1, ref2)
+    days, sec_of_day = times[0].posix_days()
+    ref = UtcTimes.from_posix_days(days, np.floor(sec_of_day / 3600.0) * 3600.0)  # a UTC hour
+    sec = times.seconds_since(float(ref.jd1[0]), float(ref.jd2[0]))  # POSIX seconds
     k1 = max(math.ceil(float(sec.max()) / _NODE_S), 1)
     k0 = min(math.floor(float(sec.min()) / _NODE_S), k1 - 1)
     node_s = np.arange(k0, k1 + 1) * _NODE_S
-    node_jd1 = np.full_like(node_s, ref1)
-    node_jd2 = ref2 + node_s / DAY_S
-    dut1, xp, yp = eop.interpolate(node_jd1, node_jd2)
-    # UT1 = UTC + dut1 (ERFA's utcut1 differs only inside a leap-second day).
-    node_theta = np.unwrap(erfa.gmst82(node_jd1, node_jd2 + dut1 / DAY_S))
-    sp = erfa.sp00(node_jd1, node_jd2)
+    nodes = ref.shifted(node_s)
+    dut1, xp, yp = eop.interpolate(nodes.jd1, nodes.jd2)
+    # ERFA's utcut1 keeps UT1 right on a day that ends in a leap second
+    node_theta = np.unwrap(erfa.gmst82(*nodes.ut1(dut1)))
+    sp = erfa.sp00(nodes.jd1, nodes.jd2)
     enu_m = site.enu_matrix()
     node_mats = np.ascontiguousarray(enu_m @ erfa.pom00(xp, yp, sp))  # PEF → ITRS → ENU
     site_itrs = site.itrs_position_m()

@@ -1,14 +1,23 @@
 """UTC times as two-part Julian dates, and their TAI, TT and UT1 counterparts.
 
-`UtcTimes` holds UTC in the ERFA quasi-JD convention (jd1 + jd2, each day
-86400 "seconds" long, which makes it a continuous count like POSIX time).
-Mount time is integer microseconds since 1970-01-01 UTC (POSIX, leap seconds
-not counted), convertible both ways without rounding beyond 1 µs.
+`UtcTimes` holds UTC in ERFA's quasi-JD convention: jd1 + jd2 where the
+fraction of a day is the UTC seconds elapsed that day divided by the day's own
+length — 86 401 s on a day that ends in a leap second, so 23:59:60.5 exists.
+ERFA's UTC functions (utctai, utcut1, d2dtf, apco13, ...) take exactly that.
+
+Mount time is integer microseconds since 1970-01-01 UTC counted the POSIX way:
+86 400 s a day, leap seconds not counted (23:59:60.x reads as the next day's
+00:00:00.x). Conversions between the two scale the day fraction by the day's
+real length, so an instant on a leap-second day is the same instant in both;
+`seconds_since` and `shifted` count POSIX seconds (the continuous UTC count that
+SGP4, skyfield and the mount use).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import functools
+import re
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -20,6 +29,7 @@ from .constants import DAY_S, UNIX_EPOCH_JD
 from .exceptions import TimeParseError
 
 _US_PER_DAY = 86_400_000_000
+_LEAP_SECOND = re.compile(r"^(.*T\d{2}:\d{2}:)60((?:[.,]\d+)?(?:[+-]\d{2}:?\d{2})?)$")
 
 
 @dataclass(frozen=True)
@@ -44,7 +54,16 @@ class UtcTimes:
         """Build from mount time: integer microseconds since 1970-01-01 UTC (POSIX)."""
         t = np.atleast_1d(np.asarray(t_us, dtype=np.int64))
         days, rem = np.divmod(t, _US_PER_DAY)
-        return cls(UNIX_EPOCH_JD + days.astype(float), rem / _US_PER_DAY)
+        return cls.from_posix_days(days, rem / 1e6)
+
+    @classmethod
+    def from_posix_days(cls, days: np.ndarray, sec_of_day: np.ndarray) -> UtcTimes:
+        """Build from whole POSIX days since 1970 and seconds into that day (may exceed 86 400)."""
+        extra = np.floor(np.asarray(sec_of_day) / DAY_S).astype(np.int64)
+        days = np.asarray(days, dtype=np.int64) + extra
+        sec_of_day = np.asarray(sec_of_day) - extra * DAY_S
+        jd1 = UNIX_EPOCH_JD + days.astype(float)
+        return cls(jd1, sec_of_day / day_length_s(jd1))
 
     @classmethod
     def from_iso(cls, texts: Iterable[str]) -> UtcTimes:
@@ -73,17 +92,34 @@ class UtcTimes:
                         np.ascontiguousarray(np.atleast_1d(self.jd2[index])))
 
     def to_unix_us(self) -> np.ndarray:
-        """Return mount time (int64 µs since 1970-01-01 UTC, POSIX)."""
-        days = np.rint(self.jd1 - UNIX_EPOCH_JD).astype(np.int64)
-        return days * _US_PER_DAY + np.rint(self.jd2 * _US_PER_DAY).astype(np.int64)
+        """Return mount time (int64 µs since 1970-01-01 UTC, POSIX).
+
+        An instant inside a leap second (23:59:60.x) gives the next day's 00:00:00.x.
+        """
+        days, sec = self.posix_days()
+        return days * _US_PER_DAY + np.rint(sec * 1e6).astype(np.int64)
+
+    def posix_days(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return (whole POSIX days since 1970, seconds into the day) of these instants."""
+        day = UtcTimes.from_jd(self.jd1, self.jd2)  # jd1 at 0h, 0 <= jd2 < 1
+        days = np.rint(day.jd1 - UNIX_EPOCH_JD).astype(np.int64)
+        return days, day.jd2 * day_length_s(day.jd1)
+
+    def posix_jd(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return UTC as a continuous count, (JD of the day, POSIX seconds/86 400): SGP4's time."""
+        days, sec = self.posix_days()
+        return UNIX_EPOCH_JD + days.astype(float), sec / DAY_S
 
     def seconds_since(self, ref_jd1: float, ref_jd2: float = 0.0) -> np.ndarray:
-        """Return UTC seconds elapsed since a reference two-part JD (float64)."""
-        return ((self.jd1 - ref_jd1) + (self.jd2 - ref_jd2)) * DAY_S
+        """Return POSIX seconds elapsed since a reference UTC two-part JD (float64)."""
+        days, sec = self.posix_days()
+        ref_days, ref_sec = UtcTimes.from_jd(ref_jd1, ref_jd2).posix_days()
+        return (days - ref_days[0]).astype(float) * DAY_S + (sec - ref_sec[0])
 
     def shifted(self, seconds: np.ndarray | float) -> UtcTimes:
         """Return these times moved by `seconds` (POSIX seconds, no leap seconds)."""
-        return UtcTimes.from_jd(self.jd1, self.jd2 + np.asarray(seconds) / DAY_S)
+        days, sec = self.posix_days()
+        return UtcTimes.from_posix_days(days, sec + np.asarray(seconds, dtype=float))
 
     def tai(self) -> tuple[np.ndarray, np.ndarray]:
         """Return TAI as two-part Julian dates (leap seconds from ERFA's table)."""
@@ -110,11 +146,43 @@ class UtcTimes:
         return out
 
 
+def day_length_s(jd1: np.ndarray) -> np.ndarray | float:
+    """Return the length in seconds of the UTC days whose JD (at 0h, jd1 ≡ .5) is given.
+
+    86 400 except on a day that ends in a leap second (ERFA's table). Fast path: when no
+    leap second falls between the first and the last day, one scalar 86 400 is returned.
+    """
+    jd1 = np.asarray(jd1, dtype=float)
+    if jd1.size == 0:
+        return DAY_S
+    first, last = float(np.min(jd1)), float(np.max(jd1))
+    if _tai_minus_utc(first) == _tai_minus_utc(last + 1.0):
+        return DAY_S
+    days, index = np.unique(jd1, return_inverse=True)
+    lengths = np.array([DAY_S + _tai_minus_utc(d + 1.0) - _tai_minus_utc(d) for d in days])
+    return lengths[index].reshape(jd1.shape)
+
+
+@functools.lru_cache(maxsize=4096)
+def _tai_minus_utc(jd_0h: float) -> float:
+    """Return TAI − UTC (s) at 0h UTC of the day starting at `jd_0h` (ERFA's leap-second table)."""
+    with warnings.catch_warnings():
+        # "dubious year": after ERFA's table could know of a leap second; the last value holds
+        warnings.simplefilter("ignore", erfa.ErfaWarning)
+        y, m, d, _ = erfa.jd2cal(jd_0h, 0.0)
+        return float(erfa.dat(y, m, d, 0.0))
+
+
 def _parse_one_iso(text: str) -> tuple[float, float]:
     raw = text.strip()
     cleaned = raw.replace(" ", "T", 1) if "T" not in raw and " " in raw else raw
     if cleaned.endswith(("Z", "z")):
         cleaned = cleaned[:-1] + "+00:00"
+    # 23:59:60.x, a leap second: datetime cannot hold it, ERFA can (and refuses it on a day
+    # that has none)
+    leap = _LEAP_SECOND.match(cleaned)
+    if leap:
+        cleaned = leap.group(1) + "59" + leap.group(2)
     try:
         stamp = _dt.datetime.fromisoformat(cleaned)
     except ValueError:
@@ -124,11 +192,20 @@ def _parse_one_iso(text: str) -> tuple[float, float]:
         ) from None
     if stamp.tzinfo is not None:
         stamp = stamp.astimezone(_dt.UTC).replace(tzinfo=None)
-    seconds = stamp.second + stamp.microsecond / 1e6
+    seconds = stamp.second + (1 if leap else 0) + stamp.microsecond / 1e6
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", erfa.ErfaWarning)  # "dubious year" (future)
-            return erfa.dtf2d("UTC", stamp.year, stamp.month, stamp.day, stamp.hour,
-                              stamp.minute, seconds)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", erfa.ErfaWarning)
+            jd = erfa.dtf2d("UTC", stamp.year, stamp.month, stamp.day, stamp.hour,
+                            stamp.minute, seconds)
+        # "dubious year" (a future date) is fine; "after end of day" is a second 60 on a
+        # day without a leap second
+        if any("end of day" in str(w.message) for w in caught):
+            raise ValueError("time is after end of day")
+        return jd
     except (erfa.ErfaError, ValueError) as exc:
+        if leap:
+            raise TimeParseError(f"cannot read UTC time {text!r}: there is no leap second "
+                                 "at the end of that day (second 60 exists only on days that "
+                                 "end in one, e.g. 2016-12-31)") from None
         raise TimeParseError(f"cannot convert UTC time {text!r}: {exc}") from None
