@@ -112,3 +112,20 @@ def test_where_warns_on_stale_elements_and_still_answers():
     assert "warning:" in result.stderr and "TLE epoch" in result.stderr
     row = json.loads(result.stdout)[0]
     assert row["target"] == "ISS (ZARYA)" and 300 < row["range_km"] < 15000
+
+
+def test_where_beyond_the_iers_table_says_what_it_costs_stars_without_raw_erfa_lines():
+    import subprocess
+    import sys
+
+    # a fresh process: the table's warnings are said once per process
+    done = subprocess.run(
+        [sys.executable, "-c", "from virtualstar.cli.main import main; main()",
+         "where", "Vega", "--at", "2030-06-01T22:00:00Z", *SITE_ARGS],
+        capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "ERFA" not in done.stderr and "dubious year" not in done.stderr, done.stderr
+    warnings = [ln for ln in done.stderr.splitlines() if ln.startswith("warning:")]
+    assert len(warnings) == 1, done.stderr
+    assert "outside the IERS table" in warnings[0] and "stars" in warnings[0]
+    assert "2030-06-01T22:00:00" in done.stdout

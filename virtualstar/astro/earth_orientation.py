@@ -79,14 +79,17 @@ class EarthOrientation:
             self._warn_once("outside",
                 f"a time lies outside the IERS table of {self.source} "
                 f"({_mjd_date(self.mjd[0])} .. {_mjd_date(self.mjd[-1])}): UT1-UTC and polar "
-                "motion are held at the edge value; LEO satellite positions may be off by "
-                "arcminutes. Update astropy-iers-data.")
+                "motion are held at the edge value, and leap seconds announced later are "
+                "unknown. UT1-UTC drifts by up to ~1 s a year, and each second of it turns the "
+                "sky by 15 arcsec: stars (hour angle, hence az/el) may be off by arcseconds to "
+                "tens of arcseconds, LEO satellites by arcminutes. Update astropy-iers-data.")
         elif float(np.max(mjd)) > self.measured_until_mjd + 1.0:
             self._warn_once("predicted",
                 f"a time lies after the last measured IERS value "
                 f"({_mjd_date(self.measured_until_mjd)}, {self.source}): predicted UT1-UTC and "
-                "polar motion are used (good to a few ms and mas for weeks, worse later; "
-                "a LEO satellite may be off by arcseconds). Update astropy-iers-data.")
+                "polar motion are used (good to a few ms and mas for weeks, worse later: "
+                "stars within a fraction of an arcsecond, a LEO satellite may be off by "
+                "arcseconds). Update astropy-iers-data.")
 
     def _warn_once(self, kind: str, message: str) -> None:
         # Once per table and kind: a server asks for every trajectory chunk, and any

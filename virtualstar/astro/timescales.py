@@ -122,16 +122,24 @@ class UtcTimes:
         return UtcTimes.from_posix_days(days, sec + np.asarray(seconds, dtype=float))
 
     def tai(self) -> tuple[np.ndarray, np.ndarray]:
-        """Return TAI as two-part Julian dates (leap seconds from ERFA's table)."""
-        return erfa.utctai(self.jd1, self.jd2)
+        """Return TAI as two-part Julian dates (leap seconds from ERFA's table).
+
+        ERFA's "dubious year" for dates after its table could know of a new leap second
+        is not passed on: EarthOrientation says what a date beyond the IERS table costs.
+        """
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", erfa.ErfaWarning)
+            return erfa.utctai(self.jd1, self.jd2)
 
     def tt(self) -> tuple[np.ndarray, np.ndarray]:
         """Return TT as two-part Julian dates."""
         return erfa.taitt(*self.tai())
 
     def ut1(self, dut1_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return UT1 two-part Julian dates given UT1-UTC in seconds."""
-        return erfa.utcut1(self.jd1, self.jd2, dut1_s)
+        """Return UT1 two-part Julian dates given UT1-UTC in seconds (no "dubious year")."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", erfa.ErfaWarning)
+            return erfa.utcut1(self.jd1, self.jd2, dut1_s)
 
     def iso(self, decimals: int = 3) -> list[str]:
         """Return ISO 8601 UTC strings ending in Z."""
