@@ -6,14 +6,17 @@ Layout of a store directory::
     DIR/samples/20261121T22Z-<session>.parquet  t_us (int64) + one column per signal
     DIR/overview/20261121T22Z-<session>.parquet 1-s buckets: t_us, n, <name>__min, <name>__max
     DIR/gaps.csv                                after_t_us, before_t_us, lost_samples, reason, session
+    DIR/samples/<hour>-<session>.arrows.inprogress  the hour in progress (parquet_journal.py)
+    DIR/writer.lock                             held (fcntl) by the live recorder, its PID inside
 
 Files are standard Parquet (pandas, polars, DuckDB, MATLAB's parquetread): values are
 stored exactly as streamed, compressed with zstd; float columns use BYTE_STREAM_SPLIT and
 integer columns (t_us first) DELTA_BINARY_PACKED, which shrink smooth signals and
 regular clocks the most. A file is partitioned by mount-time hour and written one big
 row group at a time from a background thread, so memory stays bounded by one row group
-and the event loop keeps receiving while zstd compresses. A file being written is named
-``*.parquet.inprogress`` and renamed when its hour (or the recording) ends.
+and the event loop keeps receiving while zstd compresses. The hour in progress is an
+append-only journal, durable every second; it becomes the hour's Parquet file when the
+hour (or the recording) ends, or when the store is next opened after a crash.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import contextlib
 import csv
 import json
 import os
+import time
 from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
@@ -35,6 +39,16 @@ import pyarrow.parquet as pq
 from .background import BackgroundWriter, new_session_id
 from .decimation import Envelope, envelope, rebucket
 from .exceptions import EmptyStore, QueryError, StoreError
+from .parquet_journal import (
+    GAP_FIELDS,
+    JOURNAL_SUFFIX,
+    HourJournal,
+    RecoveryReport,
+    WriterLock,
+    finalize_journal,
+    live_writer_pid,
+    recover,
+)
 from .samples import Gap, SampleBlock, SignalInfo
 
 __all__ = [
@@ -51,7 +65,7 @@ DEFAULT_ZSTD_LEVEL = 3
 HOUR_US = 3_600_000_000
 OVERVIEW_BUCKET_US = 1_000_000
 MAX_PENDING_FLUSHES = 2  # row groups handed to the writer thread before `write` waits
-GAP_FIELDS = ["after_t_us", "before_t_us", "lost_samples", "reason", "session"]
+DEFAULT_FLUSH_INTERVAL_S = 1.0  # wall seconds: at most this much is lost to a crash
 
 
 def _hour_label(hour: int) -> str:
@@ -67,45 +81,60 @@ class ParquetStoreWriter:
     """Write one recording session into a store directory (created when missing).
 
     Use: ``w = ParquetStoreWriter(dir); w.begin(signals, source=..., rate_hz=...);``
-    ``w.write(block)...; w.write_gap(gap); w.close()``. Raises StoreError when the
-    directory cannot be written or holds signals of other types under the same names.
+    ``w.write(block)...; w.write_gap(gap); w.close()``. The hour in progress is journalled
+    (parquet_journal.py): what was handed to `write` more than `flush_interval_s` ago
+    survives a SIGKILL or a power loss. Raises StoreError when the directory cannot be
+    written, another recorder is writing it, or it holds signals of other types under the
+    same names.
     """
 
     def __init__(self, path: str | Path, *, row_group_rows: int = DEFAULT_ROW_GROUP_ROWS,
-                 zstd_level: int = DEFAULT_ZSTD_LEVEL) -> None:
+                 zstd_level: int = DEFAULT_ZSTD_LEVEL,
+                 flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S) -> None:
         self.path = Path(path)
         self.row_group_rows = int(row_group_rows)
         self.zstd_level = int(zstd_level)
+        self.flush_interval_s = float(flush_interval_s)
         self.session = ""
         self.signals: list[SignalInfo] = []
         self.rows_written = 0
         self.files: list[Path] = []
+        self.recovered: RecoveryReport | None = None
         self._schema: pa.Schema | None = None
-        self._overview_schema: pa.Schema | None = None
         self._buffer: list[SampleBlock] = []
         self._buffered = 0
         self._hour: int | None = None
+        self._last_flush = time.monotonic()
         self._thread = BackgroundWriter("parquet-writer", MAX_PENDING_FLUSHES, self._store_error)
-        self._open: dict[str, tuple[int, pq.ParquetWriter, Path]] = {}
-        self._overview_parts: list[pa.Table] = []  # this hour's 1-s envelope, written at its end
+        self._lock = WriterLock(self.path)
+        self._journal: HourJournal | None = None
+        self._journal_hour: int | None = None
         self._closed = False
 
     # -- session -------------------------------------------------------------------------
     def begin(self, signals: list[SignalInfo], *, source: str = "", rate_hz: float = 0.0,
               period_us: float = 0.0) -> str:
-        """Start a session of `signals`; return its id. Raises StoreError."""
+        """Start a session of `signals`; return its id. Raises StoreError.
+
+        A store left by a recorder that died is recovered first (`self.recovered` says so).
+        """
         self.signals = list(signals)
         self.session = new_session_id()
         try:
             (self.path / "samples").mkdir(parents=True, exist_ok=True)
             (self.path / "overview").mkdir(parents=True, exist_ok=True)
+            self._lock.acquire()
         except OSError as exc:
             raise StoreError(f"cannot create the store directory {self.path}: {exc.strerror}") from None
+        self.recovered = recover(self.path, row_group_rows=self.row_group_rows,
+                                 zstd_level=self.zstd_level, overview_bucket_us=OVERVIEW_BUCKET_US,
+                                 hold_lock=self._lock)
         meta = _read_meta(self.path)
         known = {s["name"]: s for s in meta.get("signals", [])}
         for s in self.signals:
             old = known.get(s.name)
             if old is not None and old.get("dtype") != s.dtype:
+                self._lock.release()
                 raise StoreError(f"store {self.path} already holds {s.name} as {old.get('dtype')}; "
                                  f"this recording streams it as {s.dtype}: use another directory")
             known[s.name] = asdict(s)
@@ -122,17 +151,15 @@ class ParquetStoreWriter:
                             metadata={"unit": s.unit}) for s in self.signals]
         self._schema = pa.schema(fields, metadata={"format": PARQUET_FORMAT,
                                                    "session": self.session})
-        ov = [pa.field("t_us", pa.int64()), pa.field("n", pa.int64())]
-        for s in self.signals:
-            t = pa.from_numpy_dtype(np.dtype(s.dtype))
-            ov += [pa.field(f"{s.name}__min", t), pa.field(f"{s.name}__max", t)]
-        self._overview_schema = pa.schema(ov, metadata={"bucket_us": str(OVERVIEW_BUCKET_US)})
+        self._last_flush = time.monotonic()
         return self.session
 
     # -- samples -------------------------------------------------------------------------
     def write(self, block: SampleBlock) -> None:
-        """Buffer `block`; hand whole row groups (or an ended hour) to the writer thread."""
+        """Buffer `block`; journal what is buffered every flush interval or row group, and
+        finish an hour as soon as a sample of a later hour arrives."""
         if len(block) == 0:
+            self.flush_if_due()
             return
         hours = block.t_us // HOUR_US
         if hours[0] != hours[-1]:  # split at each hour boundary
@@ -143,10 +170,18 @@ class ParquetStoreWriter:
         hour = int(hours[0])
         if self._hour is not None and hour != self._hour:
             self._flush()
+            self._thread.submit(self._finish_hour)
         self._hour = hour
         self._buffer.append(block)
         self._buffered += len(block)
         if self._buffered >= self.row_group_rows:
+            self._flush()
+        else:
+            self.flush_if_due()
+
+    def flush_if_due(self) -> None:
+        """Journal what is buffered if the flush interval has passed (call it when idle too)."""
+        if self._buffer and time.monotonic() - self._last_flush >= self.flush_interval_s:
             self._flush()
 
     def write_gap(self, gap: Gap) -> None:
@@ -164,21 +199,22 @@ class ParquetStoreWriter:
             raise StoreError(f"cannot append to {path}: {exc.strerror}") from None
 
     def flush(self) -> None:
-        """Write what is buffered and wait until it is on disk (files stay open)."""
+        """Journal what is buffered and wait until it is on disk."""
         self._flush()
         self._thread.wait(0)
 
     def close(self) -> None:
-        """Write the rest, close and rename every file; raise StoreError if a write failed."""
+        """Write the rest, finish the hour's files; raise StoreError if a write failed."""
         if self._closed:
             return
         self._closed = True
         try:
             self._flush()
-            self._thread.submit(self._close_all)
+            self._thread.submit(self._finish_hour)
             self._thread.wait(0)
         finally:
             self._thread.shutdown()
+            self._lock.release()
 
     def __enter__(self) -> ParquetStoreWriter:
         return self
@@ -187,11 +223,11 @@ class ParquetStoreWriter:
         self.close()
 
     def _flush(self) -> None:
+        self._last_flush = time.monotonic()
         if not self._buffer:
             return
         blocks, self._buffer, self._buffered = self._buffer, [], 0
-        hour = self._hour
-        self._thread.submit(self._write_group, hour, blocks)
+        self._thread.submit(self._append, self._hour, blocks)
 
     def _store_error(self, exc: BaseException) -> BaseException:
         if isinstance(exc, StoreError):
@@ -199,75 +235,36 @@ class ParquetStoreWriter:
         return StoreError(f"writing the store {self.path} failed: {exc}")
 
     # -- the writer thread ---------------------------------------------------------------
-    def _write_group(self, hour: int, blocks: list[SampleBlock]) -> None:
-        assert self._schema is not None and self._overview_schema is not None
+    def _append(self, hour: int, blocks: list[SampleBlock]) -> None:
+        assert self._schema is not None
         t_us = np.concatenate([b.t_us for b in blocks]) if len(blocks) > 1 else blocks[0].t_us
         columns = [pa.array(t_us, pa.int64())]
         for s in self.signals:
             col = (np.concatenate([b.columns[s.name] for b in blocks]) if len(blocks) > 1
                    else blocks[0].columns[s.name])
             columns.append(pa.array(col))
-        table = pa.Table.from_arrays(columns, schema=self._schema)
-        self._writer("samples", hour, self._schema).write_table(table, row_group_size=len(t_us))
+        if self._journal is not None and self._journal_hour != hour:
+            self._finish_hour()
+        if self._journal is None:
+            name = f"{_hour_label(hour)}-{self.session}"
+            self._journal = HourJournal(self.path / "samples" / (name + JOURNAL_SUFFIX),
+                                        self._schema)
+            self._journal_hour = hour
+        self._journal.append(pa.Table.from_arrays(columns, schema=self._schema))
         self.rows_written += len(t_us)
-        self._overview_parts.append(self._overview_table(table))
 
-    def _overview_table(self, table: pa.Table) -> pa.Table:
-        assert self._overview_schema is not None
-        names = [s.name for s in self.signals]
-        env = envelope(table.column("t_us").to_numpy(),
-                       {n: table.column(n).to_numpy() for n in names}, OVERVIEW_BUCKET_US)
-        arrays: list[Any] = [pa.array(env.t_us, pa.int64()), pa.array(env.n, pa.int64())]
-        for n in names:
-            arrays += [pa.array(env.mins[n]), pa.array(env.maxs[n])]
-        return pa.Table.from_arrays(arrays, schema=self._overview_schema)
-
-    def _write_overview(self, hour: int) -> None:
-        """Write the hour's 1-s envelope as one row group (it is small: 3600 rows)."""
-        if self._overview_parts:
-            assert self._overview_schema is not None
-            table = pa.concat_tables(self._overview_parts)
-            self._overview_parts = []
-            self._writer("overview", hour, self._overview_schema).write_table(table)
-
-    def _writer(self, kind: str, hour: int, schema: pa.Schema) -> pq.ParquetWriter:
-        current = self._open.get(kind)
-        if current is not None and current[0] == hour:
-            return current[1]
-        if current is not None:
-            if kind == "samples":
-                self._write_overview(current[0])
-            self._close_one(kind)
-        final = self.path / kind / f"{_hour_label(hour)}-{self.session}.parquet"
-        temp = final.with_name(final.name + ".inprogress")
-        encodings = {"t_us": "DELTA_BINARY_PACKED"}
-        for f in schema:
-            if f.name != "t_us":
-                if pa.types.is_floating(f.type):
-                    encodings[f.name] = "BYTE_STREAM_SPLIT"
-                elif pa.types.is_integer(f.type):
-                    encodings[f.name] = "DELTA_BINARY_PACKED"
-        try:
-            writer = pq.ParquetWriter(temp, schema, compression="zstd",
-                                      compression_level=self.zstd_level, use_dictionary=False,
-                                      column_encoding=encodings, write_statistics=True)
-        except OSError as exc:
-            raise StoreError(f"cannot create {temp}: {exc}") from None
-        self._open[kind] = (hour, writer, final)
-        return writer
-
-    def _close_one(self, kind: str) -> None:
-        _, writer, final = self._open.pop(kind)
-        writer.close()
-        os.replace(final.with_name(final.name + ".inprogress"), final)
-        if kind == "samples":
-            self.files.append(final)
-
-    def _close_all(self) -> None:
-        if "samples" in self._open:
-            self._write_overview(self._open["samples"][0])
-        for kind in list(self._open):
-            self._close_one(kind)
+    def _finish_hour(self) -> None:
+        """Close the hour's journal and turn it into the hour's Parquet file and overview."""
+        if self._journal is None:
+            return
+        journal, self._journal = self._journal, None
+        journal.close()
+        stem = journal.path.name[: -len(JOURNAL_SUFFIX)]
+        done = finalize_journal(journal.path, self.path / "samples" / f"{stem}.parquet",
+                                self.path / "overview" / f"{stem}.parquet",
+                                row_group_rows=self.row_group_rows, zstd_level=self.zstd_level,
+                                overview_bucket_us=OVERVIEW_BUCKET_US)
+        self.files += done.files
 
 
 def _read_meta(path: Path) -> dict[str, Any]:
@@ -292,16 +289,23 @@ class ParquetStoreReader:
     Raises EmptyStore when `path` holds no finished sample file.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, recover_crashed: bool = True) -> None:
         self.path = Path(path)
         if not self.path.is_dir():
             raise EmptyStore(f"store directory {self.path} does not exist")
+        # A recorder that died left its hour in progress as a journal: finish it now (once;
+        # `recovered` says what was done). A live recorder's journal is its own.
+        self.recovered = (recover(self.path, row_group_rows=DEFAULT_ROW_GROUP_ROWS,
+                                  zstd_level=DEFAULT_ZSTD_LEVEL,
+                                  overview_bucket_us=OVERVIEW_BUCKET_US)
+                          if recover_crashed else None)
+        self.writer_pid = live_writer_pid(self.path)
         self.meta = _read_meta(self.path)
         self.sample_files = sorted((self.path / "samples").glob("*.parquet"))
         self.overview_files = sorted((self.path / "overview").glob("*.parquet"))
         if not self.sample_files:
-            hint = (" (a recording is still writing it: *.inprogress files are finished at the "
-                    "end of each hour)" if any((self.path / "samples").glob("*.inprogress")) else "")
+            hint = (f" (a recording, PID {self.writer_pid}, is writing it: its hour in progress "
+                    "becomes readable when the hour ends)" if self.writer_pid else "")
             raise EmptyStore(f"{self.path} holds no sample files (samples/*.parquet){hint}")
         self._signals: list[SignalInfo] | None = None
 
