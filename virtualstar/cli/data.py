@@ -34,6 +34,15 @@ def _fail(message: str, code: int = 2) -> typer.Exit:
     return typer.Exit(code)
 
 
+def _open(store: str):
+    """Open a store's reader; say on stderr when it recovered a recording whose recorder died."""
+    reader = open_reader(store)
+    recovered = getattr(reader, "recovered", None)
+    if recovered is not None:
+        typer.echo(f"vs data: warning: {recovered}", err=True)
+    return reader
+
+
 def _names(names: list[str] | None) -> list[str] | None:
     if not names:
         return None
@@ -78,7 +87,7 @@ def query(
     if decimate is not None and decimate < 1:
         raise _fail(f"--decimate {decimate}: expected a number of buckets >= 1")
     try:
-        reader = open_reader(store)
+        reader = _open(store)
         a, b = _window(reader, t_from, t_to)
         wanted = _names(names)
         if decimate is not None:
@@ -128,7 +137,7 @@ def info(store: StoreArg,
          json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False) -> None:
     """Print the signals, time span, sample count and gaps of a store."""
     try:
-        reader = open_reader(store)
+        reader = _open(store)
         start, end = reader.time_range()
         doc = {"store": store, "signals": [s.__dict__ for s in reader.signals()],
                "first_t_us": start, "last_t_us": end, "first_utc": utc_text(start),
@@ -136,6 +145,7 @@ def info(store: StoreArg,
                "gaps": [g.__dict__ for g in reader.gaps()]}
         if isinstance(reader, ParquetStoreReader):
             doc["bytes"] = sum(f.stat().st_size for f in reader.path.rglob("*") if f.is_file())
+            doc["writer_pid"] = reader.writer_pid  # a live recorder writing it now, or None
     except (RecorderError, OSError) as exc:
         raise _fail(str(exc)) from None
     if json_out:
@@ -169,7 +179,7 @@ def plot(
 
     try:
         out.mkdir(parents=True, exist_ok=True)
-        reader = open_reader(store)
+        reader = _open(store)
         a, b = _window(reader, t_from, t_to)
         wanted = _names(names)
         signals = [s for s in reader.signals() if wanted is None or s.name in wanted]
@@ -200,7 +210,7 @@ def export(
     if csv_path is None and mat_path is None:
         raise _fail("give --csv FILE and/or --mat FILE")
     try:
-        reader = open_reader(store)
+        reader = _open(store)
         a, b = _window(reader, t_from, t_to)
         wanted = _names(names)
         signals = [s for s in reader.signals() if wanted is None or s.name in wanted]
@@ -221,3 +231,37 @@ def export(
             typer.echo(f"wrote {rows} rows to {mat_path}")
     except (RecorderError, OSError) as exc:
         raise _fail(str(exc)) from None
+
+
+@app.command()
+def recover(
+    directory: Annotated[Path, typer.Argument(help="Parquet store directory (parquet:DIR).")],
+    json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Finish a Parquet store whose recorder died: keep its journalled samples, record the gap.
+
+    Any `vs data` command and a new `vs record` into the store do this by themselves; this
+    command only does it, and says what it found. A store a live recorder is writing is left
+    alone (exit 1).
+    """
+    from virtualstar.recorder.parquet_journal import live_writer_pid
+    from virtualstar.recorder.parquet_store import recover_store
+
+    if not directory.is_dir():
+        raise _fail(f"{directory} is not a directory; expected a Parquet store (parquet:DIR)")
+    pid = live_writer_pid(directory)
+    if pid is not None:
+        raise _fail(f"a live recorder (PID {pid}) is writing {directory}; nothing to recover", 1)
+    try:
+        report = recover_store(directory)
+    except (RecorderError, OSError) as exc:
+        raise _fail(str(exc), 1) from None
+    doc = {"store": str(directory), "recovered": report is not None,
+           "journals": [p.name for p in report.journals] if report else [],
+           "samples": report.rows if report else 0,
+           "last_t_us": report.last_t_us if report else None,
+           "unreadable": [p.name for p in report.unreadable] if report else []}
+    if json_out:
+        typer.echo(json.dumps(doc))
+    else:
+        typer.echo(str(report) if report else f"{directory}: nothing to recover")

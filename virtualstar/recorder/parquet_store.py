@@ -52,11 +52,13 @@ from .parquet_journal import (
 from .samples import Gap, SampleBlock, SignalInfo
 
 __all__ = [
+    "DEFAULT_FLUSH_INTERVAL_S",
     "DEFAULT_ROW_GROUP_ROWS",
     "OVERVIEW_BUCKET_US",
     "PARQUET_FORMAT",
     "ParquetStoreReader",
     "ParquetStoreWriter",
+    "recover_store",
 ]
 
 PARQUET_FORMAT = "virtualstar-recorder/1"
@@ -123,9 +125,9 @@ class ParquetStoreWriter:
         try:
             (self.path / "samples").mkdir(parents=True, exist_ok=True)
             (self.path / "overview").mkdir(parents=True, exist_ok=True)
-            self._lock.acquire()
         except OSError as exc:
             raise StoreError(f"cannot create the store directory {self.path}: {exc.strerror}") from None
+        self._lock.acquire()
         self.recovered = recover(self.path, row_group_rows=self.row_group_rows,
                                  zstd_level=self.zstd_level, overview_bucket_us=OVERVIEW_BUCKET_US,
                                  hold_lock=self._lock)
@@ -267,6 +269,12 @@ class ParquetStoreWriter:
         self.files += done.files
 
 
+def recover_store(path: str | Path) -> RecoveryReport | None:
+    """Finish a store whose recorder died (see parquet_journal.recover); None if nothing to do."""
+    return recover(Path(path), row_group_rows=DEFAULT_ROW_GROUP_ROWS,
+                   zstd_level=DEFAULT_ZSTD_LEVEL, overview_bucket_us=OVERVIEW_BUCKET_US)
+
+
 def _read_meta(path: Path) -> dict[str, Any]:
     meta_path = path / "recording.json"
     if not meta_path.exists():
@@ -295,10 +303,7 @@ class ParquetStoreReader:
             raise EmptyStore(f"store directory {self.path} does not exist")
         # A recorder that died left its hour in progress as a journal: finish it now (once;
         # `recovered` says what was done). A live recorder's journal is its own.
-        self.recovered = (recover(self.path, row_group_rows=DEFAULT_ROW_GROUP_ROWS,
-                                  zstd_level=DEFAULT_ZSTD_LEVEL,
-                                  overview_bucket_us=OVERVIEW_BUCKET_US)
-                          if recover_crashed else None)
+        self.recovered = recover_store(self.path) if recover_crashed else None
         self.writer_pid = live_writer_pid(self.path)
         self.meta = _read_meta(self.path)
         self.sample_files = sorted((self.path / "samples").glob("*.parquet"))

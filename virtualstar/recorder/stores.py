@@ -74,6 +74,12 @@ class TeeWriter:
         for w in self.writers:
             w.write_gap(gap)
 
+    def flush_if_due(self) -> None:
+        for w in self.writers:
+            flush_if_due = getattr(w, "flush_if_due", None)
+            if flush_if_due is not None:
+                flush_if_due()
+
     def close(self) -> None:
         errors = []
         for w in self.writers:

@@ -29,6 +29,7 @@ __all__ = ["Recorder", "RecordingSummary", "SampleSink", "StoreWriter"]
 log = logging.getLogger("virtualstar.recorder")
 
 DEFAULT_RECONNECT_DELAY_S = 0.2
+IDLE_FLUSH_S = 0.5  # a quiet stream still lets the store journal what it holds this often
 MAX_RECONNECT_DELAY_S = 5.0
 CLIENT_QUEUE_PACKETS = 65_536  # client-side packet queue: a burst of several seconds at 10 kHz
 
@@ -281,24 +282,37 @@ class Recorder:
         stopped and what it already queued is still stored.
         """
         stopper = asyncio.ensure_future(self._stop.wait())
+        getter: asyncio.Future | None = None
         try:
             while True:
                 timeout = None if deadline is None else deadline - time.monotonic()
                 if timeout is not None and timeout <= 0:
                     break
-                getter = asyncio.ensure_future(stream.__anext__())
-                done, _ = await asyncio.wait({getter, stopper}, timeout=timeout,
+                if getter is None:
+                    getter = asyncio.ensure_future(stream.__anext__())
+                wait_s = IDLE_FLUSH_S if timeout is None else min(timeout, IDLE_FLUSH_S)
+                done, _ = await asyncio.wait({getter, stopper}, timeout=wait_s,
                                              return_when=asyncio.FIRST_COMPLETED)
                 if getter not in done:
-                    getter.cancel()
-                    await asyncio.gather(getter, return_exceptions=True)
-                    break
+                    if stopper in done or (deadline is not None and time.monotonic() >= deadline):
+                        break
+                    # a quiet stream: what was received must still reach the disk in time
+                    flush_if_due = getattr(self.writer, "flush_if_due", None)
+                    if flush_if_due is not None:
+                        flush_if_due()
+                    continue
                 try:
                     packet = getter.result()
                 except StopAsyncIteration:
+                    getter = None
                     return not self._stop.is_set()
+                getter = None
                 self.sink.accept(packet)
                 self._progress.set()
+            if getter is not None:
+                getter.cancel()
+                await asyncio.gather(getter, return_exceptions=True)
+                getter = None
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(stream.stop(), 2.0)
             async for packet in stream:  # what was queued before the stop
