@@ -12,16 +12,27 @@ figure is printed beside a reference measured in the same run:
     (scaled to the run), without streams, then with the per-tick trace of the 3 recorded
     columns in the endpoint's full-width trace array and in a 3-column array.
 
-    .venv/bin/python benchmarks/bench_recorder_night.py [--hours 12] [--out DIR]
+Then it measures what a crash costs: `vs record` at 1 kHz from a real-time device, killed
+with SIGKILL at random moments; the samples lost are the device's clock at the kill minus
+the last sample the store recovered, beside what had been recorded before the kill (what a
+footer-less hour file used to lose).
+
+    .venv/bin/python benchmarks/bench_recorder_night.py [--hours 12] [--out DIR] [--kills 5]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import os
+import random
 import resource
 import shutil
+import signal
+import socket
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -38,6 +49,7 @@ GOAL_WALL_S = 600.0
 GOAL_STORE_BYTES = 0.5e9
 GOAL_WINDOW_S = 0.050
 GOAL_OVERVIEW_S = 2.0
+GOAL_LOST_S = 1.0  # ~ one flush interval
 
 
 def _size(path: Path) -> int:
@@ -98,6 +110,50 @@ def _step_references(exp: SineExperiment, ticks: int) -> dict[str, float]:
     return out
 
 
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def _sigkill_losses(kills: int, workdir: Path) -> tuple[list[float], list[float]]:
+    """Kill `vs record` (1 kHz, real-time device) `kills` times; return (lost s, recorded s)."""
+    port = _free_port()
+    device = subprocess.Popen([sys.executable, "-m", "astcom_client.example_device",
+                               f"tcp://127.0.0.1:{port}", "--duration", str(30 + 10 * kills)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    lost, recorded = [], []
+    rng = random.Random(7)
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError("the example device did not start") from None
+                time.sleep(0.05)
+        for k in range(kills):
+            store = workdir / f"kill-{k}"
+            rec = subprocess.Popen([sys.executable, "-c",
+                                    "from virtualstar.cli.main import main; main()", "record",
+                                    f"tcp://127.0.0.1:{port}", "counter", "wave.sine", "--rate",
+                                    "1000", "--store", f"parquet:{store}"],
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            time.sleep(rng.uniform(4.0, 7.0))
+            kill_us = time.time_ns() // 1000  # the device's mount time runs on this clock
+            os.kill(rec.pid, signal.SIGKILL)
+            rec.wait(30)
+            first, last = ParquetStoreReader(store).time_range()  # recovers the journal
+            lost.append((kill_us - last) / 1e6)
+            recorded.append((last - first) / 1e6)
+    finally:
+        device.kill()
+        device.wait(10)
+    return lost, recorded
+
+
 def _row(what: str, ours: str, goal: str, reference: str) -> None:
     print(f"{what:<26} {ours:>14} {goal:>12}   {reference}")
 
@@ -106,6 +162,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--hours", type=float, default=12.0, help="simulated hours (paper: 12)")
     parser.add_argument("--out", type=Path, default=None, help="keep the store and plots here")
+    parser.add_argument("--kills", type=int, default=5, help="SIGKILLs of a 1 kHz recording")
     args = parser.parse_args()
     out = args.out or Path(tempfile.mkdtemp(prefix="bench-night-"))
     scale = 12.0 / args.hours
@@ -193,6 +250,12 @@ def main() -> None:
         _row("whole-night overview", f"{t_overview * 1e3:.0f} ms", f"{GOAL_OVERVIEW_S * 1e3:.0f} ms",
              f"min/max from every sample: {t_full * 1e3:.0f} ms ({len(env)} buckets of "
              f"{env.bucket_us / 1e6:g} s)")
+        if args.kills > 0:
+            lost, recorded = _sigkill_losses(args.kills, out)
+            _row("lost per SIGKILL (1 kHz)", f"{statistics.median(lost):.2f} s",
+                 f"{GOAL_LOST_S:.0f} s",
+                 f"max {max(lost):.2f} s over {len(lost)} kills; recorded before each kill "
+                 f"(lost whole before the journal): median {statistics.median(recorded):.1f} s")
         if args.hours != 12:
             print(f"(goals for wall time and size scaled to {args.hours:g} h; the full run: --hours 12)")
         print(f"plots: {', '.join(str(p) for p in result.plots)}")

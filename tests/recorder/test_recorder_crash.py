@@ -176,3 +176,66 @@ def test_a_second_recorder_into_a_live_store_is_refused_with_the_pid(tmp_path):
         proc.kill()
         proc.wait(30)
         device.close()
+
+
+def _spooled_last_t_us(spool: Path) -> int | None:
+    last = None
+    for f in spool.rglob("batch-*.lp"):
+        for line in f.read_text().splitlines():
+            if line.startswith("signals,"):
+                t = int(line.rsplit(" ", 1)[1])
+                last = t if last is None else max(last, t)
+    return last
+
+
+def test_a_killed_recorder_into_an_unreachable_influxdb_loses_nothing_it_spooled(tmp_path,
+                                                                                influx):
+    from virtualstar.recorder.influx_store import (
+        InfluxConnection,
+        InfluxStoreReader,
+        spool_key,
+    )
+
+    influx.stop()  # the database is down from the start
+    device = ThreadedDevice(TOP_OF_HOUR_US - 30 * 60_000_000)
+    spool = tmp_path / "spool"
+    args = [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "record",
+            device.url, "counter", "wave.sine", "--rate", "1000",
+            "--store", f"influx:{influx.url}/crashdb", "--spool", str(spool)]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_until(device.streaming, "the recorder's stream")
+        last_t_us = device.advance_s(8)
+        _wait_until(lambda: (_spooled_last_t_us(spool) or 0) >= last_t_us - 1000,
+                    "the spool to hold the last tick")
+        os.kill(proc.pid, signal.SIGKILL)
+        _, err = proc.communicate(timeout=30)
+        assert "does not answer" in err and str(spool) in err  # said on the terminal
+        assert [p.name for p in spool.iterdir()] == [spool_key(influx.url, "crashdb")]
+
+        influx.start()
+        again = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        _wait_until(device.streaming, "the second recorder's stream")
+        device.advance_s(2)
+        again.send_signal(signal.SIGINT)
+        _, err = again.communicate(timeout=60)
+        assert again.returncode == 0, err
+        reader = InfluxStoreReader(InfluxConnection.from_env(influx.url, "crashdb"))
+        crash = [g for g in reader.gaps() if g.reason == "recorder died"]
+        assert len(crash) == 1 and crash[0].after_t_us == last_t_us
+        first_t_us, _ = reader.time_range()
+        t = reader.window(first_t_us, last_t_us + 1, ["counter"]).t_us
+        assert t[-1] == last_t_us and np.all(np.diff(t) == 1000)  # every sample before the kill
+        assert not list((spool / spool_key(influx.url, "crashdb")).glob("batch-*.lp"))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        device.close()
+
+
+def test_the_influx_spool_is_keyed_by_server_and_database(tmp_path):
+    from virtualstar.recorder.influx_store import spool_key
+
+    keys = {spool_key("http://127.0.0.1:8086", "night"), spool_key("http://127.0.0.1:8087", "night"),
+            spool_key("http://10.0.0.5:8086", "night"), spool_key("http://127.0.0.1:8086", "day")}
+    assert len(keys) == 4

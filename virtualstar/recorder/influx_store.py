@@ -6,11 +6,15 @@ Python's shortest round-trip repr, so InfluxDB keeps them bit-exact; integers wi
 ``i`` suffix), tagged with the session. Gaps go to ``recorder_gaps`` and the signal
 units to ``recorder_signals``. Queries are InfluxQL (``GET /query?epoch=u``).
 
-When the database cannot be reached (or answers 5xx), batches are appended to a spool
-directory on disk, oldest first, and written back as soon as it answers again — also by
-a later recording that uses the same spool directory. Nothing is dropped: a batch that
-InfluxDB rejects as malformed (4xx) is kept in ``rejected-*.lp`` and reported.
-HTTP runs on a writer thread so the event loop keeps receiving samples meanwhile.
+Every batch goes to a spool directory on disk first (fsynced), at least once per flush
+interval, and is then sent, oldest first; a batch leaves the spool only once InfluxDB has
+taken it. So a recorder killed at any moment loses at most its last flush interval; what
+it spooled is sent by the next recording that uses the same spool — which is keyed by
+server *and* database (``<spool>/<host>_<port>__<db>/``), so it can only go where it was
+meant to. A ``session-*.json`` marker names each live session and its last spooled sample;
+a marker left by a dead process becomes a "recorder died" gap. Nothing is dropped: a batch
+that InfluxDB rejects as malformed (4xx) is kept in ``rejected-*.lp`` and reported. HTTP
+runs on a writer thread so the event loop keeps receiving samples meanwhile.
 """
 
 from __future__ import annotations
@@ -56,6 +60,20 @@ MAX_PENDING_BATCHES = 4
 CLOSE_DRAIN_S = 10.0
 QUERY_CHUNK_ROWS = 50_000
 MAX_TIME_US = (2**63 - 2) // 1000  # InfluxDB keeps nanoseconds in an int64
+DEFAULT_FLUSH_INTERVAL_S = 1.0  # wall seconds: at most this much is lost to a crash
+CRASH_REASON = "recorder died"
+
+
+def _process_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def _clamp(t_us: int) -> int:
@@ -191,20 +209,34 @@ def _write_error(exc: BaseException) -> BaseException:
     return StoreError(f"writing to InfluxDB failed: {exc}")
 
 
-class InfluxStoreWriter:
-    """Write a recording session to InfluxDB in batches, spooling to disk while it is down.
+def spool_key(url: str, database: str) -> str:
+    """Return the spool subdirectory of one server and database: ``<host>_<port>__<db>``."""
+    where = urllib.parse.urlsplit(url)
+    port = where.port or (443 if where.scheme == "https" else 8086)
+    text = f"{where.hostname or 'localhost'}_{port}__{database}"
+    return "".join(c if c.isalnum() or c in "._-" else "_" for c in text)
 
-    `spool_dir` defaults to ``<tmp>/vs-record-spool/<database>``; batches left there
-    (the database stayed down past `close`) are written by the next writer using it.
+
+class InfluxStoreWriter:
+    """Write a recording session to InfluxDB in batches through a durable spool.
+
+    `spool_dir` (default ``<tmp>/vs-record-spool``) holds one subdirectory per server and
+    database; batches left there (the database stayed down past `close`, or the recorder
+    died) are written by the next writer of the same server and database.
     """
 
     def __init__(self, conn: InfluxConnection, *, spool_dir: str | Path | None = None,
-                 batch_lines: int = DEFAULT_BATCH_LINES, close_drain_s: float = CLOSE_DRAIN_S) -> None:
+                 batch_lines: int = DEFAULT_BATCH_LINES, close_drain_s: float = CLOSE_DRAIN_S,
+                 flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S) -> None:
         self.conn = conn
-        self.spool_dir = Path(spool_dir) if spool_dir else (
-            Path(tempfile.gettempdir()) / "vs-record-spool" / conn.database)
+        root = Path(spool_dir) if spool_dir else Path(tempfile.gettempdir()) / "vs-record-spool"
+        self.spool_dir = root / spool_key(conn.url, conn.database)
         self.batch_lines = int(batch_lines)
         self.close_drain_s = close_drain_s
+        self.flush_interval_s = float(flush_interval_s)
+        self._last_submit = time.monotonic()
+        self._last_t_us: int | None = None
+        self.crashed_sessions: list[Gap] = []
         self.session = ""
         self.signals: list[SignalInfo] = []
         self.lines_written = 0
@@ -226,6 +258,14 @@ class InfluxStoreWriter:
         """Start a session; describe the signals in recorder_signals. Never raises when down."""
         self.signals = list(signals)
         self.session = new_session_id()
+        if not self.conn.ping():
+            log.warning("InfluxDB at %s does not answer: recording into the spool %s; the "
+                        "batches are written when it answers (this or a later recording)",
+                        self.conn.url, self.spool_dir)
+        for gap in self._dead_sessions():
+            self.crashed_sessions.append(gap)
+            self.write_gap(gap)
+        self._write_marker()
         now_us = time.time_ns() // 1000
         for s in self.signals:
             self._lines.append(
@@ -236,17 +276,27 @@ class InfluxStoreWriter:
         return self.session
 
     def write(self, block: SampleBlock) -> None:
-        """Queue the samples of `block`; hand full batches to the writer thread."""
-        self._lines.extend(line_protocol(MEASUREMENT, {"session": self.session}, block))
+        """Queue the samples of `block`; spool a batch when full or every flush interval."""
+        if len(block):
+            self._lines.extend(line_protocol(MEASUREMENT, {"session": self.session}, block))
+            self._last_t_us = int(block.t_us[-1])
         if len(self._lines) >= self.batch_lines:
+            self._submit()
+        else:
+            self.flush_if_due()
+
+    def flush_if_due(self) -> None:
+        """Spool what is queued if the flush interval has passed (call it when idle too)."""
+        if self._lines and time.monotonic() - self._last_submit >= self.flush_interval_s:
             self._submit()
 
     def write_gap(self, gap: Gap) -> None:
-        """Queue a recorder_gaps point at the gap's end time."""
+        """Queue a recorder_gaps point at the gap's end time (its start when the end is unknown)."""
+        at = gap.before_t_us if gap.before_t_us >= 0 else gap.after_t_us
         self._lines.append(
             f"{GAPS_MEASUREMENT},session={_escape_key(gap.session or self.session)} "
             f"after_t_us={gap.after_t_us}i,before_t_us={gap.before_t_us}i,"
-            f"lost_samples={gap.lost_samples}i,reason={_quote(gap.reason)} {gap.before_t_us}")
+            f"lost_samples={gap.lost_samples}i,reason={_quote(gap.reason)} {at}")
 
     def flush(self) -> None:
         """Hand over what is queued and wait until it is written or spooled."""
@@ -264,6 +314,7 @@ class InfluxStoreWriter:
             self._thread.wait(0)
         finally:
             self._thread.shutdown()
+        self._marker().unlink(missing_ok=True)
         left = self.spooled_files()
         if left:
             log.warning("InfluxDB at %s unreachable: %d batch file(s) stay in %s and will be "
@@ -274,12 +325,40 @@ class InfluxStoreWriter:
         return sorted(self.spool_dir.glob("batch-*.lp"))
 
     def _submit(self) -> None:
+        self._last_submit = time.monotonic()
         if not self._lines:
             return
         payload = ("\n".join(self._lines) + "\n").encode()
         n = len(self._lines)
         self._lines = []
-        self._thread.submit(self._deliver, payload, n)
+        self._thread.submit(self._deliver, payload, n, self._last_t_us)
+
+    # -- sessions that died --------------------------------------------------------------
+    def _marker(self) -> Path:
+        return self.spool_dir / f"session-{self.session}.json"
+
+    def _write_marker(self, last_t_us: int | None = None) -> None:
+        """Say (durably) that this session is alive and what it spooled last."""
+        doc = {"session": self.session, "pid": os.getpid(), "last_t_us": last_t_us}
+        tmp = self._marker().with_suffix(".tmp")
+        tmp.write_text(json.dumps(doc))
+        os.replace(tmp, self._marker())
+
+    def _dead_sessions(self) -> list[Gap]:
+        """Return a "recorder died" gap per marker whose process is gone; remove the marker."""
+        gaps = []
+        for marker in sorted(self.spool_dir.glob("session-*.json")):
+            try:
+                doc = json.loads(marker.read_text())
+            except (OSError, ValueError):
+                continue
+            if _process_alive(int(doc.get("pid", 0))):
+                continue
+            last = doc.get("last_t_us")
+            if last is not None:
+                gaps.append(Gap(int(last), -1, -1, CRASH_REASON, str(doc.get("session", ""))))
+            marker.unlink(missing_ok=True)
+        return gaps
 
     # -- the writer thread ---------------------------------------------------------------
     def _try(self, payload: bytes) -> bool:
@@ -309,22 +388,25 @@ class InfluxStoreWriter:
             path.unlink()
         return True
 
-    def _deliver(self, payload: bytes, n: int) -> None:
-        spool_empty = not self.spooled_files()
-        if not spool_empty and time.monotonic() >= self._next_retry:
-            spool_empty = self._drain_spool()
-        if spool_empty and time.monotonic() >= self._next_retry and self._try(payload):
-            self.lines_written += n
-            return
-        self._spool(payload, n)
+    def _deliver(self, payload: bytes, n: int, last_t_us: int | None) -> None:
+        path = self._spool(payload, n)  # on disk before anything is sent: a kill keeps it
+        if last_t_us is not None:
+            self._write_marker(last_t_us)
+        if time.monotonic() >= self._next_retry:
+            self._drain_spool()
+        if path.exists():  # the database did not take it now
+            self.lines_spooled += n
+            self.spooled_batches += 1
 
-    def _spool(self, payload: bytes, n: int) -> None:
+    def _spool(self, payload: bytes, n: int) -> Path:
         name = f"batch-{time.time_ns():020d}-{n}.lp"
         tmp = self.spool_dir / (name + ".tmp")
-        tmp.write_bytes(payload)
+        with open(tmp, "wb") as f:
+            f.write(payload)
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(tmp, self.spool_dir / name)  # a batch file is either whole or absent
-        self.lines_spooled += n
-        self.spooled_batches += 1
+        return self.spool_dir / name
 
     def _final_drain(self) -> None:
         deadline = time.monotonic() + self.close_drain_s

@@ -128,7 +128,7 @@ class HourJournal:
 def read_journal(path: Path) -> Iterator[pa.RecordBatch]:
     """Yield every complete batch of a journal, stopping quietly at a torn last one."""
     try:
-        source = pa.memory_map(str(path))
+        source = pa.OSFile(str(path))  # read batch by batch: memory stays one batch
     except OSError as exc:
         raise StoreError(f"cannot read {path}: {exc}") from None
     with source:
