@@ -58,9 +58,19 @@ def _run(coro: Any) -> Any:
     except ConnectionClosed as exc:
         raise _fail(str(exc), 2) from None
     except AstcomError as exc:
-        raise _fail(f"{exc} (code {exc.code})", 1) from None
+        raise _fail(f"{exc} (code {exc.code}){_cli_hint(exc)}", 1) from None
     except (ConnectionError, OSError, TimeoutError) as exc:
         raise _fail(f"connection failed: {exc or type(exc).__name__}", 2) from None
+
+
+def _cli_hint(exc: AstcomError) -> str:
+    """Name the astcom command that does what the refused request could not."""
+    text = str(exc)
+    if "is a function, not a variable" in text:
+        return "; use `astcom call URL NAME [ARGS...]`"
+    if "is a variable, not a function" in text:
+        return "; use `astcom get`, `astcom set` or `astcom stream`"
+    return ""
 
 
 async def _connect(url: str, password: str | None, role: str | None, cafile: Path | None,
@@ -90,7 +100,16 @@ def list_command(url: Url, prefix: Annotated[str, typer.Option(
     if as_json:
         _print_json([e.as_dict() for e in entries])
         return
-    table = Table("name", "type", "kind", "access", "unit", "doc", title=f"{len(entries)} entries")
+    if not sys.stdout.isatty():
+        # a pipe or a file: one whole entry per line, tab-separated, for grep and cut
+        for e in entries:
+            sys.stdout.write("\t".join((e.name, e.type, e.kind, e.access, e.unit, e.doc)) + "\n")
+        return
+    table = Table(title=f"{len(entries)} entries")
+    table.add_column("name", no_wrap=True, overflow="fold")  # a name is never cut short
+    for column in ("type", "kind", "access", "unit"):
+        table.add_column(column)
+    table.add_column("doc", ratio=1)
     for e in entries:
         table.add_row(e.name, e.type, e.kind, e.access, e.unit, e.doc)
     out.print(table)
@@ -203,10 +222,14 @@ def stream_command(url: Url, names: Annotated[list[str], typer.Argument(
                     writer.writerow(["t_us", "tick", *stream.names])
                 start = time.monotonic()
                 samples = lost = packets = 0
+                ended = False
                 while (left := duration - (time.monotonic() - start)) > 0:
                     try:
                         packet = await stream.get(timeout_s=left)
                     except TimeoutError:
+                        break
+                    except StopAsyncIteration:  # the endpoint closed the connection
+                        ended = True
                         break
                     samples, lost, packets = samples + packet.n, lost + packet.lost, packets + 1
                     if writer is not None:
@@ -217,18 +240,30 @@ def stream_command(url: Url, names: Annotated[list[str], typer.Argument(
                         for t_us, row in zip(packet.t_us.tolist(), packet.values, strict=True):
                             out.print(t_us, *(f"{v:.9g}" for v in row.tolist()), highlight=False)
                 elapsed = time.monotonic() - start
-                await stream.stop()
+                if not ended:
+                    await stream.stop()
             finally:
                 if handle is not None:
                     handle.close()
             return {"samples": {n: samples for n in stream.names}, "lost": lost,
                     "rate_hz": stream.rate_hz, "duration_s": round(elapsed, 6),
-                    "packets": packets, "out": str(out_file) if out_file else None}
+                    "packets": packets, "out": str(out_file) if out_file else None,
+                    "endpoint_closed": ended}
 
     summary = _run(main())
+    if summary["endpoint_closed"]:
+        err.print(f"[red]error:[/red] the endpoint closed the connection after "
+                  f"{summary['duration_s']:.2f} s; the samples received are counted below",
+                  highlight=False)
     if as_json:
         _print_json(summary)
-        return
+    else:
+        _print_stream_summary(summary)
+    if summary["endpoint_closed"]:
+        raise typer.Exit(1)
+
+
+def _print_stream_summary(summary: dict[str, Any]) -> None:
     table = Table("signal", "samples", title=(f"{summary['rate_hz']:g} Hz for "
                                                f"{summary['duration_s']:.2f} s, lost {summary['lost']}"))
     for name, count in summary["samples"].items():

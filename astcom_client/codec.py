@@ -135,12 +135,20 @@ class Codec:
                                  "value (exactly one value per frame)") from None
         except (LimitExceeded, MalformedFrame):
             raise
+        except msgpack.StackError:  # msgpack's own bound (1024 levels), far above max_depth
+            raise LimitExceeded(f"frame nests deeper than {self.limits.max_depth} levels") from None
         except ValueError as exc:
             text = str(exc)
+            # bin and ext may be as long as a whole frame: one over that limit runs past the
+            # frame's end (spec §8: a length past the end is a truncated frame, 400)
+            if "exceeds max_ext_len" in text or "exceeds max_bin_len" in text:
+                raise MalformedFrame("frame ends inside a msgpack value: a bin or ext declares "
+                                     "more bytes than the frame holds (truncated frame)") from None
             if "exceeds max" in text:
                 raise LimitExceeded(f"frame exceeds a size limit: {text}") from None
             if "incomplete" in text or "truncated" in text.lower():
-                raise MalformedFrame("frame ends inside a msgpack value (truncated frame)") from None
+                raise MalformedFrame("frame ends inside a msgpack value: a value declares more "
+                                     "bytes than the frame holds (truncated frame)") from None
             raise MalformedFrame(f"frame is not valid msgpack: {text}") from None
         except Exception as exc:  # msgpack raises several types for hostile bytes
             raise MalformedFrame(f"frame is not valid msgpack: {type(exc).__name__}: {exc}") from None
@@ -181,7 +189,9 @@ class Codec:
     def _parse_array_header(self, data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int]:
         if len(data) < 4:
             raise MalformedFrame("ndarray extension shorter than its 4-byte header")
-        code, ndim, _zero = _HEAD.unpack_from(data)
+        code, ndim, reserved = _HEAD.unpack_from(data)
+        if reserved:
+            raise MalformedFrame(f"ndarray header's reserved field is {reserved}; it must be 0")
         dtype = _DTYPE_BY_CODE.get(code)
         if dtype is None:
             raise MalformedFrame(f"ndarray dtype code {code} unknown; expected 0..{len(DTYPE_CODES) - 1}")

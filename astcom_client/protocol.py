@@ -28,6 +28,7 @@ from .auth import (
 from .codec import Codec
 from .commands import (
     COMMANDS,
+    MAX_SEQ,
     PROTOCOL_VERSION,
     Auth,
     Bye,
@@ -182,7 +183,9 @@ class ServerConnection:
         seq: int | None = None
         try:
             frame = self.options.codec.decode(data)
-            if isinstance(frame, list) and len(frame) == 3 and isinstance(frame[1], int):
+            # ERR carries the request's seq only when it is a valid one (§3); else nil
+            if (isinstance(frame, list) and len(frame) == 3 and type(frame[1]) is int
+                    and 0 <= frame[1] <= MAX_SEQ):
                 seq = frame[1]
             seq, command = decode_request(frame)
             return self._dispatch(seq, command)
@@ -218,9 +221,11 @@ class ServerConnection:
     def _hello(self, seq: int, hello: Hello) -> None:
         major = hello.version.split(".")[0]
         if major != PROTOCOL_VERSION.split(".")[0]:
-            self.close(IncompatibleVersion.code, "")
-            raise IncompatibleVersion(f"protocol version {hello.version!r} is not supported; "
-                                      f"this endpoint speaks {PROTOCOL_VERSION}")
+            refusal = IncompatibleVersion(f"protocol version {hello.version!r} is not "
+                                          f"supported; this endpoint speaks {PROTOCOL_VERSION}")
+            # the reason goes into the close too; the ERR reply is sent by receive_frame
+            self.close(refusal.code, refusal.message, send_error=False)
+            raise refusal
         self.peer_name = hello.client[:64]
         auth = self.options.authenticator
         if not auth.required:
@@ -235,7 +240,7 @@ class ServerConnection:
             "auth": "hmac-sha256" if auth.required else None,
             "nonce": self._nonce,
             "role": self.role.label if self.role else None,
-            "loop_rate_hz": self.options.loop_rate_hz,
+            "loop_rate_hz": float(self.options.loop_rate_hz),  # a float, as §5 says
             "limits": self.options.limits,
         })
 

@@ -265,15 +265,23 @@ class Collection:
     def variable(self, name: str) -> Variable:
         """Return the variable `name`; raise KeyError (UnknownName) otherwise."""
         entry = self._entries.get(name)
+        if isinstance(entry, Function):
+            raise UnknownName(f"{name!r} is a function, not a variable: call it with INVOKE",
+                              name=name)
         if not isinstance(entry, Variable):
-            raise UnknownName(f"no variable named {name!r}{_hint(name, self._entries)}", name=name)
+            raise UnknownName(f"no variable named {name!r}"
+                              f"{_hint(name, self._entries, Variable)}", name=name)
         return entry
 
     def function(self, name: str) -> Function:
         """Return the function `name`; raise KeyError (UnknownName) otherwise."""
         entry = self._entries.get(name)
+        if isinstance(entry, Variable):
+            raise UnknownName(f"{name!r} is a variable, not a function: READ, WRITE or stream "
+                              "it", name=name)
         if not isinstance(entry, Function):
-            raise UnknownName(f"no function named {name!r}{_hint(name, self._entries)}", name=name)
+            raise UnknownName(f"no function named {name!r}"
+                              f"{_hint(name, self._entries, Function)}", name=name)
         return entry
 
     def infos(self, prefix: str = "") -> list[VariableInfo]:
@@ -281,8 +289,10 @@ class Collection:
         return [e.info() for e in self._entries.values() if e.name.startswith(prefix)]
 
 
-def _hint(name: str, entries: dict[str, Any]) -> str:
+def _hint(name: str, entries: dict[str, Any], kind: type) -> str:
+    """Suggest up to three names of the same kind (a variable for a variable)."""
     import difflib
 
-    close = difflib.get_close_matches(name, list(entries), n=3)
+    close = difflib.get_close_matches(
+        name, [n for n, e in entries.items() if isinstance(e, kind)], n=3)
     return f"; did you mean {', '.join(close)}?" if close else ""

@@ -43,7 +43,11 @@ from .protocol import ServerConnection
 from .registry import Collection, Function, Variable
 from .timing import round_half_up
 
-__all__ = ["EndpointService", "PendingInvoke", "ServiceLimits"]
+__all__ = ["MAX_PERIOD_TICKS", "EndpointService", "PendingInvoke", "ServiceLimits"]
+
+# The slowest stream: one sample every 2^32 ticks (5 days at 10 kHz). It keeps period_ticks,
+# and every tick a stream names, far below 2^53 (spec §2.4, §6).
+MAX_PERIOD_TICKS = 2**32
 
 
 @dataclass(frozen=True)
@@ -336,9 +340,11 @@ class EndpointService:
         if bad:
             raise InvalidValue(f"cannot stream {', '.join(bad)}: streams carry numeric scalars "
                                "and fixed-size numeric arrays")
-        if not 0 < cmd.rate_hz <= self.loop_rate_hz * (1 + 1e-9):
-            raise InvalidValue(f"rate_hz {cmd.rate_hz} out of range: expected 0 < rate_hz <= "
-                               f"{self.loop_rate_hz:g} (the device loop rate)")
+        lowest = self.loop_rate_hz / MAX_PERIOD_TICKS
+        if not lowest <= cmd.rate_hz <= self.loop_rate_hz * (1 + 1e-9):
+            raise InvalidValue(f"rate_hz {cmd.rate_hz} out of range: expected {lowest:.6g} <= "
+                               f"rate_hz <= {self.loop_rate_hz:g}: at most the device loop rate "
+                               "(every tick), at least one sample every 2^32 ticks")
         streams = self._streams_of[conn.client_id]
         if cmd.msg not in streams and len(streams) >= self.limits.max_streams_per_client:
             raise TooMany(f"this connection already runs {len(streams)} streams (the maximum)")

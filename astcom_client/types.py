@@ -126,6 +126,9 @@ class TypeSpec:
         assert dtype is not None and self.shape is not None
         if isinstance(value, str | bytes | dict) or np.isscalar(value):
             raise InvalidValue(f"{where}: expected an array {self.name}, got {type(value).__name__}")
+        if self.base != "bool" and not isinstance(value, np.ndarray) and _holds_bool(value):
+            # a bool is not a number: refused as an element as it is as a scalar
+            raise InvalidValue(f"{where}: expected {self.base} elements, got a bool element")
         try:
             arr = np.asarray(value)
         except (ValueError, TypeError) as exc:
@@ -138,11 +141,19 @@ class TypeSpec:
         return _cast_array(arr, self.base, dtype, where)
 
 
+def _holds_bool(value: Any) -> bool:
+    """Return True when a (nested) list or tuple holds a bool anywhere."""
+    for item in value:
+        if type(item) is bool or (isinstance(item, list | tuple) and _holds_bool(item)):
+            return True
+    return False
+
+
 def _cast_array(arr: np.ndarray, base: str, dtype: np.dtype, where: str) -> np.ndarray:
     if arr.size == 0:
         return np.zeros(arr.shape, dtype=dtype)
     kind = arr.dtype.kind
-    if kind not in "biuf":
+    if kind not in "biuf" or (kind == "b" and base != "bool"):
         raise InvalidValue(f"{where}: expected {base} elements, got {arr.dtype} elements")
     if base == "bool":
         if kind != "b" and not np.all((arr == 0) | (arr == 1)):

@@ -24,6 +24,7 @@ from mount_emulator import layout as L
 from mount_emulator.config import EmulatorConfig
 from mount_emulator.exceptions import ConfigError
 from mount_emulator.geometry import GuideCamera
+from mount_emulator.loop_health import LoopHealth
 from mount_emulator.model import MountModel
 from mount_emulator.registry import build_collection
 
@@ -58,6 +59,7 @@ class MountEmulator:
                                   seed=config.guide_seed)
         self.speed = float(config.speed)
         self.last_guide = (0.0, 0.0)
+        self.health = LoopHealth()
         self.collection, col_to_state = build_collection(self)
         self._col_to_state = np.zeros(self.collection.trace_width, dtype=np.int64)
         for col, idx in col_to_state.items():
@@ -83,6 +85,10 @@ class MountEmulator:
         if not math.isfinite(value) or value < 0:
             raise ValueError(f"guide.seeing_arcsec must be >= 0, got {value}")
         self.camera.seeing_arcsec = float(value)
+
+    def health_reset(self) -> None:
+        """Zero the loop-health counters (`loop.reset_health`)."""
+        self.health.reset()
 
     def mount_time_iso(self) -> str:
         """Return the mount clock as ISO-8601 UTC text with microseconds."""
@@ -116,19 +122,28 @@ class MountEmulator:
         self.ticks_run += n_ticks
         return events
 
+    def _timed_advance(self, n_ticks: int) -> None:
+        start = time.perf_counter()
+        self.advance(n_ticks)
+        self.health.block_done((time.perf_counter() - start) * 1e6)
+
     async def _run(self) -> None:
         if self.speed <= 0:
             while True:
-                self.advance(FAST_BLOCK_TICKS)
+                self._timed_advance(FAST_BLOCK_TICKS)
                 await asyncio.sleep(0)
         rate = LOOP_RATE_HZ * self.speed
         t0 = time.monotonic()
         done = 0
+        # one block is what a wake-up every block_s computes on time; more is an overrun
+        block_ticks = max(1, math.ceil(rate * self.config.block_s * 2))
         while True:
             due = int((time.monotonic() - t0) * rate) - done
+            if due > 0:
+                self.health.woke(due, block_ticks, 1e6 / rate)
             while due > 0:
                 n = min(due, MAX_BLOCK_TICKS)
-                self.advance(n)
+                self._timed_advance(n)
                 done += n
                 due -= n
                 if due > 0:

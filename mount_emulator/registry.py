@@ -73,8 +73,27 @@ def build_collection(emu: MountEmulator) -> tuple[Collection, dict[int, int]]:
                           doc=f"{slot.doc} (default {slot.default:g})",
                           get=lambda i=slot.index: float(params[i]), set=_param_setter(params, slot))
     _add_text_signals(coll, emu)
+    _add_loop_health(coll, emu)
     _add_functions(coll, emu)
     return coll, column_to_state
+
+
+def _add_loop_health(coll: Collection, emu: MountEmulator) -> None:
+    """`loop.*`: how well the device loop keeps its time (mount_emulator/loop_health.py)."""
+    for name, type_, unit, doc in (
+            ("overruns", "u64", "", "Wake-ups that found more than one block of ticks due "
+             "(the loop fell behind wall time; real time only)"),
+            ("late_ticks", "u64", "", "Ticks computed while the loop was behind by more than "
+             "one block"),
+            ("blocks", "u64", "", "Blocks of ticks computed since start"),
+            ("worst_block_us", "f64", "us", "Longest wall time of computing one block"),
+            ("last_block_us", "f64", "us", "Wall time of computing the last block"),
+            ("worst_lag_us", "f64", "us", "Largest lag of mount time behind its wall-clock due "
+             "time at a wake-up (real time only)")):
+        coll.add_variable(f"loop.{name}", type_, unit=unit, doc=doc,
+                          get=lambda n=name: getattr(emu.health, n))
+    coll.add_function("loop.reset_health", emu.health_reset,
+                      doc="Zero the loop.* counters (e.g. after start-up or a load test)")
 
 
 def _add_text_signals(coll: Collection, emu: MountEmulator) -> None:

@@ -120,7 +120,8 @@ def device_in_thread(url: str = "ws://127.0.0.1:0", **options: Any) -> Any:
 
     async def main() -> None:
         async with served(url, realtime=True, **options) as (device, endpoint, bound):
-            state.update(device=device, endpoint=endpoint, url=bound, stop=asyncio.Event())
+            state.update(device=device, endpoint=endpoint, url=bound, stop=asyncio.Event(),
+                         loop=asyncio.get_running_loop())
             ready.set()
             await state["stop"].wait()
 
