@@ -131,6 +131,7 @@ class Stream:
         self.lost = 0
         self.packets = 0
         self.lost_packets = 0
+        self.skipped_samples = 0  # ticks the device never computed (not a loss)
         self.stopped = False
 
     def on_packet(self, callback: Callable[[StreamPacket], None]) -> None:
@@ -146,10 +147,16 @@ class Stream:
             return  # still in flight from this message's previous rate
         values, arrays = self._assemble(data)
         lost = 0
-        if self._next_tick is not None and data.first_tick > self._next_tick:
-            lost = (data.first_tick - self._next_tick) // max(1, data.period_ticks)
-        if self._next_seq is not None and data.seq > self._next_seq:
+        dropped = self._next_seq is not None and data.seq > self._next_seq
+        if dropped:
             self.lost_packets += data.seq - self._next_seq
+        if self._next_tick is not None and data.first_tick > self._next_tick:
+            missing = (data.first_tick - self._next_tick) // max(1, data.period_ticks)
+            # spec §6: a seq jump means dropped packets; seq + 1 means the device skipped ticks
+            if dropped:
+                lost = missing
+            else:
+                self.skipped_samples += missing
         self._next_tick = data.first_tick + data.n * data.period_ticks
         self._next_seq = data.seq + 1
         packet = StreamPacket(data.msg, data.seq, data.first_tick, data.first_t_us, data.period_us,

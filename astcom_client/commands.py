@@ -78,7 +78,8 @@ class Command:
         """Build the command from a decoded args map; raise MalformedFrame naming the field."""
         values: dict[str, Any] = {}
         for name, required in _fields(cls):
-            if name not in args:
+            if name not in args or (args[name] is None and not required):
+                # an optional field sent as nil means its default (spec §3)
                 if required:
                     raise MalformedFrame(f"{cls.OP}: missing field {name!r}")
                 continue

@@ -88,7 +88,8 @@ class EndpointConfig:
                 "max_messages": self.max_messages,
                 "max_names_per_message": self.max_names_per_message,
                 "max_streams_per_client": self.max_streams_per_client,
-                "auth_timeout_s": self.auth_timeout_s, "queue_packets": self.queue_packets}
+                "auth_timeout_s": self.auth_timeout_s, "queue_packets": self.queue_packets,
+                "max_clients": self.max_clients, "max_pending": self.max_pending}
 
 
 class Endpoint:

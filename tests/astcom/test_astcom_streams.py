@@ -206,7 +206,7 @@ def test_a_raising_callback_does_not_break_the_connection() -> None:
     run(main())
 
 
-def test_a_gap_in_the_device_ticks_ends_the_packet_and_shows_as_lost_samples() -> None:
+def test_a_gap_in_the_device_ticks_ends_the_packet_and_counts_as_skipped_not_lost() -> None:
     async def main() -> None:
         async with memory_session() as (device, endpoint, client):
             stream = await client.stream(["counter"], rate_hz=RATE_HZ)  # 20 samples per packet
@@ -217,7 +217,10 @@ def test_a_gap_in_the_device_ticks_ends_the_packet_and_shows_as_lost_samples() -
             packets = list(stream._queue)
         ticks = [p.ticks.tolist() for p in packets]
         assert ticks[0] == list(range(20)) and ticks[1] == list(range(20, 30))
-        assert ticks[2] == list(range(130, 150)) and packets[2].lost == 100
+        assert ticks[2] == list(range(130, 150))
+        # seq went on by one: the device skipped the ticks, no packet was dropped (spec §6)
+        assert [p.seq for p in packets] == [0, 1, 2] and packets[2].lost == 0
+        assert stream.skipped_samples == 100 and stream.lost == 0
         for packet in packets:  # counter == tick everywhere: no packet spans the gap
             np.testing.assert_array_equal(packet.column("counter"), packet.ticks)
     run(main())

@@ -139,3 +139,80 @@ def test_a_client_written_from_the_spec_authenticates_lists_reads_and_streams(sc
             assert "t_us" in (await client.call("PING"))["t_us"]
             await client.call("BYE")
     run(main())
+
+
+@pytest.mark.parametrize("scheme", ["ws", "tcp"])
+def test_a_client_written_from_the_spec_meets_the_settled_edges(scheme: str) -> None:
+    """The answers §3, §5, §6, §7 and §8 now give, checked from the spec client's side."""
+    async def main() -> None:
+        async with served(f"{scheme}://127.0.0.1:0") as (_, _, url):
+            # §5: version syntax; the reply states the endpoint's own version
+            for version in ("1", "1.7"):
+                probe = SpecClient(scheme, url)
+                await probe.open()
+                assert (await probe.call("HELLO", {"version": version}))["version"] == "1.0"
+                await probe.call("BYE")
+            client = SpecClient(scheme, url)
+            await client.open()
+            # §3: an optional field may be nil; §5: the limits name max_clients, max_pending
+            client.seq += 1
+            await client.send(["HELLO", client.seq, {"version": "1.0", "client": None}])
+            hello = (await client.recv())[2]
+            limits = hello["limits"]
+            assert isinstance(hello["loop_rate_hz"], float)
+            assert limits["max_clients"] == 32 and limits["max_pending"] == 8
+            key, sn, cn = PASSWORDS["operator"].encode(), hello["nonce"], os.urandom(32)
+            mac = hmac.new(key, b"ASTCom-1 client\x00" + sn + cn, hashlib.sha256).digest()
+            await client.call("AUTH", {"cnonce": cn, "mac": mac, "role": None})
+            assert (await client.call("LIST", {"prefix": None}))["entries"]
+
+            # §3: an ERR about an invalid seq carries nil
+            await client.send(["PING", -1, {}])
+            assert (await client.recv())[:2] == ["ERR", None]
+            # §8: the frame's array is level 1; 16 levels pass, 17 are refused (413, closed)
+            deep = 0
+            for _ in range(16 - 2):  # frame (1) and args (2) already count
+                deep = [deep]
+            client.seq += 1
+            await client.send(["PING", client.seq, {"ignored": deep}])
+            assert (await client.recv())[0] == "OK"
+            # §6: the slowest stream is one sample every 2^32 ticks
+            msg = (await client.call("DEFINE", {"names": ["counter"]}))["msg"]
+            with pytest.raises(RuntimeError, match="^422"):
+                await client.call("STREAM_START", {"msg": msg, "rate_hz": 1000 / 2**33})
+            # §5: errors of codes other than 400/409 do not count toward the 8
+            for _ in range(10):
+                with pytest.raises(RuntimeError, match="^404"):
+                    await client.call("READ", {"msg": 999_999})
+            # ... the 400s and 409s do, all of them: the 8th is answered, then the close
+            errors = 1  # the PING with seq -1 above
+            for _ in range(6):
+                with pytest.raises(RuntimeError, match="^(400|409)"):
+                    if errors % 2:
+                        await client.call("HELLO", {"version": "1.0"})  # 409 once READY
+                    else:
+                        await client.call("FLY")  # 400: unknown OP
+                errors += 1
+            assert (await client.call("PING"))["tick"] is not None  # 7 so far: still open
+            with pytest.raises(RuntimeError, match="^400"):
+                await client.call("FLY")  # the 8th
+            from websockets.exceptions import ConnectionClosed
+
+            with pytest.raises((ConnectionClosed, asyncio.IncompleteReadError)):
+                await client.call("PING")  # the endpoint closed after the 8th
+
+            # §7: role before lookup: an observer's WRITE to an unknown message is 403
+            observer = SpecClient(scheme, url)
+            await observer.open()
+            await observer.login(PASSWORDS["observer"])
+            with pytest.raises(RuntimeError, match="^403"):
+                await observer.call("WRITE", {"msg": 123_456, "values": [1]})
+            # §7: 17 levels: 413, then the endpoint closes
+            deeper = 0
+            for _ in range(17 - 2):
+                deeper = [deeper]
+            observer.seq += 1
+            await observer.send(["PING", observer.seq, {"ignored": deeper}])
+            reply = await observer.recv()
+            assert reply[0] == "ERR" and reply[2]["code"] == 413
+    run(main())
