@@ -39,10 +39,16 @@ export function formatValue(v) {
     const a = Math.abs(v);
     return a !== 0 && (a < 1e-3 || a >= 1e6) ? v.toExponential(6) : v.toPrecision(8).replace(/\.?0+$/, '');
   }
-  if (typeof v === 'boolean' || typeof v === 'string') return String(v);
+  if (typeof v === 'boolean' || typeof v === 'string' || typeof v === 'bigint') return String(v);
   if (v instanceof Uint8Array) return `bytes(${v.length})`;
-  if (typeof v.toNested === 'function') return JSON.stringify(v.toNested());
-  return JSON.stringify(v);
+  if (typeof v.toNested === 'function') return jsonText(v.toNested());
+  return jsonText(v);
+}
+
+/** JSON text of a value whose integers may be BigInt (written as exact digits). */
+export function jsonText(v) {
+  return JSON.stringify(v, (_, x) => (typeof x === 'bigint' ? `\u0000${x}\u0000` : x))
+    .replace(/"\\u0000(-?\d+)\\u0000"/g, '$1');
 }
 
 /** Return the JSON-able form of a value (NdArray -> nested array). */

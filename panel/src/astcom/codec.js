@@ -47,9 +47,9 @@ export class NdArray {
     this.data = data;
   }
 
-  /** Return the elements as plain numbers (i64 converted with Number()), nested by shape. */
+  /** Return the elements nested by shape: numbers, and BigInt for 64-bit integers beyond 2^53. */
   toNested() {
-    const flat = Array.from(this.data, (v) => (typeof v === 'bigint' ? Number(v) : v));
+    const flat = Array.from(this.data, (v) => (typeof v === 'bigint' ? exactInteger(v) : v));
     const values = this.dtype === 'bool' ? flat.map(Boolean) : flat;
     if (this.shape.length === 0) return values[0];
     const nest = (offset, dims) => {
@@ -150,15 +150,49 @@ extensionCodec.register({
   },
 });
 
+/** Return a BigInt as a Number when that is exact (|v| < 2^53), else the BigInt itself. */
+export function exactInteger(v) {
+  const n = Number(v);
+  return Number.isSafeInteger(n) ? n : v;
+}
+
+// Spec §2.4: an integer field may exceed 2^53 (i64/u64 values, seq). Frames are decoded with
+// int 64 / uint 64 as BigInt, then every BigInt that a Number holds exactly becomes a Number:
+// t_us, ticks and counts stay plain numbers, an i64 of 2^53 + 1 stays exact.
+function fromWire(v) {
+  if (typeof v === 'bigint') return exactInteger(v);
+  if (Array.isArray(v)) {
+    for (let i = 0; i < v.length; i++) v[i] = fromWire(v[i]);
+    return v;
+  }
+  if (v !== null && typeof v === 'object' && v.constructor === Object) {
+    for (const k of Object.keys(v)) v[k] = fromWire(v[k]);
+  }
+  return v;
+}
+
+// The encoder writes BigInt as int 64 / uint 64 and, so told, a Number at or above 2^32 as a
+// float: such integers are sent as BigInt instead, so they stay integers on the wire.
+function toWire(v) {
+  if (typeof v === 'number') return Number.isSafeInteger(v) && Math.abs(v) >= 2 ** 32 ? BigInt(v) : v;
+  if (Array.isArray(v)) return v.map(toWire);
+  if (v !== null && typeof v === 'object' && v.constructor === Object) {
+    const out = {};
+    for (const k of Object.keys(v)) out[k] = toWire(v[k]);
+    return out;
+  }
+  return v;
+}
+
 /** Return the bytes of one frame. */
 export function encodeFrame(value) {
-  return encode(value, { extensionCodec, ignoreUndefined: true });
+  return encode(toWire(value), { extensionCodec, ignoreUndefined: true, useBigInt64: true });
 }
 
 /** Decode one frame; raise ProtocolError when it is not valid msgpack. */
 export function decodeFrame(bytes) {
   try {
-    return decode(bytes, { extensionCodec });
+    return fromWire(decode(bytes, { extensionCodec, useBigInt64: true }));
   } catch (err) {
     if (err instanceof ProtocolError) throw err;
     throw new ProtocolError(`undecodable frame: ${err.message}`);

@@ -6,7 +6,11 @@ const SCALARS = new Set(['bool', 'i8', 'i16', 'i32', 'i64', 'u8', 'u16', 'u32', 
   'str', 'bytes']);
 const INT_RANGE = {
   i8: [-128, 127], i16: [-32768, 32767], i32: [-(2 ** 31), 2 ** 31 - 1],
-  i64: [-(2 ** 63), 2 ** 63 - 1], u8: [0, 255], u16: [0, 65535], u32: [0, 2 ** 32 - 1], u64: [0, 2 ** 64 - 1],
+  u8: [0, 255], u16: [0, 65535], u32: [0, 2 ** 32 - 1],
+};
+// 64-bit bounds as BigInt: as Numbers, 2^63 - 1 and 2^63 are the same double.
+const BIG_RANGE = {
+  i64: [-(2n ** 63n), 2n ** 63n - 1n], u64: [0n, 2n ** 64n - 1n],
 };
 const TYPED = {
   i8: Int8Array, i16: Int16Array, i32: Int32Array, u16: Uint16Array, u32: Uint32Array,
@@ -74,6 +78,7 @@ function scalarFrom(scalar, value, where) {
     throw new TypeError(`${where}: expected true or false, got ${JSON.stringify(value)}`);
   }
   if (scalar === 'bytes') return new TextEncoder().encode(String(value));
+  if (scalar in BIG_RANGE) return bigIntegerFrom(scalar, value, where);
   const n = typeof value === 'number' ? value : Number(String(value).trim());
   if (String(value).trim() === '' || Number.isNaN(n)) {
     throw new TypeError(`${where}: expected a number (${scalar}), got ${JSON.stringify(value)}`);
@@ -87,6 +92,32 @@ function scalarFrom(scalar, value, where) {
   return n;
 }
 
+/** An i64/u64 from a BigInt, an exact Number or decimal text; a Number past 2^53 is refused. */
+function bigIntegerFrom(scalar, value, where) {
+  let b;
+  if (typeof value === 'bigint') {
+    b = value;
+  } else if (typeof value === 'number') {
+    if (!Number.isSafeInteger(value)) {
+      throw new TypeError(`${where}: ${value} is not an integer a Number holds exactly (${scalar}); ` +
+        'give integers beyond 2^53 as text or as a BigInt');
+    }
+    b = BigInt(value);
+  } else {
+    const text = String(value).trim();
+    if (!/^[+-]?\d+$/.test(text)) {
+      throw new TypeError(`${where}: expected an integer (${scalar}), got ${JSON.stringify(value)}`);
+    }
+    b = BigInt(text);
+  }
+  const [lo, hi] = BIG_RANGE[scalar];
+  if (b < lo || b > hi) {
+    throw new TypeError(`${where}: expected an integer in [${lo}, ${hi}] (${scalar}), got ${value}`);
+  }
+  const n = Number(b);
+  return Number.isSafeInteger(n) ? n : b;
+}
+
 /**
  * Return the wire value of `value` (a JS value, or user text: JSON for arrays and structs)
  * for the parsed type `type`. Throws TypeError saying what was expected.
@@ -98,7 +129,9 @@ export function coerce(type, value, where = 'value') {
   let v = value;
   if (typeof v === 'string') {
     try {
-      v = JSON.parse(v);
+      // JSON.parse would round integers beyond 2^53: keep every long integer literal as text
+      // (bigIntegerFrom reads it exactly); a struct's fields may be 64-bit integers too
+      v = JSON.parse(v.replace(/(?<![\d."])-?\d{16,}(?![\d.eE])/g, '"$&"'));
     } catch {
       const example = type.kind === 'struct' ? '{"name": 1}' : '[1, 2, 3]';
       throw new TypeError(`${where}: expected JSON such as ${example} for ${type.text}, got ${value}`);
@@ -129,6 +162,7 @@ export function coerce(type, value, where = 'value') {
     const shape = type.shape || [values.length];
     if (type.scalar in TYPED) return new NdArray(type.scalar, shape, TYPED[type.scalar].from(values));
     if (type.scalar === 'i64') return new NdArray('i64', shape, BigInt64Array.from(values.map(BigInt)));
+    if (type.scalar === 'u64') return new NdArray('u64', shape, BigUint64Array.from(values.map(BigInt)));
     return values;
   }
   throw new TypeError(`${where}: cannot send a value of type ${type.text}`);

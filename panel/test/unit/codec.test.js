@@ -63,3 +63,43 @@ test('types and signatures parse and user text converts to wire values', () => {
   assert.ok(!isStreamable('f64[]'));
   assert.ok(!isStreamable('str'));
 });
+
+// Spec §2.4: 64-bit integers beyond 2^53 stay exact (BigInt); the bounds of i64 and u64 hold.
+test('an i64 of 2^53 + 1 decodes exactly and t_us stays a plain number', () => {
+  // ["OK", 4, {"values": [2^53 + 1, 2^53 - 1], "t_us": 1763769604123000}] as Python's msgpack writes it
+  const frame = Uint8Array.from(Buffer.from(
+    '93a24f4b0482a676616c75657392cf0020000000000001cf001fffffffffffffa4745f7573cf000644239cb82978', 'hex'));
+  const [, , body] = decodeFrame(frame);
+  assert.equal(body.values[0], 9007199254740993n);
+  assert.equal(body.values[1], 9007199254740991);
+  assert.equal(typeof body.t_us, 'number');
+  assert.equal(body.t_us, 1763769604123000);
+});
+
+test('typed i64 text beyond 2^53 goes out exactly, 2^63 is refused, u64 takes 2^64 - 1', () => {
+  const i64 = parseType('i64');
+  const u64 = parseType('u64');
+  assert.equal(coerce(i64, '9007199254740993'), 9007199254740993n);
+  assert.equal(coerce(i64, '9007199254740991'), 9007199254740991);
+  assert.equal(coerce(i64, '9223372036854775807'), 2n ** 63n - 1n);
+  assert.throws(() => coerce(i64, '9223372036854775808'), /\[-9223372036854775808, 9223372036854775807\]/);
+  assert.throws(() => coerce(i64, 2 ** 63), /not an integer a Number holds exactly/);
+  assert.equal(coerce(u64, '18446744073709551615'), 2n ** 64n - 1n);
+  assert.throws(() => coerce(u64, '18446744073709551616'), /u64/);
+  assert.throws(() => coerce(u64, '-1'), /u64/);
+  const bytes = encodeFrame(['WRITE', 1, { msg: 1, values: [coerce(i64, '9007199254740993')] }]);
+  assert.ok(hex(bytes).endsWith('cf 00 20 00 00 00 00 00 01'));
+  assert.equal(decodeFrame(bytes)[2].values[0], 9007199254740993n);
+  // a plain number at or above 2^32 still goes out as an integer, not a float
+  assert.equal(hex(encodeFrame(1763769604123000)), 'cf 00 06 44 23 9c b8 29 78');
+});
+
+test('u64 and i64 arrays go out as ext 1 of their own type, exactly', () => {
+  const u = coerce(parseType('u64[]'), '[18446744073709551615, 1]');
+  assert.equal(u.dtype, 'u64');
+  assert.deepEqual(Array.from(u.data), [2n ** 64n - 1n, 1n]);
+  const back = decodeFrame(encodeFrame(u));
+  assert.deepEqual(back.toNested(), [2n ** 64n - 1n, 1]);
+  const i = coerce(parseType('i64[2]'), '[9007199254740993, -9007199254740993]');
+  assert.deepEqual(decodeFrame(encodeFrame(i)).toNested(), [9007199254740993n, -9007199254740993n]);
+});
