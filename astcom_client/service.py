@@ -86,6 +86,7 @@ class _Group:
     getters: list[tuple[int, int, Variable]]  # (buffer col, width, variable) read via get()
     buf: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
     untraced: list[tuple[int, int, Variable]] = field(default_factory=list)
+    all_traced: bool = False  # every buffer column, in order, comes from the trace
 
 
 class StreamGroup:
@@ -130,6 +131,7 @@ class StreamGroup:
         for group in self.groups:
             group.buf = np.zeros((self.spp, len(group.columns)), dtype=group.dtype)
             group.untraced = [g for g in group.getters if g[2].trace_column is None]
+            group.all_traced = np.array_equal(group.traced_pos, np.arange(len(group.columns)))
 
     def layout(self) -> dict[str, Any]:
         """Return the column layout sent in the STREAM_START reply."""
@@ -149,22 +151,30 @@ class StreamGroup:
             return
         if self.fill and start != self.packet_tick + self.fill * k:
             self._flush(codec, self.fill)  # the device skipped ticks: no packet spans a gap
-        rows = np.arange(start - first_tick, n_ticks, k)
+        # The rows due are an arithmetic progression: strided views of the trace, no index
+        # arrays (this runs once per device block, hundreds of times a second).
+        first_row = start - first_tick
+        n_rows = -(-(n_ticks - first_row) // k)
         current = [self._current_row(g, trace is None) for g in self.groups]
         done = 0
-        while done < len(rows):
+        while done < n_rows:
             if self.fill == 0:
-                tick = first_tick + int(rows[done])
+                tick = start + done * k
                 self.packet_tick = tick
                 self.packet_t_us = first_t_us + round_half_up((tick - first_tick) * tick_period_us)
-            take = min(len(rows) - done, self.spp - self.fill)
-            chunk = rows[done:done + take]
+            take = min(n_rows - done, self.spp - self.fill)
+            a = first_row + done * k
+            rows = trace[a:a + (take - 1) * k + 1:k] if trace is not None else None
             for group, row in zip(self.groups, current, strict=True):
                 target = group.buf[self.fill:self.fill + take]
                 if row is not None:
                     target[:] = row
-                if trace is not None and len(group.trace_cols):
-                    target[:, group.traced_pos] = trace[np.ix_(chunk, group.trace_cols)]
+                if rows is None or not len(group.trace_cols):
+                    continue
+                if group.all_traced:  # one copy, straight into the packet buffer
+                    np.take(rows, group.trace_cols, axis=1, out=target)
+                else:
+                    target[:, group.traced_pos] = rows[:, group.trace_cols]
             self.fill += take
             done += take
             if self.fill == self.spp:

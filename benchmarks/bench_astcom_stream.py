@@ -21,7 +21,7 @@ LOOP_RATE_HZ = 10_000.0
 PASSWORD = "bench"
 
 
-def serve(pipe: Connection, loop_rate_hz: float, n_extra: int) -> None:
+def serve(pipe: Connection, loop_rate_hz: float, n_extra: int, block_s: float = 0.002) -> None:
     """Run the device and its endpoint; answer "mark" with (cpu_s, wall_s, tick, dropped)."""
     from astcom_client import Endpoint, EndpointConfig
     from astcom_client.example_device import ExampleDevice
@@ -31,7 +31,7 @@ def serve(pipe: Connection, loop_rate_hz: float, n_extra: int) -> None:
         endpoint = Endpoint(device.collection, EndpointConfig(
             loop_rate_hz=loop_rate_hz, passwords={"operator": PASSWORD}))
         url = await endpoint.serve("ws://127.0.0.1:0")
-        loop_task = asyncio.create_task(device.run(endpoint))
+        loop_task = asyncio.create_task(device.run(endpoint, block_s=block_s))
         pipe.send((url, [v.name for v in device.collection
                          if getattr(v, "trace_column", None) is not None]))
         while True:
