@@ -26,8 +26,12 @@ NAMES = ["counter", "wave.sine", "wave.cosine", "wave.amplitude"]
 PASSWORD = "bench"
 
 
-def serve(queue: mp.Queue, stop: mp.Event, loop_rate_hz: float) -> None:
-    """Run the endpoint and an echo server until `stop` is set."""
+def serve(queue: mp.Queue, stop: mp.Event, loop_rate_hz: float, nice: int = 0) -> None:
+    """Run the endpoint and an echo server until `stop` is set (at niceness `nice`)."""
+    import os
+
+    if nice:
+        os.nice(nice)  # a negative value needs root, as a controller's raised priority does
     from websockets.asyncio.server import serve as ws_serve
 
     from astcom_client import Endpoint, EndpointConfig
@@ -138,6 +142,9 @@ def main() -> None:
     parser.add_argument("--loop-rate", type=float, default=1000.0, help="device loop rate, Hz")
     parser.add_argument("--burners", type=int, default=0,
                         help="CPU-burning processes beside the measurement (a loaded host)")
+    parser.add_argument("--server-nice", type=int, default=0,
+                        help="niceness of the endpoint's process (e.g. -10: a device "
+                             "controller's raised priority; needs root)")
     parser.add_argument("--burner-nice", type=int, default=0,
                         help="niceness of the burners: 0 competes as an equal, 19 is "
                              "background batch work (the load average counts both alike)")
@@ -146,7 +153,8 @@ def main() -> None:
     ctx = mp.get_context("spawn")
     burners = start_burners(ctx, args.burners, args.burner_nice) if args.burners else []
     queue, stop = ctx.Queue(), ctx.Event()
-    server = ctx.Process(target=serve, args=(queue, stop, args.loop_rate), daemon=True)
+    server = ctx.Process(target=serve, args=(queue, stop, args.loop_rate, args.server_nice),
+                         daemon=True)
     server.start()
     try:
         url, echo_url = queue.get(timeout=30)
@@ -161,6 +169,7 @@ def main() -> None:
     p = {name: np.percentile(result[name], [50, 99]) for name in ("ours", "frames", "echo")}
     print(f"READ of {len(NAMES)} variables (reply {result['bytes']} bytes) over loopback "
           f"WebSocket, {len(ours)} round trips each, device loop at {args.loop_rate:g} Hz, "
+          f"endpoint at nice {args.server_nice}, "
           f"{args.burners} CPU burner(s) at nice {args.burner_nice} beside it, load average {load[0]:.2f} (1 min) on "
           f"{os.cpu_count()} cores")
     print(f"{'':22}{'p50 us':>10}{'p99 us':>10}")
