@@ -245,3 +245,17 @@ def test_time_bounds_accept_the_documented_forms():
     assert parse_time_bound(str(s + 7), s, e) == s + 7
     with pytest.raises(QueryError, match="--to 'soon'.*expected"):
         parse_time_bound("soon", s, e, option="--to")
+
+
+def test_an_hour_met_again_gets_a_file_of_its_own_and_nothing_is_replaced(tmp_path):
+    from virtualstar.recorder.parquet_store import HOUR_US, ParquetStoreReader, ParquetStoreWriter
+    from virtualstar.recorder.samples import SampleBlock, SignalInfo
+
+    hour = 493_000 * HOUR_US
+    writer = ParquetStoreWriter(tmp_path / "s")
+    writer.begin([SignalInfo("x", "", "float64")])
+    for start in (hour, hour + HOUR_US, hour + 10_000_000):  # the clock goes back an hour
+        t = start + np.arange(100, dtype=np.int64) * 1000
+        writer.write(SampleBlock(t, {"x": np.arange(100.0)}))
+    writer.close()
+    assert ParquetStoreReader(tmp_path / "s").count() == 300

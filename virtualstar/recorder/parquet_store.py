@@ -249,6 +249,12 @@ class ParquetStoreWriter:
             self._finish_hour()
         if self._journal is None:
             name = f"{_hour_label(hour)}-{self.session}"
+            part = 1
+            # an hour met again (a device clock set back) gets a file of its own, never
+            # replacing the one already finished
+            while (self.path / "samples" / f"{name}.parquet").exists():
+                part += 1
+                name = f"{_hour_label(hour)}-{self.session}-{part}"
             self._journal = HourJournal(self.path / "samples" / (name + JOURNAL_SUFFIX),
                                         self._schema)
             self._journal_hour = hour
