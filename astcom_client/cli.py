@@ -100,7 +100,7 @@ def list_command(url: Url, prefix: Annotated[str, typer.Option(
     if as_json:
         _print_json([e.as_dict() for e in entries])
         return
-    if not sys.stdout.isatty():
+    if not out.is_terminal:
         # a pipe or a file: one whole entry per line, tab-separated, for grep and cut
         for e in entries:
             sys.stdout.write("\t".join((e.name, e.type, e.kind, e.access, e.unit, e.doc)) + "\n")

@@ -200,3 +200,24 @@ def test_the_emulator_reports_its_loop_health() -> None:
             assert (await client.read(["loop.overruns"]))["loop.overruns"] == 0
         await emu.endpoint.close()
     run(main())
+
+
+def test_astcom_list_at_an_80_column_terminal_keeps_every_name_whole(monkeypatch) -> None:
+    import io
+
+    from rich.console import Console
+    from typer.testing import CliRunner
+
+    import astcom_client.cli as cli
+
+    screen = io.StringIO()
+    monkeypatch.setattr(cli, "out", Console(file=screen, width=80, force_terminal=True,
+                                            color_system=None))
+    with device_in_thread(n_extra_signals=12) as dev:
+        result = CliRunner().invoke(cli.app, ["list", dev["url"], "--password",
+                                              PASSWORDS["operator"]])
+        names = [v.name for v in dev["device"].collection]
+    assert result.exit_code == 0, result.output
+    text = screen.getvalue()
+    assert max(len(line) for line in text.splitlines()) <= 80
+    assert all(name in text for name in names), [n for n in names if n not in text]
