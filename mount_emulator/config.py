@@ -56,6 +56,7 @@ class EmulatorConfig:
     traj_capacity: int = DEFAULT_TRAJ_CAPACITY
     passwords: dict[str, str] | None = None
     block_s: float = 0.002  # real-time loop wake-up period
+    stream_flush_s: float = 0.02  # mount time of samples per stream packet (lockstep: longer)
 
 
 def _flatten(data: dict, prefix: str = "") -> dict[str, object]:

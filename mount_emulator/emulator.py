@@ -33,6 +33,7 @@ __all__ = ["LOOP_RATE_HZ", "MountEmulator"]
 LOOP_RATE_HZ = 1_000_000 // L.TICK_US
 MAX_BLOCK_TICKS = 1000  # a late real-time loop catches up in blocks of at most 0.1 s
 FAST_BLOCK_TICKS = 2000  # --speed max computes this many ticks between yields
+DRIVEN_BLOCK_TICKS = 2000  # run_until publishes to the streams at least every 0.2 s of mount time
 
 
 class MountEmulator:
@@ -40,7 +41,12 @@ class MountEmulator:
 
     ``await MountEmulator(config).start("ws://127.0.0.1:0")`` returns the bound
     URL and runs the loop until ``await stop()``. ``advance(n)`` computes ticks
-    directly (tests, embedding with an external clock).
+    directly (tests); ``start(..., run_loop=False)`` leaves the pacing to an
+    external clock that calls ``run_until(t_us)`` (lockstep simulated time).
+
+    In real time without a configured start (``start_us`` None, speed 1) the clocks
+    are put on host UTC when the loop starts, not when the object is built: a
+    compile or a slow start-up does not leave the mount behind UTC.
     """
 
     def __init__(self, config: EmulatorConfig | None = None) -> None:
@@ -65,7 +71,8 @@ class MountEmulator:
         for col, idx in col_to_state.items():
             self._col_to_state[col] = idx
         self.endpoint = Endpoint(self.collection, EndpointConfig(
-            loop_rate_hz=LOOP_RATE_HZ, passwords=config.passwords, name="mount-emulator"))
+            loop_rate_hz=LOOP_RATE_HZ, passwords=config.passwords, name="mount-emulator",
+            flush_interval_s=config.stream_flush_s))
         self._wanted_key: bytes | None = None
         self._src = np.zeros(0, dtype=np.int64)
         self._dst = np.zeros(0, dtype=np.int64)
@@ -122,6 +129,19 @@ class MountEmulator:
         self.ticks_run += n_ticks
         return events
 
+    @property
+    def true_time_us(self) -> int:
+        """The emulator's UTC truth (what its PPS marks) at the last computed tick, µs."""
+        return int(self.model.state[L.G_TRUE_US])
+
+    def run_until(self, true_us: int) -> None:
+        """Compute every tick up to true UTC `true_us` (an external clock paces the loop)."""
+        due = (int(true_us) - self.true_time_us) // L.TICK_US
+        while due > 0:
+            n = min(due, DRIVEN_BLOCK_TICKS)
+            self._timed_advance(n)
+            due -= n
+
     def _timed_advance(self, n_ticks: int) -> None:
         start = time.perf_counter()
         self.advance(n_ticks)
@@ -133,7 +153,14 @@ class MountEmulator:
                 self._timed_advance(FAST_BLOCK_TICKS)
                 await asyncio.sleep(0)
         rate = LOOP_RATE_HZ * self.speed
-        t0 = time.monotonic()
+        if self.config.start_us is None:
+            # real time: true and mount time start on host UTC now (whole ticks), and the
+            # pacing counts from the same instant
+            now_us = time.time_ns() // 1000
+            t0 = time.monotonic() - (now_us % L.TICK_US) / 1e6
+            self.model.set_clock(now_us)
+        else:
+            t0 = time.monotonic()
         done = 0
         # one block is what a wake-up every block_s computes on time; more is an overrun
         block_ticks = max(1, math.ceil(rate * self.config.block_s * 2))
@@ -152,12 +179,19 @@ class MountEmulator:
                     await asyncio.sleep(0)
             await asyncio.sleep(self.config.block_s)
 
-    async def start(self, url: str = "ws://127.0.0.1:0", *more_urls: str) -> str:
-        """Listen on ``url`` (and ``more_urls``), start the loop; return the first bound URL."""
-        bound = await self.endpoint.serve(url)
+    async def start(self, url: str | None = "ws://127.0.0.1:0", *more_urls: str,
+                    run_loop: bool = True) -> str:
+        """Listen on ``url`` (and ``more_urls``), start the loop; return the first bound URL.
+
+        ``url`` None listens nowhere (in-memory clients only, `endpoint.connect_in_memory`);
+        ``run_loop`` False starts no loop: the caller paces it with `run_until`.
+        """
+        bound = await self.endpoint.serve(url) if url is not None else ""
         for extra in more_urls:
             await self.endpoint.serve(extra)
-        self._task = asyncio.get_running_loop().create_task(self._run(), name="mount-emulator-loop")
+        if run_loop:
+            self._task = asyncio.get_running_loop().create_task(self._run(),
+                                                                name="mount-emulator-loop")
         return bound
 
     async def stop(self) -> None:

@@ -277,6 +277,18 @@ class MountModel:
         return accepted
 
     # --------------------------------------------------------------------- time
+    def set_clock(self, start_us: int) -> None:
+        """Put the true and the mount clock on `start_us` (µs since 1970 UTC; whole ticks).
+
+        Only before the loop runs (a real-time emulator starting on host UTC): the
+        PPS edges then fall on true whole seconds again.
+        """
+        start_us = int(start_us) // L.TICK_US * L.TICK_US
+        self.state[L.G_TRUE_US] = float(start_us)
+        self.state[L.G_MOUNT_US] = float(start_us)
+        self.state[L.G_MOUNT_FRAC_US] = 0.0
+        self.state[L.G_PPS_COUNTDOWN] = (1_000_000 - start_us % 1_000_000) // L.TICK_US
+
     def set_utc(self, utc_second: int) -> None:
         """Arm a UTC second (since 1970): the mount clock takes it at the next PPS edge."""
         self.state[L.G_PENDING_UTC_S] = int(utc_second)

@@ -1,16 +1,20 @@
-"""The VirtualStar demo: one process, simulated time, the embedded emulator, the real VSS.
+"""The VirtualStar demo: one process, lockstep simulated time, the embedded emulator, the real VSS.
 
 `run_demo()` places the emulator's clock a little before a high ISS pass over
 the site (found with the pass predictor from the bundled TLE), starts the
-VirtualStar Server on it, and as an API client: slews to a bright star, tracks
-it sidereally, then tracks the ISS through the whole pass. It returns the
-per-phase figures (slew time, tracking error RMS and peak) and writes a PNG of
-the tracking error over time.
+VirtualStar Server on it, and as an API client (in the same process, no socket):
+slews to a bright star, tracks it sidereally, then tracks the ISS through the
+whole pass. It returns the per-phase figures (slew time, tracking error RMS and
+peak, on the encoders and on the sky) and writes a PNG of the tracking error.
+
+The emulator and the server share one `LockstepClock`: mount time advances only
+when the server has done the work due, so the figures are the same on every run
+and every host; only the wall time differs. `speed` caps the pace (×N real time);
+None runs as fast as the CPU allows.
 """
 
 from __future__ import annotations
 
-import asyncio
 import math
 import time
 import warnings
@@ -41,7 +45,7 @@ STAR_CHOICES = ("Vega", "Arcturus", "Capella", "Deneb", "Altair", "Sirius", "Can
 class DemoConfig:
     """What the demo does (mount seconds unless said otherwise)."""
 
-    speed: float = 20.0
+    speed: float | None = None  # None: as fast as the CPU allows; X: at most X times real time
     sidereal_s: float = 30.0
     min_culmination_deg: float = 60.0
     before_pass_s: float = 210.0  # clock placed this long before the pass rises
@@ -62,11 +66,16 @@ class DemoPhase:
     from_us: int
     to_us: int
     slew_time_s: float | None = None
+    on_sky_rms_arcsec: float | None = None  # encoder error with clock offset × target rate
+    on_sky_peak_arcsec: float | None = None
+    clock_offset_us: int | None = None  # the largest mount clock offset during the phase
 
     def as_dict(self) -> dict[str, Any]:
         return {"name": self.name, "target": self.target, "rms_arcsec": self.rms_arcsec,
                 "peak_arcsec": self.peak_arcsec, "duration_s": (self.to_us - self.from_us) / 1e6,
-                "slew_time_s": self.slew_time_s}
+                "slew_time_s": self.slew_time_s, "on_sky_rms_arcsec": self.on_sky_rms_arcsec,
+                "on_sky_peak_arcsec": self.on_sky_peak_arcsec,
+                "clock_offset_us": self.clock_offset_us}
 
 
 @dataclass
@@ -75,10 +84,12 @@ class DemoResult:
     plot: str | None = None
     wall_s: float = 0.0
     pass_info: dict[str, Any] = field(default_factory=dict)
+    series: dict[str, list] = field(default_factory=dict)
+    time_sync: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return {"phases": [p.as_dict() for p in self.phases], "plot": self.plot,
-                "wall_s": self.wall_s, "pass": self.pass_info}
+                "wall_s": self.wall_s, "pass": self.pass_info, "time_sync": self.time_sync}
 
 
 def find_demo_pass(site: Site, sat: Satellite, min_culmination_deg: float) -> tuple[int, int, float]:
@@ -106,88 +117,83 @@ def pick_star(site: Site, t_us: int) -> str:
     return STAR_CHOICES[0]
 
 
-async def run_demo(config: DemoConfig = DemoConfig(),
+def run_demo(config: DemoConfig = DemoConfig(),
                    say: Callable[[str], None] = lambda text: None) -> DemoResult:
-    """Run the whole demo on this event loop; return its phases and plot path."""
-    from catalogs import load_tle_file, sample_tle_path, select_satellite
-    from virtualstar.launcher import start_emulator
-    from virtualstar.server import build_server
-    from virtualstar.vss_client import VssClient
+    """Run the whole demo on a lockstep event loop of its own; return its phases and plot path."""
+    from virtualstar.lockstep import LockstepClock, run_lockstep
 
     wall0 = time.perf_counter()
     site = config.site or load_site()
+    sat, tle_text = _demo_satellite(config)
+    rise_us, set_us, culm = find_demo_pass(site, sat, config.min_culmination_deg)
+    start_us = rise_us - int(config.before_pass_s * 1e6)
+    clock = LockstepClock(start_us, pace=config.speed)
+    result = run_lockstep(_run(config, site, sat, tle_text, rise_us, set_us, culm, say, clock),
+                          clock)
+    result.plot = str(_plot(result.series, result.phases, config.out_dir))
+    result.wall_s = time.perf_counter() - wall0
+    return result
+
+
+def _demo_satellite(config: DemoConfig) -> tuple[Satellite, str]:
+    from catalogs import load_tle_file, sample_tle_path, select_satellite
+
     tle_path = sample_tle_path(config.tle_set)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         records = load_tle_file(tle_path)
     records = [r for r in records if config.satellite.lower() in r.name.lower()] or records
-    sat = Satellite.from_record(select_satellite(records, records[0].name))
-    rise_us, set_us, culm = find_demo_pass(site, sat, config.min_culmination_deg)
-    start_us = rise_us - int(config.before_pass_s * 1e6)
+    record = select_satellite(records, records[0].name)
+    return Satellite.from_record(record), Path(tle_path).read_text(encoding="utf-8")
+
+
+async def _run(config: DemoConfig, site: Site, sat: Satellite, tle_text: str, rise_us: int,
+               set_us: int, culm: float, say: Callable[[str], None], clock) -> DemoResult:
+    from virtualstar.launcher import embedded_vss
+
+    start_us = clock.now_us
     star = pick_star(site, start_us + 30_000_000)
     result = DemoResult(pass_info={"satellite": sat.name, "rise_utc": _iso(rise_us),
                                    "set_utc": _iso(set_us), "culmination_deg": culm})
-    say(f"simulated clock {_iso(start_us)} at x{config.speed:g}, site {site.name}; "
+    pace = "as fast as the CPU allows" if config.speed is None else f"up to x{config.speed:g}"
+    say(f"simulated clock {_iso(start_us)} in lockstep ({pace}), site {site.name}; "
         f"{sat.name} rises {_iso(rise_us)}, culminates at {culm:.1f}°")
-    emu = await start_emulator(speed=config.speed, start_us=start_us)
-    server = build_server(mount_url=emu.url, site=site, speed=config.speed)
-    try:
-        url = await server.start("ws://127.0.0.1:0")
-        async with await VssClient.connect(url, silence_s=30.0) as vs:
-            await _wait_mount(vs)
-            say(f"slewing to {star}")
-            op = await vs.request("slew", {"star": star})
-            info = op["info"]
-            result.phases.append(DemoPhase(
-                f"slew to {star} (landing)", star, info["landing_rms_arcsec"],
-                info["landing_peak_arcsec"], info["landed_us"],
-                info["landed_us"] + int(server.telescope.config.settle_s * 1e6),
-                info["slew_time_s"]))
-            say(f"landed after {info['slew_time_s']:.1f} s; sidereal tracking for "
-                f"{config.sidereal_s:g} s")
-            from_us = info["tracking_from_us"]
-            await _wait_mount_time(vs, from_us + int(config.sidereal_s * 1e6), config.speed)
-            await vs.request("stop")
-            to_us = from_us + int(config.sidereal_s * 1e6)
-            s = (await vs.request("errors", {"from_us": from_us, "to_us": to_us}))["stats"]
-            result.phases.append(DemoPhase(f"sidereal tracking {star}", star, s["rms_arcsec"],
-                                           s["peak_arcsec"], from_us, to_us))
-            say(f"waiting for {sat.name} (pass {_iso(rise_us)} .. {_iso(set_us)})")
-            tle_text = Path(tle_path).read_text(encoding="utf-8")
-            await vs.request("track", {"tle": tle_text, "sat": sat.name})
-            say(f"tracking {sat.name} through the pass")
-            op = await vs.request("wait", {})
-            info = op["info"]
-            result.phases.append(DemoPhase(
-                f"satellite pass {sat.name}", sat.name, info["tracking_rms_arcsec"],
-                info["tracking_peak_arcsec"], info["tracking_from_us"], info["tracking_to_us"]))
-            result.pass_info.update({k: info.get(k) for k in (
-                "keyhole", "keyhole_max_error_arcsec", "max_az_rate_deg_s")})
-            series = (await vs.request("errors", {"series": True, "max_points": 4000,
-                                                  "from_us": start_us}))["series"]
-        result.plot = str(_plot(series, result.phases, config.out_dir))
-    finally:
-        await server.close()
-        await emu.stop()
-    result.wall_s = time.perf_counter() - wall0
+    async with embedded_vss(clock=clock, site=site) as vss:
+        vs = vss.client()
+        settle_s = vss.server.telescope.config.settle_s
+        say(f"slewing to {star}, then tracking it for {config.sidereal_s:g} s")
+        op = await vs.request("track", {"star": star, "duration_s": config.sidereal_s,
+                                        "wait": True})
+        info = op["info"]
+        landed = info["landed_us"]
+        landing = (await vs.request("errors", {"from_us": landed,
+                                               "to_us": landed + int(settle_s * 1e6)}))["stats"]
+        result.phases.append(_phase(f"slew to {star} (landing)", star, landing,
+                                    slew_time_s=info["slew_time_s"]))
+        say(f"landed after {info['slew_time_s']:.1f} s (within {info['landing_error_arcsec']:.3f}″ "
+            f"of {star}); tracked {config.sidereal_s:g} s")
+        sidereal = (await vs.request("errors", {"from_us": info["tracking_from_us"],
+                                                "to_us": info["tracking_to_us"]}))["stats"]
+        result.phases.append(_phase(f"sidereal tracking {star}", star, sidereal))
+        say(f"waiting for {sat.name} (pass {_iso(rise_us)} .. {_iso(set_us)})")
+        op = await vs.request("track", {"tle": tle_text, "sat": sat.name, "wait": True})
+        info = op["info"]
+        passing = (await vs.request("errors", {"from_us": info["tracking_from_us"],
+                                               "to_us": info["tracking_to_us"]}))["stats"]
+        result.phases.append(_phase(f"satellite pass {sat.name}", sat.name, passing))
+        result.pass_info.update({k: info.get(k) for k in (
+            "keyhole", "keyhole_max_error_arcsec", "max_az_rate_deg_s")})
+        result.series = (await vs.request("errors", {"series": True, "max_points": 4000,
+                                                     "from_us": start_us}))["series"]
+        result.time_sync = (await vs.request("status"))["time_sync"]
     return result
 
 
-async def _wait_mount(vs) -> None:
-    for _ in range(200):
-        if (await vs.request("status")).get("connected"):
-            return
-        await asyncio.sleep(0.05)
-    raise RuntimeError("the VSS did not connect to the embedded emulator")
-
-
-async def _wait_mount_time(vs, t_us: int, speed: float) -> None:
-    while True:
-        st = await vs.request("status")
-        left = (t_us - st["mount_time_us"]) / 1e6
-        if left <= 0:
-            return
-        await asyncio.sleep(min(0.5, max(0.01, left / speed)))
+def _phase(name: str, target: str, stats: dict[str, Any], *,
+           slew_time_s: float | None = None) -> DemoPhase:
+    return DemoPhase(name, target, stats["rms_arcsec"], stats["peak_arcsec"], stats["from_us"],
+                     stats["to_us"], slew_time_s, stats["on_sky_rms_arcsec"],
+                     stats["on_sky_peak_arcsec"], stats["clock_offset_us"])
 
 
 def _plot(series: dict[str, list], phases: list[DemoPhase], out_dir: Path) -> Path:

@@ -34,7 +34,7 @@ SEEING_ARCSEC = 0.5  # guide-camera noise, 1 σ per axis
 SKY_NOISE_ARCSEC = math.sqrt(2) * SEEING_ARCSEC  # RMS length of a pure-noise offset
 TERMS = "IA,IE,AN,AW,NPAE,CA,TF"
 START = "2024-05-18T21:30:00Z"  # Poznań, dusk
-SPEED = 50.0  # holds and slews only (no trajectory feeding): simulated time can run fast
+SPEED = 200.0  # lockstep, paced: mount seconds per wall second at most
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def hidden():
     truth = {k.upper(): float(v) for k, v in
              tomllib.loads(GEOMETRY_FILE.read_text())["geometry"].items()}
     start_us = int(UtcTimes.from_iso([START]).to_unix_us()[0])
-    rig = Rig(start_us=start_us, site=load_site(), speed=SPEED,
+    rig = Rig(start_us=start_us, site=load_site(), pace=SPEED,
               emulator_options={"geometry_arcsec": {k.lower(): v for k, v in truth.items()},
                                 "seeing_arcsec": SEEING_ARCSEC}).start()
     yield rig, truth
@@ -101,8 +101,11 @@ def test_pointing_sample_on_a_mount_without_guide_camera_says_what_is_missing(hi
     path.write_text(json.dumps(mapping))
 
     async def start():
-        server = build_server(mount_url=rig.emulator.url, mapping_path=path, site=rig.site,
-                              speed=SPEED)
+        async def connector():
+            return await rig.emulator.connect_in_memory()
+
+        server = build_server(mount_url="in-process emulator", mapping_path=path, site=rig.site,
+                              clock=rig.clock, connector=connector)
         return server, await server.start("ws://127.0.0.1:0")
 
     server, url = rig.run(start())

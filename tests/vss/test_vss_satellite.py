@@ -22,7 +22,7 @@ from vss_rig import Rig
 from catalogs import load_tle_file, sample_tle_path
 from virtualstar.astro import Site, UtcTimes
 from virtualstar.cli.main import app
-from virtualstar.vss_client import call_server
+from virtualstar.vss_client import VssRequestError, call_server
 
 runner = CliRunner()
 OVERHEAD_UTC = (2024, 5, 18, 20, 0, 0)
@@ -107,3 +107,90 @@ def _dt(t_us: int):
     from datetime import UTC, datetime
 
     return datetime.fromtimestamp(t_us / 1e6, UTC)
+
+
+def _iss_record():
+    return next(r for r in load_tle_file(sample_tle_path("stations")) if "ISS" in r.name)
+
+
+def _pass_events(site: Site, start: tuple, end: tuple) -> dict[str, int]:
+    """Rise, culmination and set (µs) of the ISS above 5° from skyfield (geometric, no refraction)."""
+    sf = _skyfield()
+    rec = _iss_record()
+    sat = EarthSatellite(rec.line1, rec.line2, rec.name, sf.ts)
+    topos = wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
+    t, kinds = sat.find_events(topos, sf.ts.utc(*start), sf.ts.utc(*end), altitude_degrees=5.0)
+    out = {}
+    for ti, k in zip(t, kinds, strict=True):
+        out[("rise", "culmination", "set")[k]] = int(round(ti.utc_datetime().timestamp() * 1e6))
+    return out
+
+
+def test_a_pass_already_past_culmination_is_joined_where_it_is_and_tracked_to_its_set():
+    """The server starts 40 s after culmination: it joins that pass, not the next one."""
+    site = Site(lat_deg=52.4064, lon_deg=16.9252, height_m=85.0, pressure_hpa=0.0,
+                name="Poznań without refraction")
+    events = _pass_events(site, (2024, 5, 18, 19, 40), (2024, 5, 18, 20, 5))
+    start_us = events["culmination"] + 40_000_000
+    tle = sample_tle_path("stations").read_text()
+
+    async def scenario(vss, clock):
+        op = await vss.server.call("track", {"tle": tle, "sat": "ISS"})
+        samples = []
+        while True:
+            await clock.sleep(5.0)
+            values, t_us = await read_emulator(vss, ["axis.az.position", "axis.el.position",
+                                                     "mount.state_name"])
+            if values["mount.state_name"] != "TRACKING":
+                if samples:
+                    break
+                continue
+            samples.append((t_us, values["axis.az.position"], values["axis.el.position"]))
+        done = await vss.server.call("wait")
+        return op, samples, done
+
+    from vss_rig import read_emulator, run_lockstep_scenario
+
+    start_iso = UtcTimes.from_unix_us(start_us).iso(3)[0]
+    op, samples, done = run_lockstep_scenario(start_iso, scenario, site=site)
+    info = op["info"]
+    assert info["pass_in_progress"] is True
+    assert info["pass_start_us"] - start_us < 60_000_000  # joined within a minute
+    assert abs(info["pass_end_us"] - events["set"]) < 2_000_000
+    assert done["phase"] == "done" and done["info"]["ended"] == "the pass ended"
+    assert done["info"]["tracking_to_us"] >= events["set"] - 2_000_000
+    assert done["info"]["tracking_rms_arcsec"] < 2.0
+    # the encoders sit on skyfield's ISS all along the part of the pass that was left
+    sf = _skyfield()
+    earth = sf.ephemeris["earth"]
+    sat = EarthSatellite(_iss_record().line1, _iss_record().line2, "ISS", sf.ts)
+    observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
+    joined = done["info"]["tracking_from_us"]  # before it: the run-up onto the path
+    t_us, az, el = (np.array(c) for c in zip(*[s for s in samples if s[0] >= joined],
+                                              strict=True))
+    t = sf.ts.from_datetimes([_dt(u) for u in t_us])
+    alt, azi, _ = observer.at(t).observe(earth + sat).apparent().altaz()
+    import erfa
+
+    sep = np.degrees(erfa.seps(az, el, azi.radians, alt.radians)) * 3600.0
+    assert len(sep) >= 20
+    assert np.median(sep) < 1.0 and sep.max() < 5.0, sep
+
+
+def test_elements_years_older_than_the_mount_time_are_refused_with_the_hint_vs_where_gives():
+    tle = sample_tle_path("stations").read_text()
+
+    async def scenario(vss, clock):
+        vs = vss.client()
+        with pytest.raises(VssRequestError) as err:
+            await vs.request("track", {"tle": tle, "sat": "ISS"})
+        ping = await vs.request("ping")
+        return err.value, ping
+
+    from vss_rig import run_lockstep_scenario
+
+    error, ping = run_lockstep_scenario("2026-11-25T20:00:00Z", scenario)
+    assert error.code == "stale_tle"
+    assert "days after the TLE epoch" in error.message and "load fresh elements" in error.message
+    assert "vs where --tle" in error.message
+    assert ping == {"pong": True}  # the server keeps serving

@@ -4,6 +4,12 @@ The `vs` commands run `asyncio.run` themselves, so the server side lives on its
 own loop in a thread; tests talk to it through the CLI (CliRunner), through
 `VssClient`, and to the emulator directly through an ASTCom `Client` (the
 independent view of where the encoders are).
+
+The rig runs in lockstep simulated time (`virtualstar.lockstep`): the VSS and the
+emulator share one clock, so however loaded the host, the server is never late.
+A pace caps the clock (×PACE real time) so that mount time does not race ahead
+while a test's own code runs between commands. `Rig(realtime=True)` runs the
+emulator on the host clock instead, over a WebSocket, as with a real mount.
 """
 
 from __future__ import annotations
@@ -15,74 +21,35 @@ from typing import Any
 from astcom_client import Client
 from virtualstar.astro import Site
 from virtualstar.launcher import start_emulator
+from virtualstar.lockstep import LockstepClock, LockstepEventLoop
 from virtualstar.server import build_server
 
-SPEED = 20.0
-
-
-class TcpProxy:
-    """Forward TCP connections to (host, port); `cut()` breaks every open one, as a network would."""
-
-    def __init__(self, host: str, port: int) -> None:
-        self.target = (host, port)
-        self.server: asyncio.base_events.Server | None = None
-        self.writers: set[asyncio.StreamWriter] = set()
-        self.port = 0
-
-    async def start(self) -> int:
-        self.server = await asyncio.start_server(self._handle, "127.0.0.1", 0)
-        self.port = self.server.sockets[0].getsockname()[1]
-        return self.port
-
-    async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        try:
-            up_reader, up_writer = await asyncio.open_connection(*self.target)
-        except OSError:
-            writer.close()
-            return
-        self.writers |= {writer, up_writer}
-
-        async def pump(src: asyncio.StreamReader, dst: asyncio.StreamWriter) -> None:
-            try:
-                while data := await src.read(65536):
-                    dst.write(data)
-                    await dst.drain()
-            except (ConnectionError, OSError):
-                pass
-            finally:
-                dst.close()
-
-        await asyncio.gather(pump(reader, up_writer), pump(up_reader, writer))
-        self.writers -= {writer, up_writer}
-
-    def cut(self) -> None:
-        for w in list(self.writers):
-            w.transport.abort()
-        self.writers.clear()
-
-    async def close(self) -> None:
-        self.cut()
-        if self.server is not None:
-            self.server.close()
+PACE = 50.0  # mount seconds per wall second at most, while tests talk to the rig
 
 
 class Rig:
-    """Emulator (simulated time) + VSS, started on a private event loop."""
+    """Emulator + VSS, started on a private event loop (lockstep unless `realtime`)."""
 
-    def __init__(self, *, start_us: int, site: Site | None = None, speed: float = SPEED,
+    def __init__(self, *, start_us: int | None, site: Site | None = None,
+                 pace: float | None = PACE, realtime: bool = False,
                  emulator_options: dict[str, Any] | None = None,
                  **telescope_options: Any) -> None:
-        self.start_us = start_us
         self.site = site
-        self.speed = speed
         self.options = telescope_options
         self.emulator_options = emulator_options or {}
-        self.loop = asyncio.new_event_loop()
+        self.realtime = realtime
+        if realtime:
+            self.clock = None
+            self.loop = asyncio.new_event_loop()
+        else:
+            assert start_us is not None
+            self.clock = LockstepClock(start_us, pace=pace)
+            self.loop = LockstepEventLoop(self.clock)
+        self.start_us = start_us
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
         self.thread.start()
         self.emulator = None
         self.server = None
-        self.proxy: TcpProxy | None = None
         self.url = ""
 
     def run(self, coro, timeout_s: float = 120.0):
@@ -91,7 +58,7 @@ class Rig:
 
     def start(self, listen: str = "ws://127.0.0.1:0") -> Rig:
         async def go() -> None:
-            self.emulator = await start_emulator(speed=self.speed, start_us=self.start_us,
+            self.emulator = await start_emulator(start_us=self.start_us, clock=self.clock,
                                                  **self.emulator_options)
             await self.start_server(listen)
 
@@ -99,18 +66,26 @@ class Rig:
         return self
 
     async def start_server(self, listen: str = "ws://127.0.0.1:0") -> str:
-        if self.proxy is None:  # the VSS reaches the mount through a proxy that can cut the line
-            host, port = self.emulator.url.rsplit("/", 1)[-1].rsplit(":", 1)
-            self.proxy = TcpProxy(host, int(port))
-            await self.proxy.start()
-        self.server = build_server(mount_url=f"ws://127.0.0.1:{self.proxy.port}", site=self.site,
-                                   speed=self.speed, **self.options)
+        emu = self.emulator
+        connector = None
+        if self.clock is not None:
+            async def connector():
+                return await emu.connect_in_memory(name="virtualstar-server")
+        self.server = build_server(mount_url=emu.url if self.realtime else "in-process emulator",
+                                   site=self.site, clock=self.clock, connector=connector,
+                                   **self.options)
         self.url = await self.server.start(listen)
-        for _ in range(400):
-            if self.server.telescope.link.connected and self.server.telescope.errors.samples:
-                break
-            await asyncio.sleep(0.01)
+        await self.server.telescope.link.wait_connected(30.0)
+        await self.server.telescope.first_samples(30.0)
         return self.url
+
+    async def cut_line(self) -> None:
+        """Break the connection between the VSS and the mount, as a failed network would."""
+        await self.emulator.cut_in_memory()
+
+    async def mount_sleep(self, mount_s: float) -> None:
+        """Let `mount_s` seconds of mount time pass (on the rig's loop)."""
+        await self.clock.sleep(mount_s)
 
     async def mount_read(self, names: list[str]) -> tuple[dict[str, Any], int]:
         """Read emulator variables directly (one tick); return (values, mount time µs)."""
@@ -126,8 +101,6 @@ class Rig:
         async def stop() -> None:
             if self.server is not None:
                 await self.server.close()
-            if self.proxy is not None:
-                await self.proxy.close()
             if self.emulator is not None:
                 await self.emulator.stop()
 
@@ -136,3 +109,34 @@ class Rig:
         finally:
             self.loop.call_soon_threadsafe(self.loop.stop)
             self.thread.join(10.0)
+            self.loop.close()
+
+
+def run_lockstep_scenario(start_iso: str, scenario, *, site: Site | None = None,
+                          pace: float | None = None, **options: Any):
+    """Run `await scenario(vss, clock)` on a fresh emulator + VSS in lockstep, in this thread.
+
+    Nothing else shares the loop and the scenario talks to the server in-process, so
+    the run is the same on every host. Returns what the scenario returns.
+    """
+    from virtualstar.astro import UtcTimes, load_site
+    from virtualstar.launcher import embedded_vss
+    from virtualstar.lockstep import run_lockstep
+
+    clock = LockstepClock(int(UtcTimes.from_iso([start_iso]).to_unix_us()[0]), pace=pace)
+
+    async def main():
+        async with embedded_vss(clock=clock, site=site or load_site(), **options) as vss:
+            return await scenario(vss, clock)
+
+    return run_lockstep(main(), clock)
+
+
+async def read_emulator(vss, names: list[str]) -> tuple[dict[str, Any], int]:
+    """Read emulator variables over a connection of the test's own (values, mount time µs)."""
+    client = await vss.emulator.connect_in_memory(name="test-observer")
+    try:
+        values, _tick, t_us = await client.read_at(names)
+    finally:
+        await client.close()
+    return values, int(t_us)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import json
 from pathlib import Path
 from typing import Annotated
@@ -17,22 +16,28 @@ __all__ = ["demo"]
 
 
 def demo(
-    speed: Annotated[float, typer.Option(
-        "--speed", help="Simulated time at X times real time.", min=1.0, max=100.0)] = 20.0,
+    speed: Annotated[str, typer.Option(
+        "--speed", help="'max': lockstep simulated time as fast as the CPU allows (the same "
+        "figures on every run); X: lockstep at up to X times real time.")] = "max",
     out: Annotated[Path, typer.Option(
         "--out", help="Folder for the tracking-error plot (PNG).")] = Path("demo-output"),
     sidereal: Annotated[float, typer.Option(
         "--sidereal", help="Seconds (mount time) of sidereal tracking.", min=1.0)] = 30.0,
     as_json: JsonOpt = False,
 ) -> None:
-    """Run the demo in one process (about a minute) and print slew times and tracking errors."""
+    """Run the demo in one process (well under a minute) and print slew times and tracking errors.
+
+    The embedded emulator and the server share one clock (lockstep simulated time): the
+    figures are the same on every run and host; only the wall time differs.
+    """
+    from virtualstar.cli.server import parse_speed
     from virtualstar.demo import DemoConfig, run_demo
 
+    pace = parse_speed(speed)
     console = Console(stderr=True)
     say = (lambda text: None) if as_json else (lambda text: console.print(f"[dim]{text}"))
     try:
-        result = asyncio.run(run_demo(DemoConfig(speed=speed, out_dir=out, sidereal_s=sidereal),
-                                      say))
+        result = run_demo(DemoConfig(speed=pace, out_dir=out, sidereal_s=sidereal), say)
     except OSError as exc:
         raise fail(f"cannot write the plot into {out}: {exc.strerror or exc}", 1) from None
     except RuntimeError as exc:
@@ -40,13 +45,17 @@ def demo(
     if as_json:
         typer.echo(json.dumps(result.as_dict(), allow_nan=False, default=str, indent=2))
         return
-    t = Table(title=f"VirtualStar demo ({result.wall_s:.0f} s wall time, x{speed:g})",
+    pace_text = "as fast as the CPU allows" if pace is None else f"up to x{pace:g}"
+    t = Table(title=f"VirtualStar demo ({result.wall_s:.0f} s wall time, lockstep {pace_text})",
               title_justify="left")
-    for col in ("phase", "duration", "slew time", "error RMS", "error peak"):
+    for col in ("phase", "duration", "slew time", "encoder RMS", "encoder peak", "on-sky RMS",
+                "on-sky peak", "clock offset"):
         t.add_column(col, justify="left" if col == "phase" else "right")
     for p in result.phases:
         t.add_row(p.name, f"{(p.to_us - p.from_us) / 1e6:.1f} s", _f(p.slew_time_s, ".1f", " s"),
-                  _f(p.rms_arcsec, ".3f", "″"), _f(p.peak_arcsec, ".3f", "″"))
+                  _f(p.rms_arcsec, ".3f", "″"), _f(p.peak_arcsec, ".3f", "″"),
+                  _f(p.on_sky_rms_arcsec, ".3f", "″"), _f(p.on_sky_peak_arcsec, ".3f", "″"),
+                  _f(p.clock_offset_us, ".0f", " µs"))
     Console().print(t)
     info = result.pass_info
     Console().print(f"{info.get('satellite')}: culmination {info.get('culmination_deg', 0):.1f}°, "

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import signal
+import time
 from pathlib import Path
 from typing import Annotated
 
@@ -21,8 +23,12 @@ __all__ = ["server"]
 def server(
     emulator: Annotated[bool, typer.Option(
         "--emulator", help="Start the bundled mount emulator in this process and drive it.")] = False,
-    speed: Annotated[float, typer.Option(
-        "--speed", help="With --emulator: simulated time at X times real time (1 = real time).")] = 1.0,
+    speed: Annotated[str, typer.Option(
+        "--speed", help="With --emulator: 1 = real time on the host clock (default); 'max' = "
+        "lockstep simulated time, as fast as the CPU allows (the server and the emulator share "
+        "one clock, so the server is never late); X = lockstep at up to X times real time. "
+        "With --mount: the mount is a simulated emulator running by itself at X times real "
+        "time (margins grow with X).")] = "1",
     start: Annotated[str | None, typer.Option(
         "--start", help="With --emulator: mount time at start, ISO-8601 UTC (default now).")] = None,
     geometry: Annotated[Path | None, typer.Option(
@@ -54,10 +60,12 @@ def server(
                         format="%(asctime)s %(name)s: %(message)s")
     if emulator == (mount is not None):
         raise fail("give either --emulator or --mount URL")
-    if not (speed > 0 and speed < 1000):
-        raise fail(f"--speed {speed}: expected a number of times real time, > 0 and < 1000")
-    if not emulator and (speed != 1.0 or start is not None):
-        raise fail("--speed and --start only apply to --emulator (a real mount runs in real time)")
+    pace = parse_speed(speed)
+    if not emulator and pace is None:
+        raise fail("--speed max only applies to --emulator (lockstep needs the emulator in this "
+                   "process); give --speed X for a simulated mount running at X times real time")
+    if not emulator and start is not None:
+        raise fail("--start only applies to --emulator (a mount keeps its own clock)")
     geometry_arcsec = None
     if geometry is not None or seed is not None:
         if not emulator:
@@ -82,8 +90,19 @@ def server(
         raise fail(str(exc)) from None
     _warn_once_about_earth_orientation(start_us)
     try:
-        asyncio.run(_serve(emulator, speed, start_us, mount, password, mapping, listen, the_site,
-                           pointing_model, passive, geometry_arcsec))
+        if emulator and pace != 1.0:
+            from virtualstar.lockstep import LockstepClock, run_lockstep
+
+            clock = LockstepClock(start_us if start_us is not None else time.time_ns() // 1000,
+                                  pace=pace)
+            run_lockstep(_serve_embedded(clock, 1.0, start_us, password, listen, the_site,
+                                         mapping, pointing_model, passive, geometry_arcsec), clock)
+        elif emulator:
+            asyncio.run(_serve_embedded(None, 1.0, start_us, password, listen, the_site, mapping,
+                                        pointing_model, passive, geometry_arcsec))
+        else:
+            asyncio.run(_serve(pace, mount, password, mapping, listen, the_site,
+                               pointing_model, passive))
     except VssError as exc:
         raise fail(str(exc)) from None
     except OSError as exc:
@@ -106,28 +125,58 @@ def _warn_once_about_earth_orientation(start_us: int | None) -> None:
                    "(update astropy-iers-data for arcsecond-accurate satellites)", err=True)
 
 
-async def _serve(emulator, speed, start_us, mount, password, mapping, listen, site,
-                 pointing_model, passive, geometry_arcsec=None) -> None:
+def parse_speed(text: str) -> float | None:
+    """Return the --speed factor: None for 'max', else a number > 0 and < 1000."""
+    if text.strip().lower() == "max":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (0 < value < 1000):
+        raise fail(f"--speed {text!r}: expected 'max' or a number of times real time, "
+                   "> 0 and < 1000 (1 = real time)")
+    return value
+
+
+def _stop_event() -> asyncio.Event:
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    embedded = None
-    if emulator:
-        from virtualstar.launcher import start_emulator
+    return stop
 
-        embedded = await start_emulator(speed=speed, start_us=start_us, password=password,
-                                         geometry_arcsec=geometry_arcsec)
-        mount = embedded.url
+
+async def _serve_embedded(clock, speed, start_us, password, listen, site, mapping,
+                          pointing_model, passive, geometry_arcsec) -> None:
+    from virtualstar.launcher import embedded_vss
+
+    stop = _stop_event()
+    async with embedded_vss(clock=clock, speed=speed, start_us=start_us, site=site,
+                            listen=listen, password=password, geometry_arcsec=geometry_arcsec,
+                            mapping_path=mapping, active=not passive,
+                            pointing_model=pointing_model) as vss:
+        if clock is None:
+            mode = "real time"
+        elif clock.pace is None:
+            mode = "lockstep simulated time, as fast as the CPU allows"
+        else:
+            mode = f"lockstep simulated time, up to x{clock.pace:g}"
+        typer.echo(f"VirtualStar Server on {vss.url} (mount: embedded emulator, {mode}; its "
+                   f"ASTCom endpoint for other clients: {vss.emulator.url})")
+        await stop.wait()
+    typer.echo("VirtualStar Server stopped")
+
+
+async def _serve(speed, mount, password, mapping, listen, site, pointing_model, passive) -> None:
+    stop = _stop_event()
     vss = build_server(mount_url=mount, password=password, mapping_path=mapping, site=site,
                        speed=speed, active=not passive, pointing_model=pointing_model)
     try:
         url = await vss.start(listen)
-        where = f"embedded emulator {mount}" + (f", x{speed:g} simulated time" if speed != 1 else "")
-        typer.echo(f"VirtualStar Server on {url} (mount: {where if emulator else mount})")
+        where = mount + (f", a simulated mount at x{speed:g}" if speed != 1 else "")
+        typer.echo(f"VirtualStar Server on {url} (mount: {where})")
         await stop.wait()
     finally:
         await vss.close()
-        if embedded is not None:
-            await embedded.stop()
         typer.echo("VirtualStar Server stopped")

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable
 from pathlib import Path
+from typing import Any
 
 from virtualstar.astro import Site, load_site
 
+from .clock import MountClock, PacedClock
 from .mapping import load_mapping
 from .mount_link import LinkConfig, MountLink
 from .server import VssServer
@@ -18,18 +21,26 @@ def build_server(*, mount_url: str, password: str | None = None,
                  mapping_path: str | Path | None = None, site: Site | None = None,
                  speed: float = 1.0, simulated: bool | None = None, active: bool = True,
                  pointing_model: str | Path | None = None, heartbeat_s: float = 1.0,
+                 clock: MountClock | None = None,
+                 connector: Callable[[], Awaitable[Any]] | None = None,
                  **telescope_options) -> VssServer:
     """Return a VssServer for the mount at `mount_url` (not started yet).
 
-    speed: mount seconds per wall second (> 1 for a simulated-time emulator);
-    simulated defaults to speed != 1. Raises MappingError, BadRequest (model file).
+    speed: mount seconds per wall second of a mount that runs by itself (> 1 for a
+    free-running simulated emulator); simulated defaults to speed != 1.
+    clock: a `virtualstar.lockstep.LockstepClock` shared with an embedded emulator
+    (lockstep simulated time; `speed` is then its pace, 0 for none), with `connector`
+    opening the in-memory connection to it. Raises MappingError, BadRequest (model file).
     """
     mapping = load_mapping(mapping_path)
-    link = MountLink(LinkConfig(mount_url, password), mapping)
+    link = MountLink(LinkConfig(mount_url, password, connector=connector), mapping)
+    lockstep = clock is not None and clock.lockstep
+    if lockstep:
+        speed, simulated = float(getattr(clock, "pace", None) or 0.0), True
     config = TelescopeConfig(site=site or load_site(), speed=speed,
                              simulated=(speed != 1.0) if simulated is None else simulated,
-                             active=active, **telescope_options)
-    telescope = Telescope(link, config)
+                             lockstep=lockstep, active=active, **telescope_options)
+    telescope = Telescope(link, config, clock or PacedClock(speed))
     if pointing_model is not None:
         telescope.load_model(str(pointing_model))
     return VssServer(telescope, heartbeat_s=heartbeat_s)

@@ -18,7 +18,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from .exceptions import BadRequest, TargetUnreachable, UnknownCommand, VssError
-from .telescope import Operation, Telescope, parse_target
+from .operations import Phase
+from .targets import parse_target
+from .telescope import Operation, Telescope
 
 __all__ = ["COMMANDS", "Command", "dispatch"]
 
@@ -140,7 +142,7 @@ def _plain_match(value: Any, allowed: tuple) -> bool:
 async def _result(op: Operation, *, wait_done: bool) -> dict[str, Any]:
     fut = op.done if wait_done else op.begun
     await asyncio.shield(fut)
-    if op.phase in ("failed", "aborted"):
+    if op.phase in (Phase.FAILED, Phase.ABORTED):
         err = op.info.get("error", {})
         raise OperationFailed(err.get("message", "the operation failed"),
                               err.get("code", "internal"))
@@ -240,7 +242,7 @@ async def _park(t: Telescope, p: ParkParams) -> Any:
 
 
 async def _mode(t: Telescope, p: ModeParams) -> Any:
-    return t.set_mode(p.mode)
+    return await t.set_mode(p.mode)
 
 
 async def _load(t: Telescope, p: ModelParams) -> Any:

@@ -11,20 +11,28 @@
     ├── MountRejected (RuntimeError)                mount_rejected   the mount refused a command (its message)
     ├── MountFault (RuntimeError)                   mount_fault      the mount latched a fault during an operation
     ├── TargetUnreachable (ValueError)              unreachable      below the horizon, beyond the cable wrap, no pass
-    └── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
+    ├── StaleElements (ValueError)                  stale_tle        TLE too old for the mount time, or the satellite decayed
+    ├── NotArrived (RuntimeError)                   not_arrived      the mount is not where the target is (how far: in the message)
+    ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
+    ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
+    └── InternalError (RuntimeError)                internal         a bug: reported, the server keeps running
 """
 
 from __future__ import annotations
 
 __all__ = [
     "BadRequest",
+    "InternalError",
     "MappingError",
     "MountFault",
     "MountRejected",
     "MountUnavailable",
     "NotActive",
+    "NotArrived",
     "OperationAborted",
+    "StaleElements",
     "TargetUnreachable",
+    "TrackingLost",
     "UnknownCommand",
     "VssError",
 ]
@@ -98,3 +106,31 @@ class OperationAborted(RuntimeError, VssError):
     """An operation ended early: a newer command, a fault, a lost mount or a shutdown."""
 
     code = "aborted"
+
+
+class StaleElements(ValueError, VssError):
+    """A satellite's elements are too far from the mount time to be trusted, or SGP4 failed."""
+
+    code = "stale_tle"
+
+
+class NotArrived(RuntimeError, VssError):
+    """After a slew the encoders are farther from the target than the arrival tolerance."""
+
+    code = "not_arrived"
+
+    def __init__(self, message: str, error_arcsec: float) -> None:
+        super().__init__(message)
+        self.error_arcsec = error_arcsec
+
+
+class TrackingLost(RuntimeError, VssError):
+    """The mount left the trajectory it was following (its buffer ran dry): re-acquire."""
+
+    code = "tracking_lost"
+
+
+class InternalError(RuntimeError, VssError):
+    """A bug in the server, reported to the client; the server keeps running."""
+
+    code = "internal"

@@ -3,38 +3,40 @@
 The feeder samples a path on a fixed grid of mount time (`point_rate_hz`) and
 pushes the points in batches whenever the buffer has free space, keeping
 `lead_s` seconds of mount time buffered. Each cycle costs one read (mount
-time, free space, state) and at most one push; between cycles it sleeps for a
-fraction of the lead, converted to wall time by the simulation speed. A point
-is never pushed less than `min_lead_s` before the mount reaches it: if the
-feeder ever falls that far behind (a stalled host), it skips ahead on the grid
-and counts the gap in `late_gaps` instead of sending points the mount would
-reject.
+time, free space, state) and at most one push; between cycles it sleeps a
+fraction of the lead in mount time on the VSS's clock (wall-paced or lockstep).
+A point is never pushed less than `min_lead_s` before the mount reaches it: if
+the feeder ever falls that far behind (a stalled host), it skips ahead on the
+grid and counts the gap in `late_gaps` instead of sending points the mount would
+reject. A mount that stops following once started is reported: `TrackingLost`
+when its buffer ran dry (the target is then re-acquired), `OperationAborted`
+when something outside the VSS stopped it, `MountFault` on a fault.
 """
 
 from __future__ import annotations
 
-import asyncio
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from .exceptions import MountFault, OperationAborted
+from .clock import MountClock
+from .exceptions import MountFault, OperationAborted, TrackingLost
 from .mount_link import MountLink
-from .trajectories import Path
+from .trajectories import Path, Points
 
 __all__ = ["Feeder", "FeederConfig", "FeederStats"]
 
 
 @dataclass(frozen=True)
 class FeederConfig:
-    """Grid and lead of the trajectory feed (mount seconds), pacing by `speed`."""
+    """Grid and lead of the trajectory feed (mount seconds)."""
 
     point_rate_hz: float = 20.0
     lead_s: float = 5.0
     min_lead_s: float = 0.5
     max_batch: int = 1000
-    speed: float = 1.0  # mount seconds per wall second
 
     @property
     def step_us(self) -> int:
@@ -63,9 +65,12 @@ class FeederStats:
 class Feeder:
     """Feeds one path to the mount; create one per trajectory."""
 
-    def __init__(self, link: MountLink, config: FeederConfig, path: Path, first_us: int,
-                 *, fault_code: int, tracking_code: int) -> None:
+    def __init__(self, link: MountLink, clock: MountClock, config: FeederConfig, path: Path,
+                 first_us: int, *, fault_code: int, tracking_code: int,
+                 on_points: Callable[[Points], None] | None = None) -> None:
         self.link = link
+        self.clock = clock
+        self.on_points = on_points
         self.config = config
         self.path = path
         self.step_us = config.step_us
@@ -75,19 +80,23 @@ class Feeder:
         self.started = False  # set once the mount was told to follow the buffer
         self.stats = FeederStats()
         self.done = False
-        self.task: asyncio.Task | None = None
+        self._roles = ["mount_time", "free_points", "mount_state"]
+        if link.mapping.has("underruns"):
+            self._roles.append("underruns")
+        self._underruns: int | None = None
 
     async def cycle(self) -> int:
         """Top up the buffer once; return the mount time read (µs)."""
-        v = await self.link.read(["mount_time", "free_points", "mount_state"])
+        v = await self.link.read(self._roles)
         now = int(v["mount_time"])
         state = int(v["mount_state"])
+        underruns = int(v["underruns"]) if "underruns" in v else None
+        if self._underruns is None:
+            self._underruns = underruns
         if state == self.fault_code:
             raise MountFault("the mount went to FAULT while tracking")
         if self.started and state != self.tracking_code:
-            raise OperationAborted(f"the mount stopped following the trajectory (state "
-                                   f"{self.link.mapping.state_name(state)}): stopped by another "
-                                   "client, or a buffer underrun")
+            self._left_trajectory(state, underruns)
         st = self.stats
         if st.pushed:
             lead = st.last_point_us - now
@@ -110,6 +119,8 @@ class Feeder:
             p = self.path.sample(t)
             accepted = await self.link.call("traj_push", p.t_us, p.az_rad, p.el_rad,
                                             p.az_rate_rad_s, p.el_rate_rad_s)
+            if self.on_points is not None:
+                self.on_points(p)
             if not st.batches:
                 st.first_point_us = int(t[0])
             st.batches += 1
@@ -121,11 +132,20 @@ class Feeder:
             self.done = True
         return now
 
+    def _left_trajectory(self, state: int, underruns: int | None) -> None:
+        name = self.link.mapping.state_name(state)
+        if underruns is None or self._underruns is None or underruns > self._underruns:
+            what = "its trajectory buffer ran dry" if underruns is not None else \
+                "it left the trajectory (no underrun counter to tell why)"
+            raise TrackingLost(f"the mount stopped tracking (state {name}): {what}; "
+                               f"the last point pushed was for {self.stats.last_point_us} µs")
+        raise OperationAborted(f"the mount stopped following the trajectory (state {name}) "
+                               "without a buffer underrun: stopped outside the VSS")
+
     async def run(self) -> None:
         """Top up until the path ends (or the task is cancelled)."""
-        cfg = self.config
-        pause_s = max(0.002, cfg.lead_s / 4.0 / max(cfg.speed, 1e-9))
+        pause_s = self.config.lead_s / 4.0
         while not self.done:
             await self.cycle()
-            await asyncio.sleep(pause_s)
+            await self.clock.sleep(pause_s)
         self.stats.ended = "path ended"

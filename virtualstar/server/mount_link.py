@@ -16,7 +16,7 @@ import asyncio
 import contextlib
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +35,12 @@ _ERROR_ROLES = ("az_error", "el_error")
 
 @dataclass(frozen=True)
 class LinkConfig:
-    """Where the mount is and how patiently to reach it (seconds)."""
+    """Where the mount is and how patiently to reach it (wall seconds).
+
+    `connector`, when given, opens the connection instead of dialling `url` (the
+    embedded emulator in lockstep: an in-memory ASTCom client); `url` then only
+    names it in messages.
+    """
 
     url: str
     password: str | None = None
@@ -43,6 +48,7 @@ class LinkConfig:
     backoff_min_s: float = 0.2
     backoff_max_s: float = 5.0
     poll_s: float = 0.05  # how often a silent loss of the connection is looked for
+    connector: Callable[[], Awaitable[Client]] | None = None
 
 
 class MountLink:
@@ -56,6 +62,7 @@ class MountLink:
         self._lock = asyncio.Lock()
         self._client: Client | None = None
         self._connected = asyncio.Event()
+        self._changed = asyncio.Condition()
         self._lost = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._scale: dict[str, float] = {}
@@ -93,6 +100,23 @@ class MountLink:
             raise MountUnavailable(f"no connection to the mount at {self.config.url} "
                                    f"({self.last_error or 'still trying'})") from None
 
+    async def wait_reconnected(self, connects_before: int, timeout_s: float) -> None:
+        """Wait for a connection newer than the `connects_before`-th; MountUnavailable after `timeout_s`."""
+        async def newer() -> None:
+            async with self._changed:
+                await self._changed.wait_for(
+                    lambda: self.connected and self.connects > connects_before)
+
+        try:
+            await asyncio.wait_for(newer(), timeout_s)
+        except TimeoutError:
+            raise MountUnavailable(f"the mount at {self.config.url} did not come back within "
+                                   f"{timeout_s:g} s ({self.last_error or 'still trying'})") from None
+
+    async def _notify(self) -> None:
+        async with self._changed:
+            self._changed.notify_all()
+
     def mark_lost(self) -> None:
         """Declare the connection broken (a request failed); the manager reconnects."""
         self._lost.set()
@@ -101,9 +125,7 @@ class MountLink:
         delay = self.config.backoff_min_s
         while True:
             try:
-                client = await Client.connect(self.config.url, password=self.config.password,
-                                              name="virtualstar-server",
-                                              timeout_s=self.config.timeout_s)
+                client = await self._open()
             except (OSError, AstcomError, TimeoutError) as exc:
                 self._failed(str(exc) or type(exc).__name__)
                 await asyncio.sleep(delay)
@@ -126,6 +148,7 @@ class MountLink:
             self._client = client
             self.connects += 1
             self._connected.set()
+            await self._notify()
             log.info("mount connected at %s", self.config.url)
             self.on_event("mount_connected", {"url": self.config.url, "connects": self.connects})
             while client.connected and not self._lost.is_set():
@@ -133,11 +156,18 @@ class MountLink:
                     await asyncio.wait_for(self._lost.wait(), self.config.poll_s)
             self._connected.clear()
             self._client = None
+            await self._notify()
             with contextlib.suppress(Exception):
                 await client.close()
             self.last_error = "connection lost"
             log.warning("mount connection lost")
             self.on_event("mount_disconnected", {"url": self.config.url})
+
+    async def _open(self) -> Client:
+        if self.config.connector is not None:
+            return await self.config.connector()
+        return await Client.connect(self.config.url, password=self.config.password,
+                                    name="virtualstar-server", timeout_s=self.config.timeout_s)
 
     def _failed(self, reason: str) -> None:
         if reason != self.last_error:

@@ -72,6 +72,7 @@ class VssServer:
         self.telescope = telescope
         self.heartbeat_s = heartbeat_s
         self._clients: set[_Client] = set()
+        self._subscribers: list[asyncio.Queue[tuple[str, dict[str, Any]]]] = []
         self._seq = itertools.count(1)
         self._server: Server | None = None
         self._heartbeat: asyncio.Task | None = None
@@ -80,15 +81,39 @@ class VssServer:
         telescope.emit = self.broadcast
 
     def broadcast(self, kind: str, data: dict[str, Any]) -> None:
-        """Push an event to every connected client."""
-        text = Event(kind, data, next(self._seq)).to_json()
+        """Push an event to every connected client (and every in-process subscriber)."""
+        seq = next(self._seq)
+        text = Event(kind, data, seq).to_json()
         for client in list(self._clients):
             client.put(text)
+        if self._subscribers:
+            frozen = json.loads(text)["data"]  # as a socket client would see it, then and there
+            for queue in self._subscribers:
+                if queue.full():
+                    queue.get_nowait()
+                queue.put_nowait((kind, frozen))
 
-    async def start(self, url: str = f"ws://127.0.0.1:{DEFAULT_PORT}") -> str:
-        """Start the telescope and listen; return the bound ``ws://`` URL."""
-        host, port = parse_listen_url(url)
+    def subscribe(self, maxsize: int = 1024) -> asyncio.Queue[tuple[str, dict[str, Any]]]:
+        """Return a queue that receives every event from now on (in-process clients)."""
+        queue: asyncio.Queue[tuple[str, dict[str, Any]]] = asyncio.Queue(maxsize)
+        self._subscribers.append(queue)
+        return queue
+
+    def unsubscribe(self, queue: asyncio.Queue) -> None:
+        if queue in self._subscribers:
+            self._subscribers.remove(queue)
+
+    async def call(self, cmd: str, params: dict[str, Any] | None = None) -> Any:
+        """Run one command as a client would, in this process; raise VssError subclasses."""
+        self.requests += 1
+        return await dispatch(self.telescope, cmd, params or {})
+
+    async def start(self, url: str | None = f"ws://127.0.0.1:{DEFAULT_PORT}") -> str:
+        """Start the telescope and listen; return the bound ``ws://`` URL ('' if `url` is None)."""
+        host, port = parse_listen_url(url) if url is not None else ("", 0)
         await self.telescope.start()
+        if url is None:
+            return ""
         self._server = await serve(self._session, host, port, max_size=1 << 20,
                                    ping_interval=None)
         bound = self._server.sockets[0].getsockname()
@@ -101,11 +126,10 @@ class VssServer:
         """Stop listening, close client connections, stop the telescope."""
         if self._heartbeat is not None:
             self._heartbeat.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._heartbeat
+            await asyncio.wait({self._heartbeat})
         if self._server is not None:
             self._server.close()
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._server.wait_closed(), 5.0)
         await self.telescope.close()
 
@@ -138,11 +162,10 @@ class VssServer:
             pass
         finally:
             self._clients.discard(client)
-            for task in [*tasks, writer]:
+            pending = {*tasks, writer}
+            for task in pending:
                 task.cancel()
-            for task in [*tasks, writer]:
-                with contextlib.suppress(BaseException):
-                    await task
+            await asyncio.wait(pending)
 
     async def _writer(self, client: _Client) -> None:
         with contextlib.suppress(ConnectionClosed):

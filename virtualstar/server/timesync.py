@@ -1,28 +1,41 @@
 """TimeS: keep the mount clock on UTC by arming the UTC second of the next PPS edge.
 
-In real time the host clock (NTP/GPS disciplined) is UTC: shortly after a
-second has begun, TimeS sends the mount the number of the *next* second; the
-mount's clock takes that value exactly at its next PPS edge, which removes the
-drift of its crystal. Arming only in the middle of a second (away from both
-edges) makes the intended edge unambiguous.
+The mount's clock takes an armed second exactly at its next PPS edge, which
+removes the drift of its crystal. TimeS arms the *next* second only in the
+middle of the current one (between `ARM_WINDOW_US`), so the intended edge is
+never ambiguous and the sync has no whole-second offset.
 
-In simulated time the emulator owns mount time, so TimeS only verifies: it
-reads the mount clock beside the emulator's own UTC truth (when the mapping has
-a ``utc_truth`` role) and reports the offset.
+What counts as UTC:
+
+* real time: the host clock (NTP/GPS disciplined) is UTC. TimeS waits for the
+  window on the host clock and arms host second + 1.
+* simulated time (paced or lockstep): the emulator's own UTC truth (the mapping's
+  ``utc_truth`` role, what its PPS marks) is UTC; TimeS waits for the window in
+  mount time and arms truth second + 1, the same way. Without that role it can
+  only report.
+
+After each sync TimeS measures the offset mount − UTC: against the mount's UTC
+truth read at the same tick when the mapping has one, else against the host clock
+at the middle of the read (its latency included). Offsets go to `on_offset` for
+the on-sky error.
 """
 
 from __future__ import annotations
 
 import asyncio
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
+from .clock import MountClock
 from .exceptions import VssError
 from .mount_link import MountLink
 
-__all__ = ["TimeSync", "TimeSyncStatus"]
+__all__ = ["ARM_WINDOW_US", "TimeSync", "TimeSyncStatus"]
 
-ARM_WINDOW_US = (200_000, 700_000)  # arm only this far into a host second
+ARM_WINDOW_US = (200_000, 700_000)  # arm only this far into a UTC second
+_ARM_AT_US = 450_000  # aim for the middle of the window
+_AFTER_EDGE_US = 20_000  # measure this long after the edge that applies the armed second
 
 
 @dataclass
@@ -32,6 +45,8 @@ class TimeSyncStatus:
     mode: str
     armed: int = 0
     offset_us: int | None = None
+    offset_source: str | None = None  # "utc truth" (the mount's PPS truth) or "host clock"
+    host_offset_us: int | None = None  # real time: mount − host clock, read latency included
     pps_error_us: float | None = None
     syncs: int | None = None
 
@@ -40,47 +55,88 @@ class TimeSyncStatus:
 
 
 class TimeSync:
-    """Periodically sync (real time) or verify (simulated time) the mount clock."""
+    """Periodically sync the mount clock to UTC and measure its offset."""
 
-    def __init__(self, link: MountLink, *, simulated: bool, period_s: float = 10.0) -> None:
+    def __init__(self, link: MountLink, clock: MountClock, *, simulated: bool,
+                 period_s: float = 10.0,
+                 on_offset: Callable[[int, int], None] | None = None) -> None:
         self.link = link
+        self.clock = clock
         self.simulated = simulated
         self.period_s = period_s
-        self.status = TimeSyncStatus("verify" if simulated else "sync")
+        self.on_offset = on_offset or (lambda t_us, offset_us: None)
+        self.status = TimeSyncStatus("sync to utc truth" if simulated else "sync to host utc")
         self.active = True  # False: measure only (a passive server commands nothing)
 
     async def sync_once(self) -> None:
-        """Arm the next UTC second (real time) and measure the offset."""
-        if not self.simulated and self.active:
-            for _ in range(10):
-                frac = time.time_ns() // 1000 % 1_000_000
-                if ARM_WINDOW_US[0] <= frac <= ARM_WINDOW_US[1]:
-                    break
-                await asyncio.sleep(0.1)
-            now_us = time.time_ns() // 1000
-            await self.link.call("time_sync", now_us // 1_000_000 + 1)
-            self.status.armed += 1
+        """Arm the next UTC second in the middle of the current one, then measure the offset."""
+        if self.active:
+            if self.simulated:
+                second = await self._truth_second_in_window()
+            else:
+                second = await self._host_second_in_window()
+            if second is not None and self.active:  # it may have gone passive meanwhile
+                await self.link.call("time_sync", second + 1)
+                self.status.armed += 1
+                await self._past_edge(second + 1)
         await self.verify()
 
+    async def _past_edge(self, second: int) -> None:
+        """Wait until just after the PPS edge of `second`, so the measurement sees the sync."""
+        target_us = second * 1_000_000 + _AFTER_EDGE_US
+        if self.simulated:
+            truth = int((await self.link.read(["utc_truth"]))["utc_truth"])
+            await self.clock.sleep(max(target_us - truth, 0) / 1e6)
+        else:
+            await asyncio.sleep(max(target_us - time.time_ns() // 1000, 0) / 1e6)
+
+    async def _host_second_in_window(self) -> int:
+        for _ in range(20):
+            frac = time.time_ns() // 1000 % 1_000_000
+            if ARM_WINDOW_US[0] <= frac <= ARM_WINDOW_US[1]:
+                break
+            await asyncio.sleep(((_ARM_AT_US - frac) % 1_000_000) / 1e6)
+        return time.time_ns() // 1000 // 1_000_000
+
+    async def _truth_second_in_window(self) -> int | None:
+        if not self.link.mapping.has("utc_truth"):
+            self.status.mode = "verify only (the mount has no utc_truth role)"
+            return None
+        for _ in range(20):
+            truth = int((await self.link.read(["utc_truth"]))["utc_truth"])
+            frac = truth % 1_000_000
+            if ARM_WINDOW_US[0] <= frac <= ARM_WINDOW_US[1]:
+                return truth // 1_000_000
+            await self.clock.sleep(((_ARM_AT_US - frac) % 1_000_000) / 1e6)
+        return None
+
     async def verify(self) -> None:
+        """Measure the mount clock's offset from UTC."""
         roles = ["mount_time"] + [r for r in ("utc_truth", "pps_error", "sync_count")
                                   if self.link.mapping.has(r)]
-        t_host = time.time_ns() // 1000
+        before = time.time_ns() // 1000
         v = await self.link.read(roles)
-        if self.simulated:
-            if "utc_truth" in v:
-                self.status.offset_us = int(v["mount_time"]) - int(v["utc_truth"])
-        else:
-            self.status.offset_us = int(v["mount_time"]) - t_host
+        after = time.time_ns() // 1000
+        mount_us = int(v["mount_time"])
+        if not self.simulated:
+            self.status.host_offset_us = mount_us - (before + after) // 2
+        if "utc_truth" in v:
+            self.status.offset_us = mount_us - int(v["utc_truth"])
+            self.status.offset_source = "utc truth"
+        elif not self.simulated:
+            self.status.offset_us = self.status.host_offset_us
+            self.status.offset_source = "host clock"
         self.status.pps_error_us = v.get("pps_error")
         self.status.syncs = v.get("sync_count")
+        if self.status.offset_us is not None:
+            self.on_offset(mount_us, self.status.offset_us)
 
     async def run(self) -> None:
-        """Sync now and every `period_s` seconds until cancelled; survive mount losses."""
+        """Sync now and every `period_s` mount seconds until cancelled; survive mount losses."""
         while True:
             try:
                 await self.link.wait_connected()
                 await self.sync_once()
             except VssError:
                 pass
-            await asyncio.sleep(self.period_s)
+            await self.clock.sleep(self.period_s)

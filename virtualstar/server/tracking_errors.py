@@ -6,10 +6,19 @@ time holding the count, the sums of squares and the peak of the on-sky error
 (azimuth error × cos(elevation) combined with the elevation error) and of each
 axis. Any window's RMS and peak are then exact sums over bins, and memory is
 bounded by the number of bins kept (a deque), whatever the sample rate.
+
+The following error is what the *encoders* miss. The sky misses more when the
+mount clock is off UTC: the mount is then where the target was (or will be)
+`offset` earlier, `rate × |offset|` away on the sky. So the history also keeps
+the target's on-sky rate per bin (from the points the feeder pushed) and the
+clock offsets TimeS measured, and reports the **on-sky error** beside the
+encoder error: per bin the clock term is added to the encoder RMS in quadrature
+and to its peak linearly (the two may point the same way).
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -33,10 +42,18 @@ class ErrorStats:
     el_rms_arcsec: float
     from_us: int
     to_us: int
+    on_sky_rms_arcsec: float = math.nan
+    on_sky_peak_arcsec: float = math.nan
+    clock_error_peak_arcsec: float = math.nan  # the largest rate × |clock offset| in the window
+    clock_offset_us: int | None = None  # the offset of largest size applied in the window
 
     def as_dict(self) -> dict:
         return {"n": self.n, "rms_arcsec": self.rms_arcsec, "peak_arcsec": self.peak_arcsec,
                 "az_rms_arcsec": self.az_rms_arcsec, "el_rms_arcsec": self.el_rms_arcsec,
+                "on_sky_rms_arcsec": self.on_sky_rms_arcsec,
+                "on_sky_peak_arcsec": self.on_sky_peak_arcsec,
+                "clock_error_peak_arcsec": self.clock_error_peak_arcsec,
+                "clock_offset_us": self.clock_offset_us,
                 "from_us": self.from_us, "to_us": self.to_us}
 
 
@@ -47,12 +64,46 @@ class TrackingErrorHistory:
         self.bin_us = int(bin_us)
         # each bin: [bin index, n, sum sky², sum az², sum el², peak sky]
         self._bins: deque[list[float]] = deque(maxlen=max_bins)
+        self._max_bins = max_bins
+        self._rates: dict[int, float] = {}  # bin index -> the target's on-sky rate, arcsec/s
+        self._offset_t: list[int] = []  # mount times of clock-offset measurements (increasing)
+        self._offset_us: list[int] = []
         self.samples = 0
         self.last_t_us = 0
         self.last_sky_arcsec = 0.0
 
     def clear(self) -> None:
         self._bins.clear()
+        self._rates.clear()
+        self._offset_t.clear()
+        self._offset_us.clear()
+
+    def note_rates(self, t_us: np.ndarray, rate_arcsec_s: np.ndarray) -> None:
+        """Record the target's on-sky rate at trajectory points (later points overwrite)."""
+        t = np.asarray(t_us, np.int64)
+        if t.size == 0:
+            return
+        idx = t // self.bin_us
+        rate = np.asarray(rate_arcsec_s, float)
+        starts = np.flatnonzero(np.r_[True, idx[1:] != idx[:-1]])
+        peaks = np.maximum.reduceat(np.abs(rate), starts)
+        for b, r in zip(idx[starts].tolist(), peaks.tolist(), strict=True):
+            self._rates[b] = r
+        while len(self._rates) > self._max_bins:
+            del self._rates[next(iter(self._rates))]
+
+    def note_clock_offset(self, t_us: int, offset_us: int) -> None:
+        """Record the mount clock's offset from UTC measured at mount time `t_us`."""
+        if self._offset_t and t_us < self._offset_t[-1]:
+            return
+        self._offset_t.append(int(t_us))
+        self._offset_us.append(int(offset_us))
+        if len(self._offset_t) > self._max_bins:
+            del self._offset_t[0], self._offset_us[0]
+
+    def _offset_at(self, t_us: int) -> int:
+        k = bisect.bisect_right(self._offset_t, t_us) - 1
+        return self._offset_us[k] if k >= 0 else 0
 
     def add(self, t_us: np.ndarray, az_err_arcsec: np.ndarray, el_err_arcsec: np.ndarray,
             el_rad: np.ndarray) -> None:
@@ -108,15 +159,31 @@ class TrackingErrorHistory:
         if n == 0:
             return ErrorStats(0, math.nan, math.nan, math.nan, math.nan,
                               int(from_us or 0), int(to_us or 0))
+        sky2 = sum(b[2] for b in sel)
+        clock = self._clock_terms(sel)
+        worst = max(range(len(sel)), key=lambda k: clock[k][0]) if sel else 0
         return ErrorStats(
             int(n),
-            math.sqrt(sum(b[2] for b in sel) / n),
+            math.sqrt(sky2 / n),
             max(b[5] for b in sel),
             math.sqrt(sum(b[3] for b in sel) / n),
             math.sqrt(sum(b[4] for b in sel) / n),
             int(sel[0][0] * self.bin_us),
             int((sel[-1][0] + 1) * self.bin_us),
+            on_sky_rms_arcsec=math.sqrt((sky2 + sum(b[1] * c[0] ** 2 for b, c in
+                                                    zip(sel, clock, strict=True))) / n),
+            on_sky_peak_arcsec=max(b[5] + c[0] for b, c in zip(sel, clock, strict=True)),
+            clock_error_peak_arcsec=clock[worst][0],
+            clock_offset_us=max((c[1] for c in clock), key=abs),
         )
+
+    def _clock_terms(self, sel: list[list[float]]) -> list[tuple[float, int]]:
+        """Return per bin (rate × |clock offset| in arcsec, the offset in µs)."""
+        out = []
+        for b in sel:
+            offset = self._offset_at(int(b[0]) * self.bin_us)
+            out.append((self._rates.get(int(b[0]), 0.0) * abs(offset) / 1e6, offset))
+        return out
 
     def window(self, seconds: float) -> ErrorStats:
         """Return the statistics of the last `seconds` of mount time received."""

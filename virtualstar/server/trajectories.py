@@ -29,6 +29,7 @@ from virtualstar.astro import (
     Site,
     observe_mount_times,
     plan_keyhole,
+    plan_slew,
     unwrap_azimuth,
 )
 
@@ -42,9 +43,13 @@ __all__ = [
     "TablePath",
     "TargetPath",
     "observed_to_encoder",
+    "plan_run_up",
     "plan_satellite_pass",
     "ramp_start",
 ]
+
+SLEW_MARGIN = 1.05  # the mount's own slew takes a little longer than the trapezoid
+SLEW_SETTLE_S = 1.5  # mount seconds from the end of the slew to "holding" and the next command
 
 _ONE_ARCSEC_RAD = math.pi / 180.0 / 3600.0
 _RATE_STEP_S = 0.05  # step of the finite difference that carries pointing-model corrections into rates
@@ -192,6 +197,33 @@ class RampIn:
             pos[late, 0], pos[late, 1] = tail.az_rad, tail.el_rad
             vel[late, 0], vel[late, 1] = tail.az_rate_rad_s, tail.el_rate_rad_s
         return Points(t, pos[:, 0], pos[:, 1], vel[:, 0], vel[:, 1])
+
+
+def plan_run_up(path: Path, *, az_rad: float, el_rad: float, now_us: int,
+                limits: MountLimits, lead_s: float, ramp_s: float,
+                not_before_us: int | None = None) -> RampIn:
+    """Return the run-up that joins `path` as early as a slew from (az, el) at `now_us` allows.
+
+    The join is: now + slew to the run-up's rest point (× SLEW_MARGIN + SLEW_SETTLE_S)
+    + `lead_s` (time to prime the buffer) + `ramp_s`; never before `not_before_us`
+    (a pass that has not risen). Where the rest point is depends on the join, so the
+    two are refined together (three rounds suffice: the path moves little meanwhile).
+    """
+    guess_s = 0.0
+    join = now_us
+    for _ in range(3):
+        join = now_us + int((guess_s + lead_s + ramp_s) * 1e6)
+        if not_before_us is not None:
+            join = max(join, int(not_before_us))
+        p = path.sample(np.array([join], np.int64))
+        rest = ramp_start(np.array([p.az_rad[0], p.el_rad[0]]),
+                          np.array([p.az_rate_rad_s[0], p.el_rate_rad_s[0]]), ramp_s)
+        guess_s = (plan_slew(az_rad, el_rad, float(rest[0]), float(rest[1]), limits).duration_s
+                   * SLEW_MARGIN + SLEW_SETTLE_S)
+    join = now_us + int((guess_s + lead_s + ramp_s) * 1e6)
+    if not_before_us is not None:
+        join = max(join, int(not_before_us))
+    return RampIn(path, join, ramp_s)
 
 
 class RampOut:

@@ -1,0 +1,46 @@
+"""Independent truth for the VSS tests: Vega's observed place from astropy, sky distances."""
+
+from __future__ import annotations
+
+import numpy as np
+from astropy.utils import iers
+
+iers.conf.auto_download = False
+
+
+def vega_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
+    """Return astropy's observed az, el (deg) of Vega at mount times (UTC µs)."""
+    import astropy.units as u
+    from astropy.coordinates import AltAz, Distance, EarthLocation, SkyCoord
+    from astropy.time import Time
+
+    from catalogs import bright_stars
+
+    s = bright_stars().lookup("Vega")
+    star = SkyCoord(ra=s.ra_deg * u.deg, dec=s.dec_deg * u.deg,
+                    pm_ra_cosdec=s.pm_ra_cosdec_mas_yr * u.mas / u.yr,
+                    pm_dec=s.pm_dec_mas_yr * u.mas / u.yr,
+                    distance=Distance(parallax=s.parallax_mas * u.mas),
+                    radial_velocity=(s.rv_km_s or 0.0) * u.km / u.s,
+                    obstime=Time(s.epoch_jyear, format="jyear", scale="tcb"), frame="icrs")
+    t = Time(np.asarray(t_us) / 1e6, format="unix", scale="utc")
+    loc = EarthLocation.from_geodetic(site.lon_deg * u.deg, site.lat_deg * u.deg, site.height_m * u.m)
+    frame = AltAz(obstime=t, location=loc, pressure=site.pressure_hpa * u.hPa,
+                  temperature=site.temperature_c * u.deg_C, relative_humidity=site.humidity,
+                  obswl=site.wavelength_um * u.micron)
+    moved = star.apply_space_motion(new_obstime=t)
+    aa = moved.transform_to(frame)
+    return aa.az.deg, aa.alt.deg
+
+
+def sky_sep_arcsec(az1, el1, az2, el2) -> np.ndarray:
+    import erfa
+
+    return np.degrees(erfa.seps(np.radians(az1), np.radians(el1), np.radians(az2),
+                                np.radians(el2))) * 3600.0
+
+
+def vega_rate_arcsec_s(t_us: int, site) -> float:
+    """Return Vega's on-sky rate (arcsec/s) at mount time `t_us`, from astropy."""
+    az, el = vega_truth(np.array([t_us, t_us + 1_000_000]), site)
+    return float(sky_sep_arcsec(az[0], el[0], az[1], el[1]))

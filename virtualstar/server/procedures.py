@@ -1,0 +1,375 @@
+"""What each operation does: the procedures the supervisor runs, one phase after another.
+
+Every motion follows the same recipe, in mount time:
+
+1. PREPARING: the mount must be connected and not in fault; a moving mount is
+   brought to rest and axes that are off are powered.
+2. SLEWING: the mount slews with its own point-to-point profile to the *rest
+   point* of a constant-acceleration run-up (`trajectories.plan_run_up`) that
+   joins the target's path at a chosen instant with the path's position and
+   rate. If the host was too slow (a paced mount does not wait), the join is
+   planned again from where the mount is, with a larger margin.
+3. WAITING / JOINING: the buffer is initialised, primed and started; a feeder
+   keeps it filled beside the procedure, so the two end together.
+4. SETTLING: `settle_s` after the join the encoders are compared with the
+   path's demand at the same mount time: beyond `arrival_tolerance_arcsec` the
+   operation fails with `not_arrived`, saying how far off it is; within, the
+   request is answered (the operation has *begun*).
+5. TRACKING until the duration or the pass ends, then ENDING: back to rest.
+
+A procedure raises on anything that stops it; the supervisor decides whether
+to run it again (`operations.resume_decision`), so a re-acquisition after an
+underrun or a reconnection is just the procedure run once more from where the
+mount is (a satellite pass in progress is joined where it is then).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import warnings
+from collections.abc import Awaitable
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
+
+from virtualstar.astro import (
+    FixedAltAz,
+    Satellite,
+    UtcTimes,
+    observe_mount_times,
+    satellite_passes,
+    unwrap_azimuth,
+)
+from virtualstar.astro.exceptions import SatelliteError
+
+from .exceptions import StaleElements, TargetUnreachable
+from .feeder import Feeder
+from .motion import ARCSEC_PER_RAD
+from .operations import Operation, Phase
+from .pass_selection import choose_pass, windows_from_passes
+from .trajectories import (
+    Path,
+    Points,
+    RampIn,
+    RampOut,
+    TargetPath,
+    plan_run_up,
+    plan_satellite_pass,
+)
+
+if TYPE_CHECKING:
+    from .telescope import Telescope
+
+__all__ = ["follow_sky_target", "hold_fixed", "measure_pointing", "track_satellite_pass"]
+
+log = logging.getLogger("virtualstar.server")
+
+T = TypeVar("T")
+
+MAX_JOIN_PLANS = 12  # plans of a join before giving up (each with 1.5× the previous margin)
+PASS_LOOKBACK_S = 1800.0  # predictions start this far back, so a pass in progress is found
+MIN_JOIN_TRACK_S = 10.0  # a finite path is joined only if this much of it is left
+
+
+# ---------------------------------------------------------------------- shared steps
+async def run_beside(main: Awaitable[T], feeder: Feeder) -> T:
+    """Run `main` while the feeder keeps the buffer filled; either failing ends both.
+
+    Neither outlives this call: a cancellation or an error cancels and awaits both
+    tasks (no feeder left pushing points for an operation that ended).
+    """
+    loop = asyncio.get_running_loop()
+    feeding = loop.create_task(feeder.run(), name="vss-feeder")
+    main_task = loop.create_task(main, name="vss-procedure")  # type: ignore[arg-type]
+    try:
+        done, _ = await asyncio.wait({feeding, main_task}, return_when=asyncio.FIRST_COMPLETED)
+        if feeding in done and not feeding.cancelled() and feeding.exception() is not None:
+            raise feeding.exception()  # type: ignore[misc]
+        return await main_task
+    finally:
+        for task in (feeding, main_task):
+            task.cancel()
+        await asyncio.wait({feeding, main_task})
+
+
+async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int | None = None,
+                  end_us: int | None = None) -> tuple[RampIn, Feeder]:
+    """Slew to the run-up of `path` and start following it; return the run-up and its feeder."""
+    cfg = t.config
+    lead_s = cfg.start_lead_s
+    for plan in range(MAX_JOIN_PLANS):
+        here = await t.motion.position()
+        ramp = plan_run_up(path, az_rad=here.az_rad, el_rad=here.el_rad, now_us=here.t_us,
+                           limits=t.limits, lead_s=lead_s, ramp_s=cfg.ramp_s,
+                           not_before_us=not_before_us)
+        if end_us is not None and ramp.join_us > end_us - int(MIN_JOIN_TRACK_S * 1e6):
+            raise TargetUnreachable(f"too little of the path is left to join it: it ends "
+                                    f"{(end_us - here.t_us) / 1e6:.0f} s from now")
+        rest_az, rest_el = float(ramp.rest_rad[0]), float(ramp.rest_rad[1])
+        t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(rest_az),
+                           to_el_deg=math.degrees(rest_el), join_us=ramp.join_us)
+        pos = await t.motion.goto(rest_az, rest_el, t.limits)
+        t.motion.verify_at(pos, rest_az, rest_el, cfg.arrival_tolerance_arcsec,
+                           f"slew to the run-up of {op.target}")
+        if pos.t_us + int(lead_s * 1e6) < ramp.begin_us:
+            if ramp.begin_us - pos.t_us > cfg.feed_lead_s * 1e6:
+                t.supervisor.phase(op, Phase.WAITING, start_utc=iso_utc(ramp.begin_us))
+                await t.motion.wait_until(ramp.begin_us - int((cfg.feed_lead_s - lead_s) * 1e6),
+                                          op.info)
+            feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
+                                                     on_points=t.note_points)
+            if feeder is not None:
+                t.supervisor.phase(op, Phase.JOINING)
+                return ramp, feeder
+        log.warning("operation %s: the join at %s came too late for the host (plan %d); "
+                    "planning again from where the mount is", op.id, iso_utc(ramp.join_us),
+                    plan + 1)
+        op.info["join_plans"] = plan + 2
+        lead_s *= 1.5
+    raise TargetUnreachable(f"could not join {op.target} after {MAX_JOIN_PLANS} plans: the host "
+                            f"cannot keep up with ×{t.config.speed:g} simulated time")
+
+
+async def prepare(t: Telescope, op: Operation) -> None:
+    t.supervisor.phase(op, Phase.PREPARING)
+    await t.motion.prepare()
+
+
+# ---------------------------------------------------------------------- procedures
+async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
+                            duration_s: float | None) -> dict[str, Any]:
+    """Slew to a sky target, verify the landing, track it (for `duration_s`, or until ended)."""
+    cfg = t.config
+    await prepare(t, op)
+    here = await t.motion.position()
+    path = TargetPath(target, cfg.site, limits=t.limits, eop=t.eop, model=t.model,
+                      current_az_rad=here.az_rad)
+    ramp, feeder = await acquire(t, op, path)
+
+    async def on_path() -> dict[str, Any]:
+        settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
+        await t.motion.wait_until(ramp.join_us)
+        t.supervisor.phase(op, Phase.SETTLING)
+        await t.motion.wait_until(settled_us)
+        err = await t.motion.verify_on_path(ramp, cfg.arrival_tolerance_arcsec,
+                                            f"landing on {op.target}")
+        s = t.errors.stats(ramp.join_us, settled_us)
+        landing = {"slew_time_s": (ramp.join_us - here.t_us) / 1e6,
+                   "landing_rms_arcsec": s.rms_arcsec, "landing_peak_arcsec": s.peak_arcsec,
+                   "landing_error_arcsec": err, "slew_from_us": here.t_us,
+                   "landed_us": ramp.join_us}
+        t.supervisor.phase(op, Phase.TRACKING, tracking_from_us=settled_us, **landing)
+        t.supervisor.begun(op)
+        t.emit("slew_done", {"id": op.id, **landing})
+        if duration_s is None:
+            await asyncio.Event().wait()  # until stopped, replaced, or the target leaves
+        end = settled_us + int(duration_s * 1e6)
+        await t.motion.wait_until(end, op.info)
+        return {"ended": "duration elapsed", "tracking_to_us": end}
+
+    try:
+        result = await run_beside(on_path(), feeder)
+    except TargetUnreachable as exc:
+        if op.phase is not Phase.TRACKING:
+            raise
+        # the target left the limits: let the points already buffered play out, then rest
+        await t.motion.wait_until(feeder.stats.last_point_us - 200_000)
+        result = {"ended": f"the target left the limits: {exc}",
+                  "tracking_to_us": await t.motion.mount_time_us()}
+    op.info["feeder"] = feeder.stats.as_dict()
+    t.supervisor.phase(op, Phase.ENDING)
+    await t.motion.halt()
+    s = t.errors.stats(op.info["tracking_from_us"], result["tracking_to_us"])
+    return {**result, **tracking_figures(s)}
+
+
+async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, *,
+                     power_off: bool) -> dict[str, Any]:
+    """Slew to a fixed observed direction, verify the landing and hold (park: power off)."""
+    await prepare(t, op)
+    here = await t.motion.position()
+    enc = TargetPath(FixedAltAz(az_deg % 360.0, el_deg), t.config.site, limits=t.limits,
+                     eop=t.eop, model=t.model, current_az_rad=here.az_rad).sample(
+        np.array([here.t_us], np.int64))
+    enc_az, enc_el = float(enc.az_rad[0]), float(enc.el_rad[0])
+    t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(enc_az),
+                       to_el_deg=math.degrees(enc_el))
+    pos = await t.motion.goto(enc_az, enc_el, t.limits)
+    t.supervisor.phase(op, Phase.SETTLING)
+    err = t.motion.verify_at(pos, enc_az, enc_el, t.config.arrival_tolerance_arcsec,
+                             f"slew to {op.target}")
+    if power_off:
+        t.supervisor.phase(op, Phase.ENDING)
+        await t.link.call("power_off")
+    return {"slew_time_s": (pos.t_us - here.t_us) / 1e6, "landing_rms_arcsec": err,
+            "landing_peak_arcsec": err, "landing_error_arcsec": err, "slew_from_us": here.t_us,
+            "landed_us": pos.t_us}
+
+
+async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, *,
+                           settle_s: float) -> dict[str, Any]:
+    """Point at a sky target's place at the exposure instant, hold, and measure with the camera.
+
+    The mount is sent to the target's observed place at t_exp (through the pointing
+    model, if one is loaded) and *held* there, so the encoders and the star's place
+    given to the camera refer to the same instant however long the requests take.
+    """
+    cfg = t.config
+    await prepare(t, op)
+    here = await t.motion.position()
+    # where the star will be when the mount has landed and settled
+    first = _observed_deg(t, target, here.t_us)
+    slew_s = t.motion.plan_slew_s(here, math.radians(first[0]), math.radians(first[1]), t.limits)
+    t_exp = here.t_us + int((slew_s * 1.05 + 1.0 + settle_s) * 1e6)
+    star_az, star_el = _observed_deg(t, target, t_exp)
+    if not t.limits.el_min_deg <= star_el <= t.limits.el_max_deg:
+        raise TargetUnreachable(f"{name} is at elevation {star_el:.2f} deg, outside the "
+                                f"limits {t.limits.el_min_deg:g}..{t.limits.el_max_deg:g} deg")
+    enc = TargetPath(FixedAltAz(star_az, star_el), cfg.site, limits=t.limits, eop=t.eop,
+                     model=t.model, current_az_rad=here.az_rad).sample(np.array([t_exp], np.int64))
+    enc_az, enc_el = float(enc.az_rad[0]), float(enc.el_rad[0])
+    t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(enc_az),
+                       to_el_deg=math.degrees(enc_el))
+    pos = await t.motion.goto(enc_az, enc_el, t.limits)
+    t.motion.verify_at(pos, enc_az, enc_el, cfg.arrival_tolerance_arcsec, f"slew to {name}")
+    t.supervisor.phase(op, Phase.MEASURING)
+    await t.motion.wait_until(max(pos.t_us + int(settle_s * 1e6), t_exp), op.info)
+    v = await t.link.read(["az_position", "el_position", "mount_time"])
+    dx, dy = (float(x) for x in await t.link.call("guide_measure", star_az, star_el))
+    enc_az_deg, enc_el_deg = math.degrees(float(v["az_position"])), math.degrees(float(v["el_position"]))
+    # the sky place on the optical axis: the star minus its offset from the axis
+    axis_el = star_el - dy / 3600.0
+    axis_az = star_az - dx / 3600.0 / math.cos(math.radians(star_el))
+    return {"sample": {
+        "target": name, "slew_time_s": (pos.t_us - here.t_us) / 1e6, "t_exp_us": t_exp,
+        "utc": iso_utc(t_exp, 3), "measured_us": int(v["mount_time"]),
+        "star": {"az_deg": star_az, "el_deg": star_el},
+        "encoder": {"az_deg": enc_az_deg, "el_deg": enc_el_deg},
+        "offset_arcsec": {"dx": dx, "dy": dy, "total": math.hypot(dx, dy)},
+        "axis": {"az_deg": axis_az, "el_deg": axis_el},
+        "pointing_model": t.model_source or None}}
+
+
+async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
+                               max_wait_s: float | None) -> dict[str, Any]:
+    """Track the next pass of `sat` that can still be reached, or the one in progress."""
+    cfg = t.config
+    await prepare(t, op)
+    here = await t.motion.position()
+    check_elements(sat, here.t_us, cfg.max_tle_age_days)
+    choice = _choose_pass(t, sat, here)
+    window = choice.window
+    set_us = int(window.set_us)  # choose_pass only returns passes with a set
+    if max_wait_s is not None and choice.join_us - here.t_us > max_wait_s * 1e6:
+        raise TargetUnreachable(f"the next pass of {sat.name} begins in "
+                                f"{(choice.join_us - here.t_us) / 1e6:.0f} s, more than the "
+                                f"{max_wait_s:g} s allowed")
+    with _sgp4_errors(sat, here.t_us):
+        plan = plan_satellite_pass(
+            sat, cfg.site, choice.join_us, set_us, step_s=cfg.sat_grid_s, limits=t.limits,
+            track_rate_limit_deg_s=t.track_rate_limit_deg_s * cfg.keyhole_rate_fraction,
+            accel_limit_deg_s2=t.limits.az_max_accel_deg_s2, eop=t.eop, model=t.model,
+            current_az_rad=here.az_rad)
+    t.supervisor.phase(op, Phase.PLANNED, pass_start_us=choice.join_us, pass_end_us=set_us,
+                       pass_start_utc=iso_utc(choice.join_us, 3), pass_end_utc=iso_utc(set_us, 3),
+                       pass_rise_utc=None if window.rise_us is None else iso_utc(window.rise_us, 3),
+                       pass_in_progress=choice.in_progress,
+                       culmination_el_deg=window.culmination_el_deg,
+                       keyhole=plan.keyhole_limited,
+                       keyhole_max_error_arcsec=plan.keyhole_max_error_arcsec,
+                       max_az_rate_deg_s=plan.max_az_rate_deg_s)
+    t.supervisor.begun(op)
+    # run out to rest after set, and hold: stopping a little late costs nothing
+    path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
+    ramp, feeder = await acquire(t, op, path, not_before_us=choice.join_us, end_us=set_us)
+
+    async def on_path() -> int:
+        await t.motion.wait_until(ramp.join_us)
+        t.supervisor.phase(op, Phase.SETTLING, tracking_from_us=ramp.join_us)
+        await t.motion.wait_until(ramp.join_us + int(cfg.settle_s * 1e6))
+        err = await t.motion.verify_on_path(ramp, cfg.arrival_tolerance_arcsec,
+                                            f"joining the pass of {sat.name}")
+        t.supervisor.phase(op, Phase.TRACKING, join_error_arcsec=err)
+        return min(await t.motion.wait_until(set_us, op.info), set_us)
+
+    track_to = await run_beside(on_path(), feeder)
+    op.info["feeder"] = feeder.stats.as_dict()
+    t.supervisor.phase(op, Phase.ENDING)
+    await t.motion.halt()
+    s = t.errors.stats(op.info["tracking_from_us"], track_to)
+    return {"ended": "the pass ended", "tracking_to_us": track_to, **tracking_figures(s)}
+
+
+# ---------------------------------------------------------------------- helpers
+def tracking_figures(s) -> dict[str, Any]:
+    return {"tracking_rms_arcsec": s.rms_arcsec, "tracking_peak_arcsec": s.peak_arcsec,
+            "on_sky_rms_arcsec": s.on_sky_rms_arcsec, "on_sky_peak_arcsec": s.on_sky_peak_arcsec,
+            "clock_error_peak_arcsec": s.clock_error_peak_arcsec}
+
+
+def _observed_deg(t: Telescope, target: Any, t_us: int) -> tuple[float, float]:
+    o = observe_mount_times(target, np.array([t_us], np.int64), t.config.site, t.eop)
+    return math.degrees(float(o.az_rad[0])) % 360.0, math.degrees(float(o.el_rad[0]))
+
+
+def check_elements(sat: Satellite, now_us: int, max_age_days: float) -> None:
+    """Refuse elements farther than `max_age_days` from the mount time (StaleElements)."""
+    epoch_us = int(sat.epoch.to_unix_us()[0])
+    age_days = (now_us - epoch_us) / 86_400e6
+    if abs(age_days) > max_age_days:
+        side = "after" if age_days > 0 else "before"
+        raise StaleElements(
+            f"{sat.name}: the mount time {iso_utc(now_us)} is {abs(age_days):.1f} days {side} "
+            f"the TLE epoch {iso_utc(epoch_us)} (limit {max_age_days:g} days); positions may be "
+            "off by kilometres or the satellite may have decayed -- load fresh elements "
+            "(e.g. from CelesTrak); `vs where --tle FILE` gives the same warning")
+
+
+@contextlib.contextmanager
+def _sgp4_errors(sat: Satellite, now_us: int):
+    try:
+        yield
+    except SatelliteError as exc:
+        raise StaleElements(
+            f"{sat.name}: SGP4 cannot propagate these elements to {iso_utc(now_us)} ({exc}); "
+            "the satellite may have decayed or the TLE is too old -- load fresh elements "
+            "(e.g. from CelesTrak); `vs where --tle FILE` gives the same warning") from None
+
+
+def _choose_pass(t: Telescope, sat: Satellite, here):
+    cfg = t.config
+    start = UtcTimes.from_unix_us(here.t_us - int(PASS_LOOKBACK_S * 1e6))
+    with _sgp4_errors(sat, here.t_us), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        passes = satellite_passes(sat, cfg.site, start,
+                                  start.shifted(PASS_LOOKBACK_S + cfg.pass_search_s),
+                                  min_el_deg=t.limits.el_min_deg, eop=t.eop)
+
+    def prepare_s(join_us: int) -> float:
+        # the slew from here to where the pass is at the join, the run-up and the margins
+        o = observe_mount_times(sat, np.array([join_us], np.int64), cfg.site, t.eop)
+        to_az = float(unwrap_azimuth(o.az_rad, limits=t.limits, current_az_rad=here.az_rad)[0])
+        slew_s = t.motion.plan_slew_s(here, to_az, float(o.el_rad[0]), t.limits)
+        return slew_s * 1.05 + 3.0 + cfg.start_lead_s + cfg.ramp_s
+
+    with _sgp4_errors(sat, here.t_us):
+        choice = choose_pass(windows_from_passes(passes), here.t_us, prepare_s=prepare_s,
+                             min_track_s=cfg.min_pass_track_s)
+    if choice is None:
+        raise TargetUnreachable(f"{sat.name} has no pass above {t.limits.el_min_deg:g} deg with "
+                                f"at least {cfg.min_pass_track_s:g} s left to track in the next "
+                                f"{cfg.pass_search_s / 3600:g} h")
+    return choice
+
+
+def sky_rate_arcsec_s(p: Points) -> np.ndarray:
+    """Return the on-sky rate of trajectory points (arcsec/s)."""
+    return np.hypot(p.az_rate_rad_s * np.cos(p.el_rad), p.el_rate_rad_s) * ARCSEC_PER_RAD
+
+
+def iso_utc(t_us: int, digits: int = 0) -> str:
+    """Return mount time µs as ISO-8601 UTC text (`digits` decimals of the second)."""
+    return UtcTimes.from_unix_us(int(t_us)).iso(digits)[0]
