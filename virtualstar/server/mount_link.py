@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import logging
 import math
+from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -24,13 +26,24 @@ from astcom_client import AstcomError, Client, ConnectionClosed, DeviceError, St
 
 from .exceptions import MappingError, MountRejected, MountUnavailable
 from .mapping import RoleMapping
+from .operations import current_operation
 
-__all__ = ["LinkConfig", "MountLink"]
+__all__ = ["LinkConfig", "MountCall", "MountLink"]
 
 log = logging.getLogger("virtualstar.server.mount")
 
 ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
 _ERROR_ROLES = ("az_error", "el_error")
+CALL_LOG = 4096  # function calls kept in `MountLink.calls`
+
+
+@dataclass(frozen=True)
+class MountCall:
+    """One function the VSS called on the mount: order, role, and the operation that sent it."""
+
+    seq: int
+    role: str
+    operation: int | None  # None: outside any operation (stop, TimeS, a reconnection)
 
 
 @dataclass(frozen=True)
@@ -66,6 +79,8 @@ class MountLink:
         self._lost = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._scale: dict[str, float] = {}
+        self._call_seq = itertools.count(1)
+        self.calls: deque[MountCall] = deque(maxlen=CALL_LOG)
         self.connects = 0
         self.last_error = ""
 
@@ -226,6 +241,7 @@ class MountLink:
     async def call(self, role: str, *args: Any) -> Any:
         """Invoke the mount function playing `role` with `args`; return its value."""
         name = self.mapping.function(role)
+        self.calls.append(MountCall(next(self._call_seq), role, current_operation.get()))
         return await self._do(f"{name}()", lambda c: c.invoke(name, *args))
 
     async def write_raw(self, values: dict[str, Any]) -> None:

@@ -24,6 +24,7 @@ starts again.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import enum
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,7 +32,13 @@ from typing import Any
 from .exceptions import MountUnavailable, TrackingLost, VssError
 
 __all__ = ["TERMINAL", "TRANSITIONS", "IllegalTransition", "Operation", "Phase", "Resume",
-           "resume_decision"]
+           "current_operation", "resume_decision"]
+
+#: The id of the operation whose task is running (None outside operations): set by the
+#: supervisor for an operation's task, inherited by every task it starts (its feeder), and
+#: written beside each command the mount link sends, so the log says who moved the mount.
+current_operation: contextvars.ContextVar[int | None] = contextvars.ContextVar(
+    "current_operation", default=None)
 
 MAX_RESUMES = 10  # re-acquisitions of one operation before it gives up
 

@@ -36,7 +36,7 @@ from .exceptions import (
 )
 from .motion import Motion
 from .mount_link import MountLink
-from .operations import Operation, Phase, Resume, resume_decision
+from .operations import Operation, Phase, Resume, current_operation, resume_decision
 
 __all__ = ["Procedure", "Supervisor"]
 
@@ -107,6 +107,7 @@ class Supervisor:
         await asyncio.wait({op.task})
 
     async def _drive(self, op: Operation, procedure: Procedure) -> None:
+        current_operation.set(op.id)  # this task's context, copied into every task it starts
         try:
             while True:
                 op.attempt = asyncio.get_running_loop().create_task(
