@@ -47,7 +47,7 @@ log = logging.getLogger("virtualstar.lockstep")
 T = TypeVar("T")
 
 TICK_US = 100  # the emulator's loop period: mount time advances in whole ticks
-DEFAULT_MAX_STEP_US = 200_000  # at most this much mount time per step: streams flow, I/O is polled
+DEFAULT_MAX_STEP_US = 1_000_000  # at most this much mount time per step: streams flow, I/O is polled
 _MAX_PACE_WAIT_S = 0.05  # a paced clock re-checks outside I/O at least this often
 _PACE_SLIP_S = 0.25  # behind its pace by more than this (a stalled host): re-anchor, no burst
 

@@ -210,8 +210,7 @@ class VssClient:
                 await ws.close()
         if self._reader is not None:
             self._reader.cancel()
-            with contextlib.suppress(BaseException):
-                await self._reader
+            await asyncio.wait({self._reader})
         self._fail_pending(ServerUnavailable("the client closed the connection"))
 
     async def __aenter__(self) -> VssClient:

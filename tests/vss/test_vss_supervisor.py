@@ -98,15 +98,16 @@ def test_a_slew_that_does_not_arrive_is_reported_with_how_far_off_it_is():
 
 
 def test_a_buffer_underrun_is_followed_by_reacquiring_the_star_from_where_the_mount_is():
-    """A host stall (the mount link held for 8 s) lets the trajectory buffer run dry."""
+    """A host stall (the mount link held past the buffered lead) lets the buffer run dry."""
     site = load_site()
 
     async def scenario(vss, clock):
         vs = vss.client()
         op = await vs.request("track", {"star": "Vega"})
         await clock.sleep(10.0)
+        stall_s = vss.server.telescope.config.feed_lead_s + 8.0
         async with vss.server.telescope.link._lock:  # the feeder cannot push: a frozen host
-            await clock.sleep(8.0)
+            await clock.sleep(stall_s)
         resumed = await vs.next_event("resumed", 60.0)
         while (st := await vs.request("status"))["operation"]["phase"] != "tracking":
             await clock.sleep(0.5)
@@ -123,6 +124,34 @@ def test_a_buffer_underrun_is_followed_by_reacquiring_the_star_from_where_the_mo
     info = st["operation"]["info"]
     assert info["resumes"] == 1 and info["interrupted"]["code"] == "tracking_lost"
     assert "ran dry" in info["interrupted"]["message"]  # the mount's underrun counter rose
+    t = np.array([r[1] for r in reads])
+    az = np.degrees([r[0]["axis.az.position"] for r in reads]) % 360.0
+    el = np.degrees([r[0]["axis.el.position"] for r in reads])
+    taz, tel = vega_truth(t, site)
+    assert sky_sep_arcsec(az, el, taz, tel).max() < 1.0
+
+
+def test_a_join_made_late_by_a_stalled_host_is_planned_again_not_aborted():
+    """The link is held (a frozen host) through the end of the slew: the run-up is missed."""
+    site = load_site()
+
+    async def scenario(vss, clock):
+        vs = vss.client()
+        slew = asyncio.ensure_future(vs.request("slew", {"star": "Vega"}))
+        while ((await vs.request("status"))["operation"] or {}).get("phase") != "slewing":
+            await clock.sleep(0.1)
+        async with vss.server.telescope.link._lock:  # nothing reaches the mount for a minute
+            await clock.sleep(60.0)
+        op = await slew
+        reads = [await read_emulator(vss, POSITION)]
+        for _ in range(3):
+            await clock.sleep(1.0)
+            reads.append(await read_emulator(vss, POSITION))
+        await vs.request("stop")
+        return op, reads
+
+    op, reads = run_lockstep_scenario(START, scenario, site=site)
+    assert op["phase"] == "tracking" and op["info"]["join_plans"] >= 2
     t = np.array([r[1] for r in reads])
     az = np.degrees([r[0]["axis.az.position"] for r in reads]) % 360.0
     el = np.degrees([r[0]["axis.el.position"] for r in reads])

@@ -98,8 +98,7 @@ def render_status(st: dict[str, Any]) -> Table:
     if not st.get("connected"):
         t.add_row("mount", f"[red]not connected[/] ({st.get('url')}: {st.get('mount_error')})")
         return t
-    t.add_row("mount", f"{st['mount_state']}  ({st['url']}, {st['mode']}"
-                       + (f", simulated x{st['speed']:g}" if st.get("simulated") else "") + ")")
+    t.add_row("mount", f"{st['mount_state']}  ({st['url']}, {st['mode']}, {_time_mode(st)})")
     t.add_row("mount time", st["mount_time_utc"])
     enc, obs, rd = st["encoder"], st["observed"], st["radec"]
     t.add_row("encoder az / el", f"{enc['az_deg']:.5f}° / {enc['el_deg']:.5f}°")
@@ -116,14 +115,26 @@ def render_status(st: dict[str, Any]) -> Table:
     if op:
         t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
     for window, s in st.get("tracking_error", {}).items():
-        t.add_row(f"tracking error {window}", f"RMS {_f(s['rms_arcsec'], '.3f', '″')}, "
-                                              f"peak {_f(s['peak_arcsec'], '.3f', '″')}")
+        t.add_row(f"tracking error {window}",
+                  f"encoders RMS {_f(s['rms_arcsec'], '.3f', '″')}, peak "
+                  f"{_f(s['peak_arcsec'], '.3f', '″')}; on the sky RMS "
+                  f"{_f(s.get('on_sky_rms_arcsec'), '.3f', '″')}, peak "
+                  f"{_f(s.get('on_sky_peak_arcsec'), '.3f', '″')}")
     ts = st.get("time_sync", {})
-    t.add_row("time sync", f"{ts.get('mode')}: offset {ts.get('offset_us')} µs, "
-                           f"{ts.get('syncs')} PPS syncs")
+    t.add_row("clock offset", f"{_f(ts.get('offset_us'), 'd', ' µs')} (mount − UTC, from the "
+                              f"{ts.get('offset_source') or '-'}; {ts.get('syncs')} PPS syncs, "
+                              f"PPS error {_f(ts.get('pps_error_us'), '.0f', ' µs')})")
     if st.get("last_fault"):
         t.add_row("last fault", f"[red]{st['last_fault']}")
     return t
+
+
+def _time_mode(st: dict[str, Any]) -> str:
+    mode = st.get("time_mode") or ("paced" if st.get("simulated") else "real time")
+    if mode == "real time":
+        return "real time"
+    speed = st.get("speed")
+    return f"{mode} simulated time" + (f" x{speed:g}" if speed else ", as fast as the CPU allows")
 
 
 def status(server: ServerOpt = None, as_json: JsonOpt = False) -> None:

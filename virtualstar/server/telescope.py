@@ -63,6 +63,7 @@ _LIMIT_ROLES = ("az_slew_rate_limit", "el_slew_rate_limit", "az_slew_accel_limit
                 "el_max")
 WATCH_S = 1.0  # mount seconds between the slow polls of the mount state
 STALL_WALL_S = 5.0  # paced time: a mount clock standing this long (wall) is a lost mount
+LOCKSTEP_LEAD_S = 30.0  # mount seconds of trajectory buffered in lockstep
 
 
 @dataclass(frozen=True)
@@ -74,7 +75,7 @@ class TelescopeConfig:
     simulated: bool = False
     lockstep: bool = False  # the VSS and the embedded emulator share a LockstepClock
     point_rate_hz: float = 20.0
-    lead_s: float | None = None  # None: 5 s, or 3 s of wall time in paced simulated time
+    lead_s: float | None = None  # None: 5 s; 3 s of wall time in paced time; 30 s in lockstep
     error_rate_hz: float = 1000.0
     ramp_s: float = 2.0
     settle_s: float = 1.0
@@ -105,9 +106,12 @@ class TelescopeConfig:
 
         In paced simulated time the same mount lead is a shorter wall time, and an
         event loop stalled by a loaded host must not drain the buffer: keep at least
-        3 s of wall time.
+        3 s of wall time. In lockstep nothing is ever late, and longer batches cost
+        less (each one computes the target's place once): 30 s.
         """
-        return self.lead_s if self.lead_s is not None else max(5.0, 3.0 * self.margin_speed)
+        if self.lead_s is not None:
+            return self.lead_s
+        return LOCKSTEP_LEAD_S if self.lockstep else max(5.0, 3.0 * self.margin_speed)
 
     @property
     def time_mode(self) -> str:

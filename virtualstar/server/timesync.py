@@ -69,17 +69,24 @@ class TimeSync:
         self.active = True  # False: measure only (a passive server commands nothing)
 
     async def sync_once(self) -> None:
-        """Arm the next UTC second in the middle of the current one, then measure the offset."""
-        if self.active:
-            if self.simulated:
-                second = await self._truth_second_in_window()
-            else:
-                second = await self._host_second_in_window()
-            if second is not None and self.active:  # it may have gone passive meanwhile
-                await self.link.call("time_sync", second + 1)
-                self.status.armed += 1
-                await self._past_edge(second + 1)
+        """Measure the offset, arm the next UTC second mid-second, measure again after its edge.
+
+        The measurement before the sync is the drift accumulated since the last one (the
+        worst offset of the period), the one after it what the sync left.
+        """
+        if not self.active:
+            await self.verify()
+            return
+        if self.simulated:
+            second = await self._truth_second_in_window()
+        else:
+            second = await self._host_second_in_window()
         await self.verify()
+        if second is not None and self.active:  # it may have gone passive meanwhile
+            await self.link.call("time_sync", second + 1)
+            self.status.armed += 1
+            await self._past_edge(second + 1)
+            await self.verify()
 
     async def _past_edge(self, second: int) -> None:
         """Wait until just after the PPS edge of `second`, so the measurement sees the sync."""

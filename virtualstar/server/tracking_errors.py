@@ -102,8 +102,14 @@ class TrackingErrorHistory:
             del self._offset_t[0], self._offset_us[0]
 
     def _offset_at(self, t_us: int) -> int:
-        k = bisect.bisect_right(self._offset_t, t_us) - 1
-        return self._offset_us[k] if k >= 0 else 0
+        """Return the larger of the offsets measured just before and just after `t_us`.
+
+        Between two measurements a drifting clock's offset lies between them, so the
+        larger one bounds it (after the newest measurement, that one alone).
+        """
+        k = bisect.bisect_right(self._offset_t, t_us)
+        around = self._offset_us[max(k - 1, 0):k + 1]
+        return max(around, key=abs) if around else 0
 
     def add(self, t_us: np.ndarray, az_err_arcsec: np.ndarray, el_err_arcsec: np.ndarray,
             el_rad: np.ndarray) -> None:

@@ -1,0 +1,91 @@
+"""The import rules of ../shared/ARCHITECTURE.md and docs/architecture.md, checked by an AST scan.
+
+Every import statement of every module counts, those inside functions too (a lazy
+import is still a dependency).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+OURS = ("astcom_client", "mount_emulator", "virtualstar", "pointing_model", "catalogs")
+
+
+def imported(path: Path) -> set[str]:
+    """Return the dotted names a module imports (relative imports resolved)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    package = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                names.add(".".join([*base, node.module] if node.module else base))
+            else:
+                names.add(node.module or "")
+    return names
+
+
+def modules(package: str) -> list[Path]:
+    return sorted((ROOT / package).rglob("*.py"))
+
+
+def ours(names: set[str]) -> set[str]:
+    return {n for n in names if n.split(".")[0] in OURS}
+
+
+def offending(paths: list[Path], forbidden: tuple[str, ...]) -> list[str]:
+    bad = []
+    for path in paths:
+        for name in ours(imported(path)):
+            if name.split(".")[0] in forbidden or name in forbidden:
+                bad.append(f"{path.relative_to(ROOT)} imports {name}")
+    return bad
+
+
+@pytest.mark.parametrize(("package", "forbidden"), [
+    ("astcom_client", ("mount_emulator", "virtualstar", "pointing_model", "catalogs")),
+    ("catalogs", ("astcom_client", "mount_emulator", "virtualstar", "pointing_model")),
+    ("mount_emulator", ("virtualstar", "pointing_model", "catalogs")),
+])
+def test_a_package_imports_only_what_the_architecture_allows(package, forbidden):
+    assert offending(modules(package), forbidden) == []
+
+
+def test_the_pointing_model_core_imports_nothing_of_ours_and_its_cli_no_emulator():
+    cli = [p for p in modules("pointing_model") if p.name.startswith("cli")]  # cli, cli_sky
+    core = [p for p in modules("pointing_model") if p not in cli]
+    assert offending(core, ("astcom_client", "mount_emulator", "virtualstar", "catalogs")) == []
+    assert offending(cli, ("mount_emulator", "astcom_client")) == []
+
+
+def test_only_the_launcher_of_virtualstar_imports_the_emulator():
+    others = [p for p in modules("virtualstar") if p != ROOT / "virtualstar" / "launcher.py"]
+    assert offending(others, ("mount_emulator",)) == []
+
+
+@pytest.mark.parametrize("module", ["protocol.py", "codec.py", "commands.py", "service.py",
+                                    "registry.py"])
+def test_the_astcom_protocol_core_does_no_io(module):
+    names = imported(ROOT / "astcom_client" / module)
+    assert not names & {"asyncio", "socket", "websockets", "ssl"}, names
+
+
+@pytest.mark.parametrize("module", ["physics.py", "model.py"])
+def test_the_emulator_physics_reads_no_clock_and_no_socket(module):
+    names = imported(ROOT / "mount_emulator" / module)
+    assert not names & {"time", "datetime", "asyncio", "socket"}, names
+
+
+def test_the_vss_reads_no_clock_of_its_own_for_mount_time():
+    """The VSS waits on the mount clock (server/clock.py); wall time only for timeouts."""
+    allowed = {"clock.py", "timesync.py", "telescope.py", "server.py"}  # wall: TimeS, stall, heartbeat
+    for path in modules("virtualstar/server"):
+        if path.name not in allowed:
+            assert "time" not in imported(path), path.name
