@@ -32,7 +32,7 @@ BAD_FRAMES = [
     ('{"id": 12, "cmd": "load_model", "params": {"path": "/nonexistent/model.json"}}',
      "bad_request", "cannot load pointing model"),
     ('{"id": 13, "cmd": "slew", "params": {"star": "Canopus"}}', "unreachable",
-     "below the elevation limit"),  # dec -52.7 never rises at latitude 52.4
+     "below the horizon limit 5.00°"),  # dec -52.7 never rises at latitude 52.4
 ]
 
 

@@ -14,6 +14,14 @@ Public API (radians and rad/s inside, degrees at user interfaces):
 """
 
 from .altaz import Horizon, KeyholePlan, MountLimits, elevation_ok, plan_keyhole, unwrap_azimuth
+from .avoidance import (
+    AvoidanceZones,
+    ZoneHit,
+    check_places,
+    load_horizon_file,
+    slew_route,
+    zone_mask,
+)
 from .bodies import BODY_SEGMENTS, SolarSystemBody
 from .earth_orientation import EarthOrientation
 from .events import Event, Pass, find_events, satellite_passes
@@ -43,6 +51,7 @@ from .timescales import UtcTimes
 
 __all__ = [
     "AstroError",
+    "AvoidanceZones",
     "BODY_SEGMENTS",
     "CoordinateParseError",
     "EarthOrientation",
@@ -68,9 +77,12 @@ __all__ = [
     "UnknownTarget",
     "UnreachablePath",
     "UtcTimes",
+    "ZoneHit",
+    "check_places",
     "elevation_ok",
     "enu_to_azel",
     "find_events",
+    "load_horizon_file",
     "load_site",
     "observe_enu",
     "observe_mount_times",
@@ -81,6 +93,8 @@ __all__ = [
     "plan_slew_to_target",
     "resolve_target",
     "satellite_passes",
+    "slew_route",
     "trapezoid",
     "unwrap_azimuth",
+    "zone_mask",
 ]

@@ -39,6 +39,12 @@ class TargetParams:
     altaz: str | None = None
     az_deg: float | None = None
     el_deg: float | None = None
+    allow_sun: bool = False  # operators only: ignore the Sun/Moon zones for this operation
+
+    @property
+    def target_fields(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(TargetParams)
+                if f.name != "allow_sun"}
 
 
 @dataclass(frozen=True)
@@ -158,11 +164,11 @@ async def _status(t: Telescope, p: NoParams) -> Any:
 
 
 async def _slew(t: Telescope, p: TargetParams) -> Any:
-    target, name, fixed = parse_target(dataclasses.asdict(p))
+    target, name, fixed = parse_target(p.target_fields)
     if fixed is not None:
-        op = await t.slew_altaz(*fixed)
+        op = await t.slew_altaz(*fixed, allow_sun=p.allow_sun)
     else:
-        op = await t.follow_target(target, name, kind="slew")
+        op = await t.follow_target(target, name, kind="slew", allow_sun=p.allow_sun)
     return await _result(op, wait_done=False)
 
 
@@ -173,15 +179,15 @@ async def _track(t: Telescope, p: TrackParams) -> Any:
         if any(getattr(p, k) is not None for k in ("radec", "ra_deg", "star", "altaz", "az_deg")):
             raise BadRequest("track: give either a TLE or a sky target, not both")
         sat = _satellite(p.tle, p.sat)
-        op = await t.track_satellite(sat, max_wait_s=p.max_wait_s)
+        op = await t.track_satellite(sat, max_wait_s=p.max_wait_s, allow_sun=p.allow_sun)
         return await _result(op, wait_done=p.wait)
     if p.sat is not None:
         raise BadRequest("track: 'sat' selects a satellite inside 'tle'; no TLE was given")
-    target, name, fixed = parse_target({k: v for k, v in dataclasses.asdict(p).items()
-                                        if k in {f.name for f in dataclasses.fields(TargetParams)}})
+    target, name, fixed = parse_target(p.target_fields)
     if fixed is not None:
         raise BadRequest("track: a fixed az/el does not move; use slew for it")
-    op = await t.follow_target(target, name, kind="track", duration_s=p.duration_s)
+    op = await t.follow_target(target, name, kind="track", duration_s=p.duration_s,
+                               allow_sun=p.allow_sun)
     return await _result(op, wait_done=p.wait)
 
 
@@ -217,13 +223,12 @@ def _satellite(tle: str, name: str | None):
 
 
 async def _pointing_sample(t: Telescope, p: SampleParams) -> Any:
-    target, name, fixed = parse_target({k: v for k, v in dataclasses.asdict(p).items()
-                                        if k != "settle_s"})
+    target, name, fixed = parse_target(p.target_fields)
     if fixed is not None:
         from virtualstar.astro import FixedAltAz
 
         target = FixedAltAz(fixed[0] % 360.0, fixed[1])
-    op = await t.pointing_sample(target, name, settle_s=p.settle_s)
+    op = await t.pointing_sample(target, name, settle_s=p.settle_s, allow_sun=p.allow_sun)
     done = await _result(op, wait_done=True)
     return {"id": done["id"], **done["info"]["sample"]}
 

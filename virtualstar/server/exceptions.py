@@ -12,6 +12,7 @@
     ├── MountFault (RuntimeError)                   mount_fault      the mount latched a fault during an operation
     ├── TargetUnreachable (ValueError)              unreachable      below the horizon, beyond the cable wrap, no pass
     ├── StaleElements (ValueError)                  stale_tle        TLE too old for the mount time, or the satellite decayed
+    ├── InExclusionZone (ValueError)                exclusion_zone   the target or the slew's path is too near the Sun (or Moon)
     ├── NotArrived (RuntimeError)                   not_arrived      the mount is not where the target is (how far: in the message)
     ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
     ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 __all__ = [
     "BadRequest",
+    "InExclusionZone",
     "InternalError",
     "MappingError",
     "MountFault",
@@ -134,3 +136,9 @@ class InternalError(RuntimeError, VssError):
     """A bug in the server, reported to the client; the server keeps running."""
 
     code = "internal"
+
+
+class InExclusionZone(ValueError, VssError):
+    """The target, or the path the mount would take to it, comes too near the Sun or the Moon."""
+
+    code = "exclusion_zone"

@@ -74,7 +74,7 @@ _END = frozenset({Phase.FAILED, Phase.ABORTED, Phase.INTERRUPTED})
 TRANSITIONS: dict[Phase, frozenset[Phase]] = {
     Phase.STARTING: frozenset({Phase.PREPARING}) | _END,
     Phase.PREPARING: frozenset({Phase.PLANNED, Phase.SLEWING}) | _END,
-    Phase.PLANNED: frozenset({Phase.SLEWING}) | _END,
+    Phase.PLANNED: frozenset({Phase.SLEWING, Phase.WAITING}) | _END,
     Phase.SLEWING: frozenset({Phase.SLEWING, Phase.WAITING, Phase.JOINING, Phase.SETTLING,
                               Phase.MEASURING}) | _END,
     Phase.WAITING: frozenset({Phase.SLEWING, Phase.JOINING}) | _END,

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import math
 import warnings
@@ -45,7 +46,7 @@ from virtualstar.astro import (
 )
 from virtualstar.astro.exceptions import SatelliteError
 
-from .exceptions import StaleElements, TargetUnreachable
+from .exceptions import InExclusionZone, StaleElements, TargetUnreachable
 from .feeder import Feeder
 from .motion import ARCSEC_PER_RAD
 from .operations import Operation, Phase
@@ -72,6 +73,7 @@ T = TypeVar("T")
 MAX_JOIN_PLANS = 12  # plans of a join before giving up (each with 1.5× the previous margin)
 PASS_LOOKBACK_S = 1800.0  # predictions start this far back, so a pass in progress is found
 MIN_JOIN_TRACK_S = 10.0  # a finite path is joined only if this much of it is left
+RUN_UP_STEP_US = 2_000_000  # a run-up inside a zone moves the join this much later
 
 
 # ---------------------------------------------------------------------- shared steps
@@ -96,11 +98,12 @@ async def run_beside(main: Awaitable[T], feeder: Feeder) -> T:
 
 
 async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int | None = None,
-                  end_us: int | None = None) -> tuple[RampIn, Feeder]:
+                  end_us: int | None = None, allow_sun: bool = False) -> tuple[RampIn, Feeder]:
     """Slew to the run-up of `path` and start following it; return the run-up and its feeder."""
     cfg = t.config
     lead_s = cfg.start_lead_s
-    for plan in range(MAX_JOIN_PLANS):
+    plan = 0
+    while plan < MAX_JOIN_PLANS:
         here = await t.motion.position()
         ramp = plan_run_up(path, az_rad=here.az_rad, el_rad=here.el_rad, now_us=here.t_us,
                            limits=t.limits, lead_s=lead_s, ramp_s=cfg.ramp_s,
@@ -109,9 +112,21 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
             raise TargetUnreachable(f"too little of the path is left to join it: it ends "
                                     f"{(end_us - here.t_us) / 1e6:.0f} s from now")
         rest_az, rest_el = float(ramp.rest_rad[0]), float(ramp.rest_rad[1])
+        if t.safety.inside(rest_az, rest_el, ramp.begin_us, allow_sun=allow_sun):
+            # the run-up would start inside a zone (a pass leaving it): join a little later
+            not_before_us = ramp.join_us + RUN_UP_STEP_US
+            continue
+        clear_us = t.safety.first_clear_us(rest_az, rest_el, here.t_us, ramp.begin_us,
+                                           allow_sun=allow_sun)
+        if clear_us > here.t_us:
+            # the Sun has not left the place to wait at yet: wait here until it has
+            t.supervisor.phase(op, Phase.WAITING, start_utc=iso_utc(clear_us))
+            await t.motion.wait_until(clear_us, op.info)
+            continue
         t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(rest_az),
                            to_el_deg=math.degrees(rest_el), join_us=ramp.join_us)
-        pos = await t.motion.goto(rest_az, rest_el, t.limits)
+        pos = await goto_safely(t, op, rest_az, rest_el, f"the run-up of {op.target}",
+                                allow_sun=allow_sun)
         t.motion.verify_at(pos, rest_az, rest_el, cfg.arrival_tolerance_arcsec,
                            f"slew to the run-up of {op.target}")
         if pos.t_us + int(lead_s * 1e6) < ramp.begin_us:
@@ -127,10 +142,26 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         log.warning("operation %s: the join at %s came too late for the host (plan %d); "
                     "planning again from where the mount is", op.id, iso_utc(ramp.join_us),
                     plan + 1)
-        op.info["join_plans"] = plan + 2
+        plan += 1
+        op.info["join_plans"] = plan + 1
         lead_s *= 1.5
     raise TargetUnreachable(f"could not join {op.target} after {MAX_JOIN_PLANS} plans: the host "
                             f"cannot keep up with ×{t.config.speed:g} simulated time")
+
+
+async def goto_safely(t: Telescope, op: Operation, az_rad: float, el_rad: float, what: str, *,
+                      allow_sun: bool):
+    """Slew to encoder angles along a path out of the Sun/Moon zones (a detour if need be)."""
+    here = await t.motion.position()
+    legs = t.safety.route(here.az_rad, here.el_rad, az_rad, el_rad, here.t_us, what,
+                          allow_sun=allow_sun)
+    if len(legs) > 1:
+        op.info["detour_deg"] = [[round(math.degrees(a), 3), round(math.degrees(e), 3)]
+                                 for a, e in legs[:-1]]
+    pos = None
+    for leg_az, leg_el in legs:
+        pos = await t.motion.goto(leg_az, leg_el, t.limits)
+    return pos
 
 
 async def prepare(t: Telescope, op: Operation) -> None:
@@ -140,14 +171,19 @@ async def prepare(t: Telescope, op: Operation) -> None:
 
 # ---------------------------------------------------------------------- procedures
 async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
-                            duration_s: float | None) -> dict[str, Any]:
-    """Slew to a sky target, verify the landing, track it (for `duration_s`, or until ended)."""
+                            duration_s: float | None, allow_sun: bool = False) -> dict[str, Any]:
+    """Slew to a sky target, verify the landing, track it (for `duration_s`, or until ended).
+
+    The track stops before the target would enter a Sun/Moon zone or pass below the
+    horizon (`ended` says which and when).
+    """
     cfg = t.config
     await prepare(t, op)
     here = await t.motion.position()
     path = TargetPath(target, cfg.site, limits=t.limits, eop=t.eop, model=t.model,
-                      current_az_rad=here.az_rad)
-    ramp, feeder = await acquire(t, op, path)
+                      current_az_rad=here.az_rad,
+                      guard=t.safety.guard(op.target, allow_sun=allow_sun))
+    ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun)
 
     async def on_path() -> dict[str, Any]:
         settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
@@ -172,13 +208,15 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
 
     try:
         result = await run_beside(on_path(), feeder)
-    except TargetUnreachable as exc:
+    except (TargetUnreachable, InExclusionZone) as exc:
         if op.phase is not Phase.TRACKING:
             raise
-        # the target left the limits: let the points already buffered play out, then rest
+        # the next chunk would leave the limits or enter a zone: the points already
+        # buffered stop short of it; let them play out, then rest
         await t.motion.wait_until(feeder.stats.last_point_us - 200_000)
-        result = {"ended": f"the target left the limits: {exc}",
-                  "tracking_to_us": await t.motion.mount_time_us()}
+        why = ("the target left the limits" if isinstance(exc, TargetUnreachable)
+               else "stopped before entering the exclusion zone")
+        result = {"ended": f"{why}: {exc}", "tracking_to_us": await t.motion.mount_time_us()}
     op.info["feeder"] = feeder.stats.as_dict()
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
@@ -187,7 +225,7 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
 
 
 async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, *,
-                     power_off: bool) -> dict[str, Any]:
+                     power_off: bool, allow_sun: bool = False) -> dict[str, Any]:
     """Slew to a fixed observed direction, verify the landing and hold (park: power off)."""
     await prepare(t, op)
     here = await t.motion.position()
@@ -197,7 +235,7 @@ async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, 
     enc_az, enc_el = float(enc.az_rad[0]), float(enc.el_rad[0])
     t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(enc_az),
                        to_el_deg=math.degrees(enc_el))
-    pos = await t.motion.goto(enc_az, enc_el, t.limits)
+    pos = await goto_safely(t, op, enc_az, enc_el, op.target, allow_sun=allow_sun)
     t.supervisor.phase(op, Phase.SETTLING)
     err = t.motion.verify_at(pos, enc_az, enc_el, t.config.arrival_tolerance_arcsec,
                              f"slew to {op.target}")
@@ -210,7 +248,7 @@ async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, 
 
 
 async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, *,
-                           settle_s: float) -> dict[str, Any]:
+                           settle_s: float, allow_sun: bool = False) -> dict[str, Any]:
     """Point at a sky target's place at the exposure instant, hold, and measure with the camera.
 
     The mount is sent to the target's observed place at t_exp (through the pointing
@@ -228,12 +266,13 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
     if not t.limits.el_min_deg <= star_el <= t.limits.el_max_deg:
         raise TargetUnreachable(f"{name} is at elevation {star_el:.2f} deg, outside the "
                                 f"limits {t.limits.el_min_deg:g}..{t.limits.el_max_deg:g} deg")
+    t.safety.check_place(star_az, star_el, t_exp, name, allow_sun=allow_sun)
     enc = TargetPath(FixedAltAz(star_az, star_el), cfg.site, limits=t.limits, eop=t.eop,
                      model=t.model, current_az_rad=here.az_rad).sample(np.array([t_exp], np.int64))
     enc_az, enc_el = float(enc.az_rad[0]), float(enc.el_rad[0])
     t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(enc_az),
                        to_el_deg=math.degrees(enc_el))
-    pos = await t.motion.goto(enc_az, enc_el, t.limits)
+    pos = await goto_safely(t, op, enc_az, enc_el, name, allow_sun=allow_sun)
     t.motion.verify_at(pos, enc_az, enc_el, cfg.arrival_tolerance_arcsec, f"slew to {name}")
     t.supervisor.phase(op, Phase.MEASURING)
     await t.motion.wait_until(max(pos.t_us + int(settle_s * 1e6), t_exp), op.info)
@@ -254,8 +293,13 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
 
 
 async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
-                               max_wait_s: float | None) -> dict[str, Any]:
-    """Track the next pass of `sat` that can still be reached, or the one in progress."""
+                               max_wait_s: float | None, allow_sun: bool = False) -> dict[str, Any]:
+    """Track the next pass of `sat` that can still be reached, or the one in progress.
+
+    Only a stretch of the pass outside every zone (Sun, Moon, horizon profile) is
+    tracked: the track joins after the pass leaves a zone and stops before it enters
+    one (`zone_stop` in the info says which and when).
+    """
     cfg = t.config
     await prepare(t, op)
     here = await t.motion.position()
@@ -273,8 +317,12 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
             track_rate_limit_deg_s=t.track_rate_limit_deg_s * cfg.keyhole_rate_fraction,
             accel_limit_deg_s2=t.limits.az_max_accel_deg_s2, eop=t.eop, model=t.model,
             current_az_rad=here.az_rad)
-    t.supervisor.phase(op, Phase.PLANNED, pass_start_us=choice.join_us, pass_end_us=set_us,
-                       pass_start_utc=iso_utc(choice.join_us, 3), pass_end_utc=iso_utc(set_us, 3),
+    join_us, set_us, stops = _safe_part(t, plan, choice.join_us, allow_sun)
+    if stops is not None:
+        op.info["zone_stop"] = stops
+    plan = dataclasses.replace(plan, path=plan.path.between(join_us, set_us))
+    t.supervisor.phase(op, Phase.PLANNED, pass_start_us=join_us, pass_end_us=set_us,
+                       pass_start_utc=iso_utc(join_us, 3), pass_end_utc=iso_utc(set_us, 3),
                        pass_rise_utc=None if window.rise_us is None else iso_utc(window.rise_us, 3),
                        pass_in_progress=choice.in_progress,
                        culmination_el_deg=window.culmination_el_deg,
@@ -284,7 +332,8 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
     t.supervisor.begun(op)
     # run out to rest after set, and hold: stopping a little late costs nothing
     path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
-    ramp, feeder = await acquire(t, op, path, not_before_us=choice.join_us, end_us=set_us)
+    ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
+                                 allow_sun=allow_sun)
 
     async def on_path() -> int:
         await t.motion.wait_until(ramp.join_us)
@@ -304,6 +353,19 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
 
 
 # ---------------------------------------------------------------------- helpers
+def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, int, str | None]:
+    """Return (join, end, why it ends early or None) of the pass stretch outside every zone.
+
+    (`acquire` then keeps the run-up, which lies on the path before the join, outside too.)
+    """
+    p = plan.path.points
+    i0, i1, hit = t.safety.safe_stretch(p.t_us, np.mod(p.az_rad, 2 * math.pi), p.el_rad,
+                                        join_us, t.config.min_pass_track_s, allow_sun=allow_sun)
+    why = None if hit is None else f"stops before: {hit.describe('the satellite')}"
+    return int(p.t_us[i0]), int(p.t_us[i1]), why
+
+
+
 def tracking_figures(s) -> dict[str, Any]:
     return {"tracking_rms_arcsec": s.rms_arcsec, "tracking_peak_arcsec": s.peak_arcsec,
             "on_sky_rms_arcsec": s.on_sky_rms_arcsec, "on_sky_peak_arcsec": s.on_sky_peak_arcsec,

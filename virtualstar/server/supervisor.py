@@ -63,9 +63,18 @@ class Supervisor:
 
     # ------------------------------------------------------------------ commands
     async def start(self, kind: str, target: str, procedure: Procedure, *,
-                    resumable: bool = False) -> Operation:
-        """End the running operation, wait for it, then start `procedure`; return the new one."""
+                    resumable: bool = False,
+                    check: Callable[[], Awaitable[None]] | None = None) -> Operation:
+        """End the running operation, wait for it, then start `procedure`; return the new one.
+
+        `check` runs first, in the order the commands arrived (under the lock): if it
+        raises, the command is refused and the running operation goes on untouched.
+        A command must reach here without awaiting anything else, or a `stop` sent after
+        it could overtake it.
+        """
         async with self._lock:
+            if check is not None:
+                await check()
             await self._end_running(OperationAborted(f"replaced by a new {kind} ({target})"))
             loop = asyncio.get_running_loop()
             op = Operation(next(self._ids), kind, target, resumable=resumable,

@@ -27,7 +27,14 @@ from typing import Any
 import erfa
 import numpy as np
 
-from virtualstar.astro import EarthOrientation, MountLimits, Satellite, Site, UtcTimes
+from virtualstar.astro import (
+    AvoidanceZones,
+    EarthOrientation,
+    MountLimits,
+    Satellite,
+    Site,
+    UtcTimes,
+)
 
 from . import procedures
 from .clock import MountClock, PacedClock
@@ -44,6 +51,7 @@ from .feeder import FeederConfig
 from .motion import Motion
 from .mount_link import MountLink
 from .operations import Operation
+from .safety import HOLD_LOOKAHEAD_S, Safety
 from .supervisor import Supervisor
 from .timesync import TimeSync
 from .tracking_errors import TrackingErrorHistory
@@ -89,6 +97,7 @@ class TelescopeConfig:
     arrival_tolerance_arcsec: float = 5.0
     max_tle_age_days: float = 14.0
     resume_timeout_s: float = 60.0  # wall seconds an interrupted track waits for the mount
+    zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
 
     @property
     def margin_speed(self) -> float:
@@ -142,6 +151,7 @@ class Telescope:
         self.track_rate_limit_deg_s = 6.0
         self.eop = EarthOrientation.from_astropy_iers_data()
         self.motion = Motion(link, self.clock)
+        self.safety = Safety(config.zones, config.site, self.eop, lambda: self.limits)
         self.supervisor = Supervisor(link, self.motion, emit=lambda k, d: self.emit(k, d),
                                      resume_timeout_s=config.resume_timeout_s)
         self.last_fault = ""
@@ -301,35 +311,65 @@ class Telescope:
                                    f"({self.link.last_error or 'connecting'})")
 
     async def follow_target(self, target, name: str, *, kind: str = "track",
-                            duration_s: float | None = None) -> Operation:
+                            duration_s: float | None = None, allow_sun: bool = False) -> Operation:
         """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped)."""
         self._check_can_move()
 
-        async def procedure(op: Operation) -> dict[str, Any]:
-            return await procedures.follow_sky_target(self, op, target, duration_s=duration_s)
+        async def check() -> None:
+            self.safety.check_target(target, await self.motion.mount_time_us(), name,
+                                     allow_sun=allow_sun)
 
-        return await self.supervisor.start(kind, name, procedure, resumable=True)
+        async def procedure(op: Operation) -> dict[str, Any]:
+            return await procedures.follow_sky_target(self, op, target, duration_s=duration_s,
+                                                      allow_sun=allow_sun)
+
+        return await self._start(kind, name, procedure, resumable=True, allow_sun=allow_sun,
+                                 check=check)
+
+    async def _start(self, kind: str, name: str, procedure, *, resumable: bool = False,
+                     allow_sun: bool = False, check=None) -> Operation:
+        op = await self.supervisor.start(kind, name, procedure, resumable=resumable, check=check)
+        if allow_sun:
+            op.info["allow_sun"] = True
+            log.warning("safety override: operation %s (%s %s) may point inside the Sun and "
+                        "Moon exclusion zones", op.id, kind, name)
+            self.emit("safety_override", {"id": op.id, "kind": kind, "target": name,
+                                          "zones": sorted(self.safety.configured.bodies)})
+        return op
 
     async def slew_altaz(self, az_deg: float, el_deg: float, *, kind: str = "slew",
-                         power_off: bool = False) -> Operation:
-        """Slew to a fixed observed direction and hold there (park: then power off)."""
+                         power_off: bool = False, allow_sun: bool = False) -> Operation:
+        """Slew to a fixed observed direction and hold there (park: then power off).
+
+        A hold must stay out of the Sun/Moon zones for the next hour (the Sun drifts
+        15°/h); the park position is exempt (the stow is the safe place).
+        """
         self._check_can_move()
         lim = self.limits
         lowest = lim.el_min_deg - self.config.horizon_deg if kind == "park" else lim.el_min_deg
         if not lowest <= el_deg <= lim.el_max_deg:
             raise TargetUnreachable(f"elevation {el_deg:g}° is outside the range "
                                     f"{lowest:g}..{lim.el_max_deg:g}° the mount may point to")
+        name = f"az {az_deg:g} el {el_deg:g}"
+
+        async def check() -> None:
+            if kind != "park":
+                self.safety.check_place(az_deg % 360.0, el_deg,
+                                        await self.motion.mount_time_us(), name,
+                                        allow_sun=allow_sun, ahead_s=HOLD_LOOKAHEAD_S)
 
         async def procedure(op: Operation) -> dict[str, Any]:
-            return await procedures.hold_fixed(self, op, az_deg, el_deg, power_off=power_off)
+            return await procedures.hold_fixed(self, op, az_deg, el_deg, power_off=power_off,
+                                               allow_sun=allow_sun or kind == "park")
 
-        return await self.supervisor.start(kind, f"az {az_deg:g} el {el_deg:g}", procedure)
+        return await self._start(kind, name, procedure, allow_sun=allow_sun, check=check)
 
     async def park(self) -> Operation:
         m = self.link.mapping
         return await self.slew_altaz(m.park_az_deg, m.park_el_deg, kind="park", power_off=True)
 
-    async def pointing_sample(self, target, name: str, *, settle_s: float = 2.0) -> Operation:
+    async def pointing_sample(self, target, name: str, *, settle_s: float = 2.0,
+                              allow_sun: bool = False) -> Operation:
         """Point at a sky target, hold, and measure the star's offset with the guide camera.
 
         The result (`op.info["sample"]`) gives the star's observed place, the
@@ -345,19 +385,28 @@ class Telescope:
             raise BadRequest(f"settle_s={settle_s}: expected >= 0 mount seconds")
         self._check_can_move()
 
+        async def check() -> None:
+            self.safety.check_target(target, await self.motion.mount_time_us(), name,
+                                     allow_sun=allow_sun)
+
         async def procedure(op: Operation) -> dict[str, Any]:
-            return await procedures.measure_pointing(self, op, target, name, settle_s=settle_s)
+            return await procedures.measure_pointing(self, op, target, name, settle_s=settle_s,
+                                                     allow_sun=allow_sun)
 
-        return await self.supervisor.start("pointing_sample", name, procedure)
+        return await self._start("pointing_sample", name, procedure, allow_sun=allow_sun,
+                                 check=check)
 
-    async def track_satellite(self, sat: Satellite, *, max_wait_s: float | None = None) -> Operation:
+    async def track_satellite(self, sat: Satellite, *, max_wait_s: float | None = None,
+                              allow_sun: bool = False) -> Operation:
         """Track the pass of `sat` in progress, or the next one above the horizon limit."""
         self._check_can_move()
 
         async def procedure(op: Operation) -> dict[str, Any]:
-            return await procedures.track_satellite_pass(self, op, sat, max_wait_s=max_wait_s)
+            return await procedures.track_satellite_pass(self, op, sat, max_wait_s=max_wait_s,
+                                                         allow_sun=allow_sun)
 
-        return await self.supervisor.start("track_satellite", sat.name, procedure, resumable=True)
+        return await self._start("track_satellite", sat.name, procedure, resumable=True,
+                                 allow_sun=allow_sun)
 
     async def stop(self, *, reset_faults: bool = False) -> dict[str, Any]:
         """End any operation and bring the mount to rest; optionally clear latched faults."""

@@ -107,12 +107,13 @@ class TargetPath:
     end_us: int | None = None
 
     def __init__(self, target, site: Site, *, limits: MountLimits, eop=None, model=None,
-                 current_az_rad: float | None = None) -> None:
+                 current_az_rad: float | None = None, guard=None) -> None:
         self.target = target
         self.site = site
         self.limits = limits
         self.eop = eop
         self.model = model
+        self.guard = guard  # guard(t_us, az_rad, el_rad) raises before observed places are used
         self._anchor = current_az_rad
         self._last: tuple[int, float] | None = None  # (t_us, observed mount az) of the newest sample
 
@@ -127,6 +128,8 @@ class TargetPath:
         if self._last is not None and abs(az[0] - self._last[1]) > math.pi:
             raise TargetUnreachable("the target's azimuth reached the end of the cable wrap "
                                     f"({self.limits.wrap_min_deg:g}..{self.limits.wrap_max_deg:g} deg)")
+        if self.guard is not None:
+            self.guard(np.asarray(t_us, np.int64), obs.az_rad, obs.el_rad)
         lo_el = math.radians(self.limits.el_min_deg)
         if np.any(obs.el_rad < lo_el):
             raise TargetUnreachable(
@@ -158,6 +161,15 @@ class TablePath:
         t = np.asarray(t_us, np.int64)
         s = np.clip((t - self.start_us) * 1e-6, 0.0, (self.end_us - self.start_us) * 1e-6)
         return Points(t, self._az(s), self._el(s), self._az(s, 1), self._el(s, 1))
+
+    def between(self, start_us: int, end_us: int) -> TablePath:
+        """Return the part of the path from `start_us` to `end_us` (nodes kept, ends exact)."""
+        if start_us <= self.start_us and end_us >= self.end_us:
+            return self
+        p = self.points
+        inner = (p.t_us > start_us) & (p.t_us < end_us)
+        t = np.concatenate([[start_us], p.t_us[inner], [end_us]]).astype(np.int64)
+        return TablePath(self.sample(t))
 
 
 def ramp_start(position_rad: np.ndarray, rate_rad_s: np.ndarray, duration_s: float) -> np.ndarray:
