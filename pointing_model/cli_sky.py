@@ -59,10 +59,12 @@ def radec_to_observed_altaz(utcs: Sequence[str], ra_deg: np.ndarray, dec_deg: np
 
 def plan_stars(n_stars: int, site: Any, *, at_utc: str | None = None,
                min_el_deg: float = 20.0, max_el_deg: float = 85.0,
-               max_vmag: float | None = None) -> list[PlannedStar]:
+               max_vmag: float | None = None, exclude=None) -> list[PlannedStar]:
     """Pick `n_stars` bundled bright stars spread evenly over the sky visible at `at_utc`.
 
-    `at_utc` is ISO 8601 (default: now). Raises ValueError if too few stars qualify.
+    `at_utc` is ISO 8601 (default: now). `exclude(az_deg, el_deg, times)`, if given,
+    returns a mask of places not to use (behind the horizon profile, near the Sun).
+    Raises ValueError if too few stars qualify.
     """
     from catalogs import bright_stars
     from virtualstar.astro import IcrsStar, UtcTimes
@@ -78,6 +80,9 @@ def plan_stars(n_stars: int, site: Any, *, at_utc: str | None = None,
         for i, star in enumerate(stars):
             obs = IcrsStar.from_catalog(star).observe(times, site)
             az[i], el[i] = np.degrees(obs.az_rad[0]), np.degrees(obs.el_rad[0])
+    if exclude is not None and len(stars):
+        keep = ~np.asarray(exclude(az, el, times), bool)
+        stars, az, el = [s for s, k in zip(stars, keep, strict=True) if k], az[keep], el[keep]
     chosen = pick_spread(az, el, n_stars, min_el_deg=min_el_deg, max_el_deg=max_el_deg)
     return [PlannedStar(stars[i].label, stars[i].hip, stars[i].vmag, stars[i].ra_deg,
                         stars[i].dec_deg, utc, float(az[i]), float(el[i])) for i in chosen]

@@ -253,3 +253,58 @@ def test_the_horizon_profile_refuses_a_place_behind_it_and_stops_a_track_before_
                        bright_stars().lookup(name).dec_deg * u.deg).transform_to(altaz_frame(stop_t))
     assert stop_aa.alt.deg >= bump - 0.01  # it stopped before the star sank behind the bump
     assert (stop_t - info["tracking_from_us"]) / 1e6 < 1800.0
+
+
+def test_a_satellite_pass_is_joined_only_once_it_is_above_the_horizon_profile():
+    """A 35° wall in the west, where the ISS rises: the track waits until it clears it."""
+    wall = Horizon(az_deg=(0.0, 200.0, 205.0, 335.0, 340.0), el_deg=(5.0, 5.0, 35.0, 35.0, 5.0))
+    tle = sample_tle_path("stations").read_text()
+
+    async def scenario(vss, clock):
+        op = await vss.server.call("track", {"tle": tle, "sat": "ISS"})
+        samples = []
+        for _ in range(1800):
+            await clock.sleep(1.0)
+            values, t_us = await read_emulator(vss, ENCODERS)
+            if values["mount.state_name"] == "TRACKING":
+                samples.append((values["axis.az.position"], values["axis.el.position"]))
+            elif samples:
+                break
+        return op, samples, await vss.server.call("wait")
+
+    op, samples, done = run_lockstep_scenario("2024-05-18T19:45:00Z", scenario,
+                                              zones=AvoidanceZones(horizon=wall))
+    assert done["phase"] == "done"
+    az, el = (np.degrees(np.array(c)) for c in zip(*samples, strict=True))
+    floor = np.interp(az % 360.0, wall.az_deg, wall.el_deg, period=360.0)
+    assert (el >= floor - 0.01).all(), (el - floor).min()
+    assert (el < 35.0).any() and (az % 360.0 < 200.0).any()  # it did track low in the east
+
+
+def test_where_and_passes_show_the_sun_separation_astropy_and_skyfield_agree_on(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from virtualstar.cli.main import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["where", "Elnath", "--at", NOON, "--json"])
+    assert res.exit_code == 0, res.output
+    row = json.loads(res.stdout)[0]
+    t = noon_us()
+    elnath = bright_stars().lookup("Elnath")
+    star = SkyCoord(elnath.ra_deg * u.deg, elnath.dec_deg * u.deg).transform_to(altaz_frame(t))
+    sun = get_body("sun", Time(t / 1e6, format="unix"), LOC).transform_to(altaz_frame(t))
+    assert row["sun_separation_deg"] == pytest.approx(star.separation(sun).deg, abs=0.02)
+    horizon = tmp_path / "horizon.txt"
+    horizon.write_text("0 5\n200 5\n205 35\n335 35\n340 5\n")
+    res = runner.invoke(app, ["passes", "--tle", str(sample_tle_path("stations")), "--sat", "ISS",
+                              "--from", "2024-05-18T19:40:00Z", "--to", "2024-05-18T20:10:00Z",
+                              "--horizon", str(horizon), "--json"])
+    assert res.exit_code == 0, res.output
+    p = json.loads(res.stdout)[0]
+    assert 40.0 < p["sun_min_separation_deg"] < 60.0  # the setting Sun in the north-west
+    rise = int(UtcTimes.from_iso([p["rise_utc"]]).to_unix_us()[0])
+    above = int(UtcTimes.from_iso([p["above_horizon_from_utc"]]).to_unix_us()[0])
+    assert above > rise + 60_000_000  # it rises in the west, behind the 35° wall

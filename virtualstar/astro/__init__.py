@@ -17,6 +17,7 @@ from .altaz import Horizon, KeyholePlan, MountLimits, elevation_ok, plan_keyhole
 from .avoidance import (
     AvoidanceZones,
     ZoneHit,
+    avoidance_from_options,
     check_places,
     load_horizon_file,
     slew_route,
@@ -78,6 +79,7 @@ __all__ = [
     "UnreachablePath",
     "UtcTimes",
     "ZoneHit",
+    "avoidance_from_options",
     "check_places",
     "elevation_ok",
     "enu_to_azel",

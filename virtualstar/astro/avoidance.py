@@ -42,8 +42,9 @@ from .site import Site
 from .slew import plan_slew
 from .timescales import UtcTimes
 
-__all__ = ["DEFAULT_SUN_RADIUS_DEG", "AvoidanceZones", "ZoneHit", "body_places",
-           "check_places", "load_horizon_file", "slew_route", "zone_hits", "zone_mask"]
+__all__ = ["DEFAULT_SUN_RADIUS_DEG", "AvoidanceZones", "ZoneHit", "avoidance_from_options",
+           "body_places", "check_places", "load_avoidance", "load_horizon_file", "slew_route",
+           "zone_hits", "zone_mask"]
 
 DEFAULT_SUN_RADIUS_DEG = 30.0
 ROUTE_STEP_S = 0.5  # slew paths are judged every half second
@@ -309,3 +310,65 @@ def load_horizon_file(path: str | Path) -> Horizon:
     if len(set(a % 360.0 for a in az)) != len(az):
         raise SiteError(f"{path}: an azimuth appears twice (0 and 360 are the same)")
     return Horizon(tuple(az), tuple(el))
+
+
+def load_avoidance(path: str | Path | None = None) -> AvoidanceZones:
+    """Read the `[safety]` table of a site TOML file (the same file as `load_site`).
+
+    Keys: ``sun_radius_deg`` (default 30), ``moon_radius_deg`` (default none),
+    ``horizon_file`` (a horizon profile, relative to the TOML file). Without a path the
+    file named by $VIRTUALSTAR_SITE is read, else the defaults apply. Raises SiteError.
+    """
+    import os
+    import tomllib
+
+    from .site import SITE_ENV_VAR
+
+    if path is None:
+        path = os.environ.get(SITE_ENV_VAR) or None
+    if path is None:
+        return AvoidanceZones()
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise SiteError(f"cannot read site file {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SiteError(f"{path}: not valid TOML: {exc}") from None
+    table = data.get("safety", {})
+    known = {"sun_radius_deg", "moon_radius_deg", "horizon_file"}
+    unknown = sorted(set(table) - known)
+    if unknown:
+        raise SiteError(f"{path} [safety]: unknown keys {unknown}; valid keys: {sorted(known)}")
+    horizon = None
+    if "horizon_file" in table:
+        horizon = load_horizon_file(path.parent / str(table["horizon_file"]))
+    try:
+        return AvoidanceZones(sun_radius_deg=float(table.get("sun_radius_deg",
+                                                             DEFAULT_SUN_RADIUS_DEG)),
+                              moon_radius_deg=(None if table.get("moon_radius_deg") is None
+                                               else float(table["moon_radius_deg"])),
+                              horizon=horizon)
+    except (TypeError, ValueError) as exc:
+        raise SiteError(f"{path} [safety]: {exc}") from None
+
+
+def avoidance_from_options(*, site_file: str | Path | None = None,
+                           sun_radius_deg: float | None = None,
+                           moon_radius_deg: float | None = None,
+                           horizon_file: str | Path | None = None) -> AvoidanceZones:
+    """Return the site's zones with command-line overrides applied (None = keep); SiteError."""
+    import dataclasses
+
+    zones = load_avoidance(site_file)
+    changes: dict = {}
+    if sun_radius_deg is not None:
+        changes["sun_radius_deg"] = sun_radius_deg
+    if moon_radius_deg is not None:
+        changes["moon_radius_deg"] = moon_radius_deg or None
+    if horizon_file is not None:
+        changes["horizon"] = load_horizon_file(horizon_file)
+    try:
+        return dataclasses.replace(zones, **changes)
+    except ValueError as exc:
+        raise SiteError(str(exc)) from None

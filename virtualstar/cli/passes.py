@@ -6,9 +6,12 @@ import json
 from pathlib import Path
 from typing import Annotated
 
+import erfa
+import numpy as np
 import typer
 
-from virtualstar.astro import EarthOrientation, satellite_passes
+from virtualstar.astro import AstroError, EarthOrientation, avoidance_from_options, satellite_passes
+from virtualstar.astro.avoidance import body_places
 from virtualstar.cli.where import (
     HumidityOpt,
     JsonOpt,
@@ -40,9 +43,13 @@ def passes(
     temperature_c: TemperatureOpt = None,
     humidity: HumidityOpt = None,
     no_refraction: NoRefractionOpt = False,
+    horizon: Annotated[Path | None, typer.Option(
+        "--horizon", help="Horizon profile ('AZ_DEG EL_DEG' lines, docs/vss.md 'Safety'): each "
+        "pass also gets the times it is above it. Default: the site file's, if any.")] = None,
     as_json: JsonOpt = False,
 ) -> None:
-    """List satellite passes: rise, culmination (time, elevation) and set."""
+    """List satellite passes: rise, culmination (time, elevation) and set; the closest the pass
+    comes to the Sun; with a horizon profile, when it is above that profile."""
     the_site = build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction)
     t0, t1 = parse_times([start]), parse_times([end])
     if not -90.0 < min_el < 90.0:
@@ -52,28 +59,58 @@ def passes(
         raise fail(f"--to {end} is not after --from {start}")
     if span_s > 31 * 86400:
         raise fail(f"--from/--to span {span_s / 86400:.1f} days; at most 31 days per search")
-    def work():
-        satellite = load_satellite(tle, sat)
-        return satellite, satellite_passes(satellite, the_site, t0, t1, min_el_deg=min_el,
-                                           eop=EarthOrientation.from_astropy_iers_data())
+    try:
+        zones = avoidance_from_options(site_file=site_file, horizon_file=horizon)
+    except AstroError as exc:
+        raise fail(str(exc)) from None
 
-    satellite, found = run_collecting_warnings(work)
-    rows = [_pass_fields(p) for p in found]
+    def work():
+        eop = EarthOrientation.from_astropy_iers_data()
+        satellite = load_satellite(tle, sat)
+        found = satellite_passes(satellite, the_site, t0, t1, min_el_deg=min_el, eop=eop)
+        return satellite, [{**_pass_fields(p), **_pass_sky(satellite, p, the_site, zones, eop)}
+                           for p in found]
+
+    satellite, rows = run_collecting_warnings(work)
     if as_json:
         typer.echo(json.dumps(rows, indent=1))
         return
     typer.echo(f"{satellite.name}: {len(rows)} passes above {min_el:g} deg from {the_site.name}")
     typer.echo(f"{'rise UTC':24} {'az':>6}   {'culmination UTC':24} {'el':>5} {'az':>6}   "
-               f"{'set UTC':24} {'az':>6}")
+               f"{'set UTC':24} {'az':>6}  {'sun_sep_min':>11}"
+               + (f"  {'above the horizon profile (UTC)':45}" if zones.horizon else ""))
     for r in rows:
-        typer.echo(f"{r['rise_utc'] or '(before start)':24} {_num(r['rise_az_deg'])}   "
-                   f"{r['culmination_utc']:24} {r['culmination_el_deg']:5.1f} "
-                   f"{r['culmination_az_deg']:6.1f}   {r['set_utc'] or '(after end)':24} "
-                   f"{_num(r['set_az_deg'])}")
+        line = (f"{r['rise_utc'] or '(before start)':24} {_num(r['rise_az_deg'])}   "
+                f"{r['culmination_utc']:24} {r['culmination_el_deg']:5.1f} "
+                f"{r['culmination_az_deg']:6.1f}   {r['set_utc'] or '(after end)':24} "
+                f"{_num(r['set_az_deg'])}  {_num(r['sun_min_separation_deg'], 11)}")
+        if zones.horizon:
+            line += (f"  {r['above_horizon_from_utc'] or '-'} .. "
+                     f"{r['above_horizon_to_utc'] or '-'}")
+        typer.echo(line)
 
 
-def _num(value: float | None) -> str:
-    return f"{value:6.1f}" if value is not None else f"{'-':>6}"
+def _num(value: float | None, width: int = 6) -> str:
+    return f"{value:{width}.1f}" if value is not None else f"{'-':>{width}}"
+
+
+def _pass_sky(satellite, p, site, zones, eop) -> dict:
+    """The pass sampled every second: its closest approach to the Sun, its time above the profile."""
+    lo = p.rise.utc if p.rise is not None else p.culmination.utc
+    hi = p.set.utc if p.set is not None else p.culmination.utc
+    span = float(hi.seconds_since(lo.jd1[0], lo.jd2[0])[0])
+    times = lo.shifted(np.arange(0.0, span + 1.0, 1.0))
+    obs = satellite.observe(times, site, eop)
+    sun_az, sun_el = body_places(times, site, eop, ("sun",))["sun"]
+    sep = np.degrees(erfa.seps(obs.az_rad, obs.el_rad, sun_az, sun_el))
+    out = {"sun_min_separation_deg": round(float(sep.min()), 3)}
+    if zones.horizon is not None:
+        above = np.degrees(obs.el_rad) >= zones.min_el_deg(obs.az_rad)
+        idx = np.flatnonzero(above)
+        iso = times.iso()
+        out["above_horizon_from_utc"] = iso[idx[0]] if idx.size else None
+        out["above_horizon_to_utc"] = iso[idx[-1]] if idx.size else None
+    return out
 
 
 def _pass_fields(p) -> dict:

@@ -59,8 +59,31 @@ def plan_for_server(status: dict[str, Any], n_stars: int, *, at_utc: str | None,
     site_doc = status["site"]
     site = Site(**{f.name: site_doc[f.name] for f in fields(Site) if f.name in site_doc})
     at = at_utc or status.get("mount_time_utc")
-    stars = plan_stars(n_stars, site, at_utc=at, min_el_deg=min_el_deg)
+    stars = plan_stars(n_stars, site, at_utc=at, min_el_deg=min_el_deg,
+                       exclude=_server_zones(status, site))
     return sorted(stars, key=lambda s: s.az_deg)  # short slews: go round the horizon once
+
+
+def _server_zones(status: dict[str, Any], site: Any):
+    """Return an exclude(az_deg, el_deg, times) for the server's zones (horizon, Sun, Moon)."""
+    import numpy as np
+
+    from virtualstar.astro import AvoidanceZones, Horizon, zone_mask
+
+    doc = status.get("safety")
+    if not doc:
+        return None
+    horizon = doc.get("horizon")
+    zones = AvoidanceZones(sun_radius_deg=doc["sun_radius_deg"],
+                           moon_radius_deg=doc.get("moon_radius_deg"),
+                           horizon=Horizon(tuple(horizon["az_deg"]), tuple(horizon["el_deg"]))
+                           if horizon else None, el_min_deg=doc.get("el_min_deg", 0.0))
+
+    def exclude(az_deg, el_deg, times) -> np.ndarray:
+        t_us = np.full(len(az_deg), int(times.to_unix_us()[0]), np.int64)
+        return zone_mask(np.radians(az_deg), np.radians(el_deg), t_us, zones, site)
+
+    return exclude
 
 
 async def measure_stars(client: VssClient, stars: list[Any], *, settle_s: float = 2.0,
@@ -76,7 +99,7 @@ async def measure_stars(client: VssClient, stars: list[Any], *, settle_s: float 
             sample = await client.request("pointing_sample", {
                 "ra_deg": star.ra_deg, "dec_deg": star.dec_deg, "settle_s": settle_s})
         except VssRequestError as exc:
-            if exc.code != "unreachable":
+            if exc.code not in ("unreachable", "exclusion_zone"):
                 raise
             result.skipped.append({"star": star.name, "error": exc.message})
             sample = None

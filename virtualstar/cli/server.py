@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from virtualstar.astro import AstroError
+from virtualstar.astro import AstroError, avoidance_from_options
 from virtualstar.astro.site import site_from_options
 from virtualstar.cli.status import fail
 from virtualstar.server import DEFAULT_PORT, VssError, build_server
@@ -49,6 +49,16 @@ def server(
         "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a [site] table.")] = None,
     site: Annotated[str | None, typer.Option(
         "--site", help="Site as LAT,LON,HEIGHT_M (degrees, degrees east, metres).")] = None,
+    sun_radius: Annotated[float | None, typer.Option(
+        "--sun-radius", help="Radius (degrees) of the exclusion zone around the Sun: no target, "
+        "slew path or track comes nearer (default 30, or sun_radius_deg in the site file's "
+        "safety table).")] = None,
+    moon_radius: Annotated[float | None, typer.Option(
+        "--moon-radius", help="Radius (degrees) of an exclusion zone around the Moon (default "
+        "none; 0 switches it off).")] = None,
+    horizon: Annotated[Path | None, typer.Option(
+        "--horizon", help="Horizon profile: a text file of 'AZ_DEG EL_DEG' lines, the lowest "
+        "usable elevation per azimuth (docs/vss.md, 'Safety'); default the flat limit.")] = None,
     pointing_model: Annotated[Path | None, typer.Option(
         "--pointing-model", help="Pointing model JSON file to apply (observed → encoder).")] = None,
     passive: Annotated[bool, typer.Option(
@@ -86,6 +96,8 @@ def server(
             raise fail(f"--start: {exc}") from None
     try:
         the_site = site_from_options(site_file=site_file, site_text=site)
+        zones = avoidance_from_options(site_file=site_file, sun_radius_deg=sun_radius,
+                                       moon_radius_deg=moon_radius, horizon_file=horizon)
     except AstroError as exc:
         raise fail(str(exc)) from None
     _warn_once_about_earth_orientation(start_us)
@@ -96,13 +108,14 @@ def server(
             clock = LockstepClock(start_us if start_us is not None else time.time_ns() // 1000,
                                   pace=pace)
             run_lockstep(_serve_embedded(clock, 1.0, start_us, password, listen, the_site,
-                                         mapping, pointing_model, passive, geometry_arcsec), clock)
+                                         mapping, pointing_model, passive, geometry_arcsec,
+                                         zones), clock)
         elif emulator:
             asyncio.run(_serve_embedded(None, 1.0, start_us, password, listen, the_site, mapping,
-                                        pointing_model, passive, geometry_arcsec))
+                                        pointing_model, passive, geometry_arcsec, zones))
         else:
             asyncio.run(_serve(pace, mount, password, mapping, listen, the_site,
-                               pointing_model, passive))
+                               pointing_model, passive, zones))
     except VssError as exc:
         raise fail(str(exc)) from None
     except OSError as exc:
@@ -148,14 +161,14 @@ def _stop_event() -> asyncio.Event:
 
 
 async def _serve_embedded(clock, speed, start_us, password, listen, site, mapping,
-                          pointing_model, passive, geometry_arcsec) -> None:
+                          pointing_model, passive, geometry_arcsec, zones) -> None:
     from virtualstar.launcher import embedded_vss
 
     stop = _stop_event()
     async with embedded_vss(clock=clock, speed=speed, start_us=start_us, site=site,
                             listen=listen, password=password, geometry_arcsec=geometry_arcsec,
                             mapping_path=mapping, active=not passive,
-                            pointing_model=pointing_model) as vss:
+                            pointing_model=pointing_model, zones=zones) as vss:
         if clock is None:
             mode = "real time"
         elif clock.pace is None:
@@ -168,10 +181,12 @@ async def _serve_embedded(clock, speed, start_us, password, listen, site, mappin
     typer.echo("VirtualStar Server stopped")
 
 
-async def _serve(speed, mount, password, mapping, listen, site, pointing_model, passive) -> None:
+async def _serve(speed, mount, password, mapping, listen, site, pointing_model, passive,
+                 zones) -> None:
     stop = _stop_event()
     vss = build_server(mount_url=mount, password=password, mapping_path=mapping, site=site,
-                       speed=speed, active=not passive, pointing_model=pointing_model)
+                       speed=speed, active=not passive, pointing_model=pointing_model,
+                       zones=zones)
     try:
         url = await vss.start(listen)
         where = mount + (f", a simulated mount at x{speed:g}" if speed != 1 else "")

@@ -10,13 +10,16 @@ from rich.table import Table
 
 from virtualstar.cli.status import JsonOpt, ServerOpt, _f, ask, fail, print_json
 
-__all__ = ["RadecOpt", "StarOpt", "op_table", "slew", "target_params"]
+__all__ = ["AllowSunOpt", "RadecOpt", "StarOpt", "op_table", "slew", "target_params"]
 
 RadecOpt = Annotated[str | None, typer.Option(
     "--radec", help='ICRS "RA DEC": "05h34m31.94s +22d00m52.2s", "05:34:31.94 +22:00:52.2" '
                     '(RA in hours) or "83.633 22.0145" (degrees).')]
 AltazOpt = Annotated[str | None, typer.Option(
     "--altaz", help='Observed "AZ EL" in degrees (azimuth north through east), e.g. "180 45".')]
+AllowSunOpt = Annotated[bool, typer.Option(
+    "--allow-sun", help="Engineering override: ignore the Sun and Moon exclusion zones for this "
+                        "operation (operators only; the server logs it and tells every client).")]
 StarOpt = Annotated[str | None, typer.Option(
     "--star", help='Bright-star name, HIP number or Bayer designation ("Vega", "HIP 91262", '
                    '"alf Lyr"), or a planet.')]
@@ -55,9 +58,15 @@ def op_table(op: dict[str, Any], title: str) -> Table:
 
 
 def slew(radec: RadecOpt = None, altaz: AltazOpt = None, star: StarOpt = None,
-         server: ServerOpt = None, as_json: JsonOpt = False) -> None:
-    """Slew to a target and wait until it lands; a sky target is then tracked until `vs stop`."""
-    params = target_params(radec, altaz, star)
+         allow_sun: AllowSunOpt = False, server: ServerOpt = None, as_json: JsonOpt = False) -> None:
+    """Slew to a target and wait until it lands; a sky target is then tracked until `vs stop`.
+
+    Targets within the Sun's exclusion zone (30°) or below the horizon are refused; a slew
+    whose path would cross the zone goes round it.
+    """
+    params: dict[str, Any] = target_params(radec, altaz, star)
+    if allow_sun:
+        params["allow_sun"] = True
     op = ask(server, "slew", params, progress=True, quiet=as_json)
     if as_json:
         print_json(op)

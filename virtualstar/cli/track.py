@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from virtualstar.cli.slew import RadecOpt, StarOpt, op_table
+from virtualstar.cli.slew import AllowSunOpt, RadecOpt, StarOpt, op_table
 from virtualstar.cli.status import JsonOpt, ServerOpt, ask, fail, print_json
 
 __all__ = ["track"]
@@ -26,6 +26,7 @@ def track(
                            "`vs stop` (stars) or the end of the pass (satellites).")] = None,
     wait: Annotated[bool, typer.Option(
         "--wait", help="Wait until the track ends and print its tracking-error summary.")] = False,
+    allow_sun: AllowSunOpt = False,
     server: ServerOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
@@ -38,6 +39,8 @@ def track(
     if duration is not None and not duration > 0:
         raise fail(f"--duration {duration}: expected a positive number of seconds")
     params: dict = {"wait": wait}
+    if allow_sun:
+        params["allow_sun"] = True
     if duration is not None:
         params["duration_s"] = duration
     if tle is not None:

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
+import erfa
+import numpy as np
 import typer
 
 from virtualstar.astro import (
@@ -21,6 +23,7 @@ from virtualstar.astro import (
     find_events,
     resolve_target,
 )
+from virtualstar.astro.avoidance import body_places
 from virtualstar.astro.observed import topocentric_apparent_radec
 from virtualstar.astro.site import site_from_options
 
@@ -121,6 +124,7 @@ class _Row:
     az_rate_deg_s: float
     el_rate_deg_s: float
     range_km: float | None = None  # satellites only
+    sun_separation_deg: float | None = None  # from the Sun's observed place at the same time
 
 
 def where(
@@ -192,6 +196,10 @@ def _compute(obj: Any, times: UtcTimes, site: Site) -> tuple[Any, list[_Row], li
         range_km = obj.topocentric(times, site, eop).range_m / 1e3
         rows = [dataclasses.replace(r, range_km=float(d)) for r, d in zip(rows, range_km,
                                                                            strict=True)]
+    sun_az, sun_el = body_places(times, site, eop, ("sun",))["sun"]
+    sep = np.degrees(erfa.seps(obs.az_rad, obs.el_rad, sun_az, sun_el))
+    rows = [dataclasses.replace(r, sun_separation_deg=round(float(d), 4))
+            for r, d in zip(rows, sep, strict=True)]
     events = []
     for i in range(len(times)):
         found = find_events(obj, site, times[i], 86400.0, eop=eop)
@@ -234,11 +242,12 @@ def _print_table(obj: Any, site: Site, rows: list[_Row], events: list[dict]) -> 
     typer.echo(f"{obj.name} from {site.name} (lat {site.lat_deg:.4f}, lon {site.lon_deg:.4f}, "
                f"{site.height_m:g} m), {refr}")
     typer.echo(f"{'UTC':24} {'az_deg':>10} {'el_deg':>9} {'az_rate_deg_s':>14} "
-               f"{'el_rate_deg_s':>14}  {'RA (apparent)':>13} {'Dec':>12}")
+               f"{'el_rate_deg_s':>14}  {'RA (apparent)':>13} {'Dec':>12} {'sun_sep_deg':>11}")
     for row, ev in zip(rows, events, strict=True):
         typer.echo(f"{row.utc:24} {row.az_deg:10.5f} {row.el_deg:9.5f} "
                    f"{row.az_rate_deg_s:14.7f} {row.el_rate_deg_s:14.7f}  "
-                   f"{_hms(row.ra_deg, True):>13} {_hms(row.dec_deg, False):>12}")
+                   f"{_hms(row.ra_deg, True):>13} {_hms(row.dec_deg, False):>12} "
+                   f"{row.sun_separation_deg:11.2f}")
         culm = (f"{ev['culmination_utc']} (el {ev['culmination_el_deg']:.2f})"
                 if ev["culmination_utc"] else "-")
         typer.echo(f"{'':24} next 24 h: rise {ev['rise_utc'] or '-'}, culmination {culm}, "

@@ -465,6 +465,7 @@ class Telescope:
                                "operation": self.op.as_dict() if self.op else None,
                                "last_fault": self.last_fault or None,
                                "time_sync": self.timesync.status.as_dict(),
+                               "safety": self._safety_doc(),
                                "tracking_error": {f"{w}s": self.errors.window(w).as_dict()
                                                   for w in (1, 10, 60)}}
         if not self.link.connected:
@@ -493,6 +494,14 @@ class Telescope:
                        "late_points": v.get("late_points")},
         })
         return out
+
+    def _safety_doc(self) -> dict[str, Any]:
+        zones = self.safety.zones()
+        h = zones.horizon
+        return {"sun_radius_deg": zones.sun_radius_deg, "moon_radius_deg": zones.moon_radius_deg,
+                "el_min_deg": zones.el_min_deg,
+                "horizon": None if h is None else {"az_deg": list(h.az_deg),
+                                                   "el_deg": list(h.el_deg)}}
 
     def _radec(self, az_deg: float, el_deg: float, t_us: int) -> tuple[float, float]:
         """Return ICRS RA/Dec (deg) of an observed direction at mount time (ERFA atoc13)."""
