@@ -8,8 +8,11 @@
         async for event in vs.events():        # ("heartbeat", {...}), ("fault", {...}), ...
             ...
 
-The client watches the server's heartbeat: if nothing arrives for
-`silence_s`, the connection is declared dead even when the socket looks open.
+A server with passwords says so in its hello; the client then authenticates with
+`password` by ASTCom's challenge–response (the password never crosses the wire)
+and checks the server's proof. The client watches the server's heartbeat: if
+nothing arrives for `silence_s`, the connection is declared dead even when the
+socket looks open.
 With ``reconnect=True`` it then reconnects with backoff and the event iterator
 carries on (a ``reconnected`` event marks the gap); pending requests fail with
 `ServerUnavailable`.
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hmac
 import itertools
 import json
 import os
@@ -28,10 +32,13 @@ from typing import Any
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidURI, WebSocketException
 
-__all__ = ["DEFAULT_SERVER_URL", "SERVER_ENV_VAR", "ServerUnavailable", "VssClient",
-           "VssRequestError", "call_server", "default_server_url"]
+from astcom_client.auth import client_mac, server_proof
+
+__all__ = ["DEFAULT_SERVER_URL", "PASSWORD_ENV_VAR", "SERVER_ENV_VAR", "ServerUnavailable",
+           "VssClient", "VssRequestError", "call_server", "default_server_url"]
 
 SERVER_ENV_VAR = "VS_SERVER"
+PASSWORD_ENV_VAR = "VS_PASSWORD"
 DEFAULT_SERVER_URL = "ws://127.0.0.1:8740"
 
 
@@ -56,10 +63,13 @@ class ServerUnavailable(ConnectionError):
 class VssClient:
     """One connection to a VSS (optionally self-reconnecting)."""
 
-    def __init__(self, url: str, *, silence_s: float = 5.0, reconnect: bool = False) -> None:
+    def __init__(self, url: str, *, silence_s: float = 5.0, reconnect: bool = False,
+                 password: str | None = None) -> None:
         self.url = url
         self.silence_s = silence_s
         self.reconnect = reconnect
+        self._password = password
+        self.role: str | None = None
         self._ws: ClientConnection | None = None
         self._ids = itertools.count(1)
         self._pending: dict[int, asyncio.Future] = {}
@@ -71,9 +81,13 @@ class VssClient:
 
     @classmethod
     async def connect(cls, url: str, *, timeout_s: float = 5.0, silence_s: float = 5.0,
-                      reconnect: bool = False) -> VssClient:
-        """Connect to `url`; raise ServerUnavailable (with what to check) if it cannot."""
-        client = cls(url, silence_s=silence_s, reconnect=reconnect)
+                      reconnect: bool = False, password: str | None = None) -> VssClient:
+        """Connect to `url` (authenticating with `password` if the server asks for one).
+
+        Raises ServerUnavailable (with what to check) if it cannot connect, and
+        VssRequestError("unauthorized") for a missing or wrong password.
+        """
+        client = cls(url, silence_s=silence_s, reconnect=reconnect, password=password)
         await client._open(timeout_s)
         client._reader = asyncio.get_running_loop().create_task(client._run())
         return client
@@ -91,7 +105,41 @@ class VssClient:
             await ws.close()
             raise ServerUnavailable(f"{self.url} is not a VirtualStar Server (no hello)")
         self.hello = first.get("data", {})
+        auth = self.hello.get("auth") or {}
+        if auth.get("required"):
+            try:
+                self.role = await self._authenticate(ws, auth, timeout_s)
+            except BaseException:
+                await ws.close()
+                raise
+        else:
+            self.role = auth.get("role") or "operator"
         self._ws = ws
+
+    async def _authenticate(self, ws: ClientConnection, auth: dict[str, Any],
+                            timeout_s: float) -> str:
+        if not self._password:
+            raise VssRequestError("unauthorized", f"the VirtualStar Server at {self.url} needs a "
+                                  f"password: give vs --password PW or set ${PASSWORD_ENV_VAR}")
+        server_nonce = bytes.fromhex(auth["nonce"])
+        client_nonce = os.urandom(32)
+        mac = client_mac(self._password, server_nonce, client_nonce)
+        await ws.send(json.dumps({"id": "auth", "cmd": "auth", "params": {
+            "client_nonce": client_nonce.hex(), "mac": mac.hex()}}))
+        while True:
+            doc = json.loads(await asyncio.wait_for(ws.recv(), timeout_s))
+            if doc.get("id") == "auth":
+                break
+        if not doc.get("ok"):
+            err = doc.get("error") or {}
+            raise VssRequestError(str(err.get("code", "unauthorized")),
+                                  f"{self.url}: {err.get('message', 'authentication failed')}")
+        result = doc["result"]
+        proof = server_proof(self._password, server_nonce, client_nonce)
+        if not hmac.compare_digest(bytes.fromhex(result.get("server_proof") or ""), proof):
+            raise ServerUnavailable(f"{self.url} accepted the password but could not prove it "
+                                    "knows it: not the server you meant")
+        return str(result["role"])
 
     async def _run(self) -> None:
         delay = 0.2
@@ -108,6 +156,9 @@ class VssClient:
                 except ServerUnavailable:
                     delay = min(2 * delay, 2.0)
                     continue
+                except VssRequestError as exc:  # the password stopped working: give up
+                    self._put(("disconnected", {"url": self.url, "reason": exc.message}))
+                    return
                 delay = 0.2
                 self.reconnects += 1
                 self._put(("reconnected", {"url": self.url, "reconnects": self.reconnects}))
@@ -221,7 +272,8 @@ class VssClient:
 
 
 def call_server(url: str, cmd: str, params: dict[str, Any] | None = None, *,
-                on_event=None, timeout_s: float | None = None) -> Any:
+                on_event=None, timeout_s: float | None = None,
+                password: str | None = None) -> Any:
     """Connect, send one command, return its result (blocking; for command lines).
 
     on_event(name, data) sees every server event while the answer is awaited.
@@ -229,7 +281,7 @@ def call_server(url: str, cmd: str, params: dict[str, Any] | None = None, *,
     """
 
     async def run() -> Any:
-        async with await VssClient.connect(url) as client:
+        async with await VssClient.connect(url, password=password) as client:
             watcher = None
             if on_event is not None:
                 async def pump() -> None:

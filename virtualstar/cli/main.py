@@ -1,5 +1,7 @@
 """Root of the `vs` command line; each command lives in a module of its own."""
 
+from typing import Annotated
+
 import typer
 
 app = typer.Typer(
@@ -8,6 +10,17 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
 )
+
+
+@app.callback()
+def _root(password: Annotated[str | None, typer.Option(
+        "--password", envvar="VS_PASSWORD", show_default=False,
+        help="Password of the VirtualStar Server's API, for every client command (vs --password "
+             "PW status); the operator password may move the telescope, the observer one only "
+             "watch. Not the mount's password (vs server --password).")] = None) -> None:
+    from virtualstar.cli.status import set_api_password
+
+    set_api_password(password)
 
 from virtualstar.cli import data as _data  # noqa: E402
 from virtualstar.cli import demo as _demo  # noqa: E402

@@ -24,7 +24,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from virtualstar.cli.status import JsonOpt, ServerOpt, fail, print_json
+from virtualstar.cli.status import JsonOpt, ServerOpt, api_password, fail, print_json
 from virtualstar.vss_client import ServerUnavailable, VssClient, VssRequestError, default_server_url
 
 __all__ = ["RunResult", "measure_stars", "plan_for_server", "pointing_run", "samples_to_run"]
@@ -191,7 +191,7 @@ def pointing_run(
 
 async def _run(url: str, n: int, at: str | None, min_el: float, settle: float,
                console: Console, *, quiet: bool) -> RunResult:
-    async with await VssClient.connect(url) as client:
+    async with await VssClient.connect(url, password=api_password()) as client:
         status = await client.request("status")
         if not status.get("connected"):
             raise VssRequestError("mount_offline", f"the server has no mount connected "

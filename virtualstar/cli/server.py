@@ -15,7 +15,7 @@ import typer
 from virtualstar.astro import AstroError, avoidance_from_options
 from virtualstar.astro.site import site_from_options
 from virtualstar.cli.status import fail
-from virtualstar.server import DEFAULT_PORT, VssError, build_server
+from virtualstar.server import DEFAULT_PORT, AccessConfig, VssError, build_server
 
 __all__ = ["server"]
 
@@ -40,9 +40,20 @@ def server(
     mount: Annotated[str | None, typer.Option(
         "--mount", help="ASTCom URL of the mount, e.g. ws://mount:8765 (instead of --emulator).")] = None,
     password: Annotated[str | None, typer.Option(
-        "--password", envvar="ASTCOM_PASSWORD", help="Operator password of the mount.")] = None,
+        "--password", envvar="ASTCOM_PASSWORD", help="Operator password of the mount's ASTCom "
+        "endpoint (the server's own API passwords: --operator-password, --observer-password).")] = None,
     mapping: Annotated[Path | None, typer.Option(
         "--mapping", help="JSON role mapping for the mount (default: the emulator's).")] = None,
+    operator_password: Annotated[str | None, typer.Option(
+        "--operator-password", envvar="VS_OPERATOR_PASSWORD", show_default=False,
+        help="Password of the operator role of this server's API (moves and configures); "
+        "clients give it with vs --password. Required to listen beyond loopback.")] = None,
+    observer_password: Annotated[str | None, typer.Option(
+        "--observer-password", envvar="VS_OBSERVER_PASSWORD", show_default=False,
+        help="Password of the observer role (status, watch, errors only).")] = None,
+    allow_origin: Annotated[list[str] | None, typer.Option(
+        "--allow-origin", help="A web page origin allowed to connect, e.g. http://panel:8080 "
+        "(repeat for more; default: pages served from loopback only).")] = None,
     listen: Annotated[str, typer.Option(
         "--listen", help="Where clients connect: ws://HOST:PORT.")] = f"ws://127.0.0.1:{DEFAULT_PORT}",
     site_file: Annotated[Path | None, typer.Option(
@@ -94,6 +105,15 @@ def server(
             start_us = int(UtcTimes.from_iso([start]).to_unix_us()[0])
         except AstroError as exc:
             raise fail(f"--start: {exc}") from None
+    passwords = {role: pw for role, pw in (("operator", operator_password),
+                                           ("observer", observer_password)) if pw}
+    if passwords and "operator" not in passwords:
+        raise fail("--observer-password needs --operator-password too (else nobody could "
+                   "move the telescope)")
+    try:
+        access = AccessConfig(passwords=passwords or None, allowed_origins=allow_origin or None)
+    except VssError as exc:
+        raise fail(str(exc)) from None
     try:
         the_site = site_from_options(site_file=site_file, site_text=site)
         zones = avoidance_from_options(site_file=site_file, sun_radius_deg=sun_radius,
@@ -109,13 +129,13 @@ def server(
                                   pace=pace)
             run_lockstep(_serve_embedded(clock, 1.0, start_us, password, listen, the_site,
                                          mapping, pointing_model, passive, geometry_arcsec,
-                                         zones), clock)
+                                         zones, access), clock)
         elif emulator:
             asyncio.run(_serve_embedded(None, 1.0, start_us, password, listen, the_site, mapping,
-                                        pointing_model, passive, geometry_arcsec, zones))
+                                        pointing_model, passive, geometry_arcsec, zones, access))
         else:
             asyncio.run(_serve(pace, mount, password, mapping, listen, the_site,
-                               pointing_model, passive, zones))
+                               pointing_model, passive, zones, access))
     except VssError as exc:
         raise fail(str(exc)) from None
     except OSError as exc:
@@ -161,14 +181,14 @@ def _stop_event() -> asyncio.Event:
 
 
 async def _serve_embedded(clock, speed, start_us, password, listen, site, mapping,
-                          pointing_model, passive, geometry_arcsec, zones) -> None:
+                          pointing_model, passive, geometry_arcsec, zones, access) -> None:
     from virtualstar.launcher import embedded_vss
 
     stop = _stop_event()
     async with embedded_vss(clock=clock, speed=speed, start_us=start_us, site=site,
                             listen=listen, password=password, geometry_arcsec=geometry_arcsec,
                             mapping_path=mapping, active=not passive,
-                            pointing_model=pointing_model, zones=zones) as vss:
+                            pointing_model=pointing_model, zones=zones, access=access) as vss:
         if clock is None:
             mode = "real time"
         elif clock.pace is None:
@@ -182,11 +202,11 @@ async def _serve_embedded(clock, speed, start_us, password, listen, site, mappin
 
 
 async def _serve(speed, mount, password, mapping, listen, site, pointing_model, passive,
-                 zones) -> None:
+                 zones, access) -> None:
     stop = _stop_event()
     vss = build_server(mount_url=mount, password=password, mapping_path=mapping, site=site,
                        speed=speed, active=not passive, pointing_model=pointing_model,
-                       zones=zones)
+                       zones=zones, access=access)
     try:
         url = await vss.start(listen)
         where = mount + (f", a simulated mount at x{speed:g}" if speed != 1 else "")

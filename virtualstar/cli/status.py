@@ -23,7 +23,20 @@ from virtualstar.vss_client import (
     default_server_url,
 )
 
-__all__ = ["JsonOpt", "ServerOpt", "ask", "fail", "render_status", "status"]
+__all__ = ["JsonOpt", "ServerOpt", "api_password", "ask", "fail", "render_status", "set_api_password",
+           "status"]
+
+_api_password: str | None = None  # from `vs --password` / $VS_PASSWORD (the root command)
+
+
+def set_api_password(password: str | None) -> None:
+    """Remember the VSS password given to the root `vs` command for every client command."""
+    global _api_password
+    _api_password = password or None
+
+
+def api_password() -> str | None:
+    return _api_password
 
 ServerOpt = Annotated[str | None, typer.Option(
     "--server", help=f"VirtualStar Server URL (default ${SERVER_ENV_VAR} or "
@@ -58,8 +71,9 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
                     elif kind == "fault":
                         console.print(f"[red]mount fault: {data.get('faults')}")
 
-                return call_server(url, cmd, params, on_event=on_event)
-        return call_server(url, cmd, params)
+                return call_server(url, cmd, params, on_event=on_event,
+                                   password=api_password())
+        return call_server(url, cmd, params, password=api_password())
     except VssRequestError as exc:
         raise fail(f"the server refused {cmd}: {exc.message} [{exc.code}]", 1) from None
     except ServerUnavailable as exc:

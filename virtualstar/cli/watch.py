@@ -10,7 +10,7 @@ import typer
 from rich.console import Console
 from rich.live import Live
 
-from virtualstar.cli.status import JsonOpt, ServerOpt, fail, render_status
+from virtualstar.cli.status import JsonOpt, ServerOpt, api_password, fail, render_status
 from virtualstar.vss_client import ServerUnavailable, VssClient, VssRequestError, default_server_url
 
 __all__ = ["watch"]
@@ -36,7 +36,7 @@ def watch(
 
 async def _watch(url: str, interval: float, count: int, as_json: bool) -> None:
     console = Console()
-    client = await VssClient.connect(url, reconnect=True)
+    client = await VssClient.connect(url, reconnect=True, password=api_password())
     events: list[str] = []
 
     async def collect() -> None:

@@ -14,6 +14,7 @@ Parts: `MountLink` (serialised, reconnecting ASTCom client spoken in roles from 
 (the API, docs/vss-api.md).
 """
 
+from .access import AccessConfig
 from .assembly import build_server
 from .commands import COMMANDS
 from .exceptions import (
@@ -40,6 +41,7 @@ from .trajectories import Points, RampIn, TablePath, TargetPath, plan_satellite_
 
 __all__ = [
     "COMMANDS",
+    "AccessConfig",
     "DEFAULT_PORT",
     "BadRequest",
     "ErrorReply",

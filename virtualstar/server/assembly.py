@@ -8,6 +8,7 @@ from typing import Any
 
 from virtualstar.astro import Site, load_site
 
+from .access import AccessConfig
 from .clock import MountClock, PacedClock
 from .mapping import load_mapping
 from .mount_link import LinkConfig, MountLink
@@ -23,6 +24,7 @@ def build_server(*, mount_url: str, password: str | None = None,
                  pointing_model: str | Path | None = None, heartbeat_s: float = 1.0,
                  clock: MountClock | None = None,
                  connector: Callable[[], Awaitable[Any]] | None = None,
+                 access: AccessConfig | None = None,
                  **telescope_options) -> VssServer:
     """Return a VssServer for the mount at `mount_url` (not started yet).
 
@@ -30,7 +32,8 @@ def build_server(*, mount_url: str, password: str | None = None,
     free-running simulated emulator); simulated defaults to speed != 1.
     clock: a `virtualstar.lockstep.LockstepClock` shared with an embedded emulator
     (lockstep simulated time; `speed` is then its pace, 0 for none), with `connector`
-    opening the in-memory connection to it. Raises MappingError, BadRequest (model file).
+    opening the in-memory connection to it. access: the API's passwords and allowed
+    origins (default: none, loopback pages only). Raises MappingError, BadRequest.
     """
     mapping = load_mapping(mapping_path)
     link = MountLink(LinkConfig(mount_url, password, connector=connector), mapping)
@@ -43,4 +46,4 @@ def build_server(*, mount_url: str, password: str | None = None,
     telescope = Telescope(link, config, clock or PacedClock(speed))
     if pointing_model is not None:
         telescope.load_model(str(pointing_model))
-    return VssServer(telescope, heartbeat_s=heartbeat_s)
+    return VssServer(telescope, heartbeat_s=heartbeat_s, access=access)

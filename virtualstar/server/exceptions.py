@@ -7,6 +7,8 @@
     ├── UnknownCommand (KeyError)                   unknown_command  no such command (lists valid ones)
     ├── MappingError (ValueError)                   mapping          mapping file wrong or names missing on the mount
     ├── NotActive (PermissionError)                 passive          the server is passive: it only watches
+    ├── Unauthorized (PermissionError)              unauthorized     no (or a wrong) password: authenticate first
+    ├── Forbidden (PermissionError)                 forbidden        the connection's role may not do this (observer)
     ├── MountUnavailable (ConnectionError)          mount_offline    no connection to the mount right now
     ├── MountRejected (RuntimeError)                mount_rejected   the mount refused a command (its message)
     ├── MountFault (RuntimeError)                   mount_fault      the mount latched a fault during an operation
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 __all__ = [
     "BadRequest",
+    "Forbidden",
     "InExclusionZone",
     "InternalError",
     "MappingError",
@@ -35,6 +38,7 @@ __all__ = [
     "StaleElements",
     "TargetUnreachable",
     "TrackingLost",
+    "Unauthorized",
     "UnknownCommand",
     "VssError",
 ]
@@ -142,3 +146,15 @@ class InExclusionZone(ValueError, VssError):
     """The target, or the path the mount would take to it, comes too near the Sun or the Moon."""
 
     code = "exclusion_zone"
+
+
+class Unauthorized(PermissionError, VssError):
+    """The connection has not authenticated, or its password was wrong."""
+
+    code = "unauthorized"
+
+
+class Forbidden(PermissionError, VssError):
+    """The connection's role may not send this command (an observer moving the mount)."""
+
+    code = "forbidden"

@@ -18,11 +18,14 @@ import json
 import logging
 import time
 from dataclasses import dataclass
+from http import HTTPStatus
 from typing import Any
 
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
+from websockets.http11 import Request, Response
 
+from .access import AccessConfig, Session, check_listen, refuse_origin
 from .commands import COMMANDS, dispatch
 from .exceptions import BadRequest, VssError
 from .protocol import API_VERSION, ErrorReply, Event, Reply, decode_request
@@ -55,9 +58,12 @@ def parse_listen_url(url: str) -> tuple[str, int]:
 class _Client:
     ws: ServerConnection
     queue: asyncio.Queue[str]
+    session: Session
     dropped: int = 0
 
     def put(self, text: str) -> None:
+        if not self.session.may_watch:  # events are for authenticated clients only
+            return
         if self.queue.full():
             with contextlib.suppress(asyncio.QueueEmpty):
                 self.queue.get_nowait()
@@ -68,9 +74,11 @@ class _Client:
 class VssServer:
     """Serve a Telescope to WebSocket clients; `await start(url)` returns the bound URL."""
 
-    def __init__(self, telescope: Telescope, *, heartbeat_s: float = 1.0) -> None:
+    def __init__(self, telescope: Telescope, *, heartbeat_s: float = 1.0,
+                 access: AccessConfig | None = None) -> None:
         self.telescope = telescope
         self.heartbeat_s = heartbeat_s
+        self.access = access or AccessConfig()
         self._clients: set[_Client] = set()
         self._subscribers: list[asyncio.Queue[tuple[str, dict[str, Any]]]] = []
         self._seq = itertools.count(1)
@@ -104,18 +112,23 @@ class VssServer:
             self._subscribers.remove(queue)
 
     async def call(self, cmd: str, params: dict[str, Any] | None = None) -> Any:
-        """Run one command as a client would, in this process; raise VssError subclasses."""
+        """Run one command as a client would, in this process; raise VssError subclasses.
+
+        In-process callers are trusted as operators (they could drive the mount anyway).
+        """
         self.requests += 1
         return await dispatch(self.telescope, cmd, params or {})
 
     async def start(self, url: str | None = f"ws://127.0.0.1:{DEFAULT_PORT}") -> str:
         """Start the telescope and listen; return the bound ``ws://`` URL ('' if `url` is None)."""
         host, port = parse_listen_url(url) if url is not None else ("", 0)
+        if url is not None:
+            check_listen(host, self.access)
         await self.telescope.start()
         if url is None:
             return ""
         self._server = await serve(self._session, host, port, max_size=1 << 20,
-                                   ping_interval=None)
+                                   ping_interval=None, process_request=self._check_origin)
         bound = self._server.sockets[0].getsockname()
         self.url = f"ws://{host}:{bound[1]}"
         self._heartbeat = asyncio.get_running_loop().create_task(self._beat())
@@ -145,14 +158,22 @@ class VssServer:
             self.broadcast("heartbeat", {"t_unix": time.time(),
                                          "mount_connected": self.telescope.link.connected})
 
+    def _check_origin(self, connection: ServerConnection, request: Request) -> Response | None:
+        reason = refuse_origin(request.headers.get_all("Origin"), self.access)
+        if reason is None:
+            return None
+        log.warning("WebSocket handshake from %s: %s", connection.remote_address, reason)
+        return connection.respond(HTTPStatus.FORBIDDEN, reason + "\n")
+
     async def _session(self, ws: ServerConnection) -> None:
-        client = _Client(ws, asyncio.Queue(EVENT_QUEUE))
+        client = _Client(ws, asyncio.Queue(EVENT_QUEUE), Session(self.access))
         self._clients.add(client)
         writer = asyncio.get_running_loop().create_task(self._writer(client))
         tasks: set[asyncio.Task] = set()
-        client.put(Event("hello", {"server": "virtualstar", "api_version": API_VERSION,
-                                   "commands": sorted(COMMANDS),
-                                   "heartbeat_s": self.heartbeat_s}, next(self._seq)).to_json())
+        client.queue.put_nowait(Event("hello", {
+            "server": "virtualstar", "api_version": API_VERSION, "commands": sorted([*COMMANDS, "auth"]),
+            "heartbeat_s": self.heartbeat_s, "auth": client.session.hello()},
+            next(self._seq)).to_json())
         try:
             async for message in ws:
                 task = asyncio.get_running_loop().create_task(self._handle(client, message))
@@ -178,7 +199,11 @@ class VssServer:
         try:
             request = decode_request(message)
             rid = request.id
-            result = await dispatch(self.telescope, request.cmd, request.params)
+            if request.cmd == "auth":
+                result = client.session.authenticate(request.params)
+            else:
+                client.session.permit(request.cmd)
+                result = await dispatch(self.telescope, request.cmd, request.params)
             text = Reply(rid, result).to_json()
         except BadRequest as exc:
             text = ErrorReply(rid if rid is not None else _guess_id(message), exc.code,
@@ -193,6 +218,8 @@ class VssServer:
         # answers are never dropped, unlike events
         with contextlib.suppress(ConnectionClosed):
             await client.ws.send(text)
+            if client.session.closed_for_failures:
+                await client.ws.close(1008, "too many wrong passwords")
 
 
 def _guess_id(message: str | bytes) -> Any:
