@@ -91,7 +91,8 @@ def list_command(url: Url, prefix: Annotated[str, typer.Option(
                      "--prefix", help="Only names starting with this text, e.g. axis.az.")] = "",
                  password: Password = None, role: Role = None, cafile: Cafile = None,
                  timeout: Timeout = 10.0, as_json: Json = False) -> None:
-    """List every variable and function: name, type, kind, access, unit, doc."""
+    """List every variable and function: name, type, kind, access, unit, doc, and the range a
+    parameter may be written to (min..max, when it declares one)."""
     async def main() -> list[Any]:
         async with await _connect(url, password, role, cafile, timeout) as client:
             return await client.list(prefix)
@@ -103,16 +104,26 @@ def list_command(url: Url, prefix: Annotated[str, typer.Option(
     if not out.is_terminal:
         # a pipe or a file: one whole entry per line, tab-separated, for grep and cut
         for e in entries:
-            sys.stdout.write("\t".join((e.name, e.type, e.kind, e.access, e.unit, e.doc)) + "\n")
+            sys.stdout.write("\t".join((e.name, e.type, e.kind, e.access, e.unit, e.doc,
+                                        _range_text(e))) + "\n")
         return
     table = Table(title=f"{len(entries)} entries")
     table.add_column("name", no_wrap=True, overflow="fold")  # a name is never cut short
-    for column in ("type", "kind", "access", "unit"):
+    for column in ("type", "kind", "access", "unit", "range"):
         table.add_column(column)
     table.add_column("doc", ratio=1)
     for e in entries:
-        table.add_row(e.name, e.type, e.kind, e.access, e.unit, e.doc)
+        table.add_row(e.name, e.type, e.kind, e.access, e.unit, _range_text(e), e.doc)
     out.print(table)
+
+
+def _range_text(entry: Any) -> str:
+    """`min..max` of a bounded entry ('' when it declares none)."""
+    if entry.min is None and entry.max is None:
+        return ""
+    lo = "" if entry.min is None else f"{entry.min:g}"
+    hi = "" if entry.max is None else f"{entry.max:g}"
+    return f"{lo}..{hi}"
 
 
 @app.command("get")

@@ -330,7 +330,9 @@ class Client:
         """Return every variable and function whose name starts with `prefix`."""
         result = await self._request(List(prefix))
         fields = ("name", "type", "kind", "access", "unit", "doc")
-        return [VariableInfo(**{k: str(e.get(k, "")) for k in fields}) for e in result["entries"]]
+        return [VariableInfo(**{k: str(e.get(k, "")) for k in fields},
+                             min=_bound(e.get("min")), max=_bound(e.get("max")))
+                for e in result["entries"]]
 
     async def define(self, names: Sequence[str]) -> MessageInfo:
         """Define (or reuse) the message made of `names` and return it."""
@@ -496,3 +498,8 @@ def _plain(value: Any) -> Any:
     if isinstance(value, Iterable) and not isinstance(value, str | bytes | dict | np.ndarray | list):
         return list(value)
     return value
+
+
+def _bound(value: Any) -> float | None:
+    """A LIST entry's min/max: a number, or absent (nil)."""
+    return None if value is None or isinstance(value, bool) else float(value)

@@ -80,9 +80,10 @@ class ExampleDevice:
                        doc=f"sin(2*pi*frequency_hz*t + {i})")
         p = self.params
         c.add_slot("wave.amplitude", p, P_AMPLITUDE, type="f64", kind="parameter", access="rw",
-                   unit="V", doc="Sine amplitude")
+                   unit="V", doc="Sine amplitude", min_value=0.0, max_value=100.0)
         c.add_slot("wave.frequency_hz", p, P_FREQUENCY_HZ, type="f64", kind="parameter",
-                   access="rw", unit="Hz", doc="Sine frequency")
+                   access="rw", unit="Hz", doc="Sine frequency", min_value=0.0,
+                   max_value=self.loop_rate_hz / 2)
         c.add_slot("wave.offset", p, P_OFFSET, type="f64", kind="parameter", access="rw",
                    unit="V", doc="Sine offset")
         c.add_slot("pair.a", p, P_PAIR_A, type="f64", kind="parameter", access="rw",
@@ -90,7 +91,7 @@ class ExampleDevice:
         c.add_slot("pair.b", p, P_PAIR_B, type="f64", kind="parameter", access="rw",
                    doc="Written together with pair.a")
         c.add_slot("gains", self.gains, slice(0, 3), type="f64[3]", kind="parameter",
-                   access="rw", doc="PID gains kp, ki, kd")
+                   access="rw", doc="PID gains kp, ki, kd", min_value=0.0, max_value=1000.0)
         c.add_variable("label", "str", kind="parameter", access="rw", doc="Device label",
                        get=lambda: self.state.label, set=lambda v: setattr(self.state, "label", v))
         c.add_variable("site", "{lat_deg:f64,lon_deg:f64}", kind="parameter", access="rw",

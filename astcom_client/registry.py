@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from .exceptions import UnknownName
-from .types import TypeSpec, parse_type
+from .exceptions import InvalidValue, UnknownName
+from .types import NUMERIC_DTYPES, TypeSpec, parse_type
 
 __all__ = ["Collection", "Function", "Variable", "VariableInfo", "astcom_field"]
 
@@ -30,7 +30,11 @@ _META_KEY = "astcom"
 
 @dataclass(frozen=True)
 class VariableInfo:
-    """One entry of a listing: what a client learns about a variable or function."""
+    """One entry of a listing: what a client learns about a variable or function.
+
+    `min`/`max`: the range a WRITE must respect (numeric variables that declare one;
+    None: unbounded on that side), in `unit`.
+    """
 
     name: str
     type: str
@@ -38,10 +42,16 @@ class VariableInfo:
     access: str
     unit: str = ""
     doc: str = ""
+    min: float | None = None
+    max: float | None = None
 
-    def as_dict(self) -> dict[str, str]:
-        """Return the entry as the map sent by LIST."""
-        return dataclasses.asdict(self)
+    def as_dict(self) -> dict[str, Any]:
+        """Return the entry as the map sent by LIST (`min`/`max` only when declared)."""
+        out = dataclasses.asdict(self)
+        for key in ("min", "max"):
+            if out[key] is None:
+                del out[key]
+        return out
 
 
 @dataclass(eq=False)
@@ -61,10 +71,29 @@ class Variable:
     get: Callable[[], Any]
     set: Callable[[Any], None] | None
     trace_column: int | None = None
+    min_value: float | None = None
+    max_value: float | None = None
 
     @property
     def type(self) -> str:
         return self.spec.name
+
+    def check_range(self, value: Any) -> None:
+        """Raise InvalidValue when `value` (or an element of it) lies outside [min, max]."""
+        if self.min_value is None and self.max_value is None:
+            return
+        values = np.atleast_1d(np.asarray(value, dtype=float))
+        unit = f" {self.unit}" if self.unit else ""
+        allowed = (f"{'-∞' if self.min_value is None else f'{self.min_value:g}'}.."
+                   f"{'∞' if self.max_value is None else f'{self.max_value:g}'}{unit}")
+        if self.min_value is not None and (np.isnan(values) | (values < self.min_value)).any():
+            bad = values[np.isnan(values) | (values < self.min_value)][0]
+            raise InvalidValue(f"{self.name} = {bad:g}{unit} is below its minimum "
+                               f"{self.min_value:g}{unit}; allowed {allowed}")
+        if self.max_value is not None and (np.isnan(values) | (values > self.max_value)).any():
+            bad = values[np.isnan(values) | (values > self.max_value)][0]
+            raise InvalidValue(f"{self.name} = {bad:g}{unit} is above its maximum "
+                               f"{self.max_value:g}{unit}; allowed {allowed}")
 
     @property
     def writable(self) -> bool:
@@ -75,7 +104,8 @@ class Variable:
         return "r" in self.access
 
     def info(self) -> VariableInfo:
-        return VariableInfo(self.name, self.spec.name, self.kind, self.access, self.unit, self.doc)
+        return VariableInfo(self.name, self.spec.name, self.kind, self.access, self.unit, self.doc,
+                            self.min_value, self.max_value)
 
 
 @dataclass(eq=False)
@@ -135,8 +165,13 @@ class Collection:
     def add_variable(self, name: str, type: str, *, kind: str = "signal",  # noqa: A002
                      access: str = "r", unit: str = "", doc: str = "",
                      get: Callable[[], Any], set: Callable[[Any], None] | None = None,  # noqa: A002
-                     traced: bool = False) -> Variable:
-        """Register a variable read through `get` (and written through `set`)."""
+                     traced: bool = False, min_value: float | None = None,
+                     max_value: float | None = None) -> Variable:
+        """Register a variable read through `get` (and written through `set`).
+
+        `min_value`/`max_value` bound what a WRITE may set (numeric types only; LIST
+        shows them as `min`/`max`): a value outside is refused (422), nothing applied.
+        """
         spec = parse_type(type)
         self._check_new(name)
         if kind not in KINDS:
@@ -147,19 +182,23 @@ class Collection:
             raise ValueError(f"{name}: access {access!r} needs a setter")
         if not callable(get):
             raise TypeError(f"{name}: get must be callable")
+        _check_bounds(name, spec, min_value, max_value)
         column = None
         if traced:
             if not spec.is_numeric_scalar:
                 raise ValueError(f"{name}: only numeric scalars can be traced, not {spec.name}")
             column = self._trace_width
             self._trace_width += 1
-        var = Variable(name, spec, kind, access, unit, doc, get, set, column)
+        var = Variable(name, spec, kind, access, unit, doc, get, set, column,
+                       None if min_value is None else float(min_value),
+                       None if max_value is None else float(max_value))
         self._entries[name] = var
         return var
 
     def add_slot(self, name: str, array: np.ndarray, index: int | slice | tuple, *,
                  type: str, kind: str = "signal", access: str = "r",  # noqa: A002
-                 unit: str = "", doc: str = "", traced: bool = False) -> Variable:
+                 unit: str = "", doc: str = "", traced: bool = False,
+                 min_value: float | None = None, max_value: float | None = None) -> Variable:
         """Register `array[index]` as a variable; the device keeps updating the array."""
         if not isinstance(array, np.ndarray):
             raise TypeError(f"{name}: add_slot needs a numpy array, got {type(array).__name__}")
@@ -182,7 +221,8 @@ class Collection:
             array[index] = value
 
         return self.add_variable(name, spec.name, kind=kind, access=access, unit=unit, doc=doc,
-                                 get=get, set=put if "w" in access else None, traced=traced)
+                                 get=get, set=put if "w" in access else None, traced=traced,
+                                 min_value=min_value, max_value=max_value)
 
     def add_function(self, name: str, fn: Callable[..., Any], *,
                      args: Sequence[tuple[str, str]] = (), returns: str | None = None,
@@ -287,6 +327,18 @@ class Collection:
     def infos(self, prefix: str = "") -> list[VariableInfo]:
         """Return the listing of every entry whose name starts with `prefix`."""
         return [e.info() for e in self._entries.values() if e.name.startswith(prefix)]
+
+
+def _check_bounds(name: str, spec: TypeSpec, lo: float | None, hi: float | None) -> None:
+    if lo is None and hi is None:
+        return
+    if spec.base not in NUMERIC_DTYPES or spec.base == "bool":
+        raise ValueError(f"{name}: only numeric variables take min/max, not {spec.name}")
+    for label, bound in (("min_value", lo), ("max_value", hi)):
+        if bound is not None and not np.isfinite(bound):
+            raise ValueError(f"{name}: {label} must be a finite number, got {bound!r}")
+    if lo is not None and hi is not None and lo > hi:
+        raise ValueError(f"{name}: min_value {lo} is above max_value {hi}")
 
 
 def _hint(name: str, entries: dict[str, Any], kind: type) -> str:

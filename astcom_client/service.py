@@ -322,6 +322,8 @@ class EndpointService:
         coerced = [v.spec.coerce(x, where=v.name) for v, x in zip(message.variables, cmd.values,
                                                                  strict=True)]
         for var, value in zip(message.variables, coerced, strict=True):
+            var.check_range(value)
+        for var, value in zip(message.variables, coerced, strict=True):
             assert var.set is not None
             try:
                 var.set(value)

@@ -411,6 +411,41 @@ STATE_INDEX: dict[str, int] = {s.name: s.index for s in STATE_SLOTS}
 PARAM_INDEX: dict[str, int] = {s.name: s.index for s in PARAM_SLOTS}
 
 
+# The range a WRITE may set (ASTCom LIST shows it; a value outside is refused whole).
+# Gains and feed-forward weights: from 0 to well above their tuning; rates, accelerations
+# and currents: positive and at most a few times the design value; fault injections 0/1.
+_FIXED_RANGES: dict[str, tuple[float, float]] = {
+    "velocity_ff": (0.0, 1.0), "acceleration_ff": (0.0, 1.0), "kvd": (0.0, 50.0),
+    "position_min": (-2 * math.pi, 2 * math.pi), "position_max": (-2 * math.pi, 2 * math.pi),
+    "encoder_bits": (8.0, 40.0), "inject_encoder_fault": (0.0, 1.0),
+    "safety.inject_heartbeat_miss": (0.0, 1.0), "time.drift_ppm": (-1000.0, 1000.0),
+    "traj.late_margin_us": (0.0, 1e6), "temperature_max": (0.0, 200.0),
+    "power.ambient_temperature": (-60.0, 60.0), "gravity_imbalance": (-1000.0, 1000.0),
+    "settle_window": (1e-3, 3600.0), "integral_zone": (0.0, 1.0),
+    "friction_smoothing": (1e-9, 1.0), "cogging_periods": (0.0, 1000.0),
+    "safety.heartbeat_timeout": (1e-4, 1.0),
+}
+_SCALED_RANGES: dict[str, tuple[float, float]] = {  # (lowest, highest × default)
+    "kp": (0.0, 10.0), "ki": (0.0, 10.0), "kv": (0.0, 10.0), "kvi": (0.0, 10.0),
+    "rate_limit": (1e-6, 3.0), "accel_limit": (1e-6, 3.0), "ctrl_rate_limit": (1e-6, 3.0),
+    "ctrl_accel_limit": (1e-6, 3.0), "current_limit": (1e-3, 3.0), "current_trip": (1e-3, 3.0),
+    "following_error_limit": (1e-6, 10.0),
+}
+
+
+def param_range(slot: Slot) -> tuple[float, float]:
+    """Return the (min, max) a parameter may be written to, in its unit."""
+    short = slot.name.rsplit(".", 1)[-1]
+    for key in (slot.name, short):
+        if key in _FIXED_RANGES:
+            return _FIXED_RANGES[key]
+    if short in _SCALED_RANGES:
+        lo, factor = _SCALED_RANGES[short]
+        return lo, factor * slot.default
+    # physical constants of the plant: positive, up to a thousand times the design value
+    return 0.0, 1000.0 * max(abs(slot.default), 1.0)
+
+
 def state_index(axis: int, field: int) -> int:
     """Return the state-array index of a per-axis field (``A_*``) of axis 0 (az) or 1 (el)."""
     return STATE_AXIS0 + axis * AXIS_STRIDE + field

@@ -69,9 +69,13 @@ def build_collection(emu: MountEmulator) -> tuple[Collection, dict[int, int]]:
                                 doc=slot.doc, traced=True)
         column_to_state[var.trace_column] = slot.index
     for slot in L.PARAM_SLOTS:
+        lo, hi = L.param_range(slot)
+        if slot.name.rsplit(".", 1)[-1] in POSITIVE_PARAMS and lo <= 0:
+            lo = 1e-6 * slot.default  # the step divides by it: never 0
         coll.add_variable(slot.name, "f64", kind="parameter", access="rw", unit=slot.unit,
                           doc=f"{slot.doc} (default {slot.default:g})",
-                          get=lambda i=slot.index: float(params[i]), set=_param_setter(params, slot))
+                          get=lambda i=slot.index: float(params[i]), set=_param_setter(params, slot),
+                          min_value=lo, max_value=hi)
     _add_text_signals(coll, emu)
     _add_loop_health(coll, emu)
     _add_functions(coll, emu)
