@@ -173,11 +173,14 @@ class ProtocolMachine(RuleBasedStateMachine):
             return
         r = self.reply("DEFINE", {"names": list(names)})
         self.defined[r[2]["msg"]] = names
+        before = self.device.params[0]
         r = self.reply("WRITE", {"msg": r[2]["msg"], "values": [value] * len(names)})
         if self.role == "observer":
             assert r[2]["code"] == 403
         elif "counter" in names:
             assert r[2]["code"] == 405
+        elif value < 0.0:  # wave.amplitude declares the range 0..100 V: nothing applied
+            assert r[2]["code"] == 422 and self.device.params[0] == before
         else:
             assert r[0] == "OK" and self.device.params[0] == value
 

@@ -308,3 +308,33 @@ def test_where_and_passes_show_the_sun_separation_astropy_and_skyfield_agree_on(
     rise = int(UtcTimes.from_iso([p["rise_utc"]]).to_unix_us()[0])
     above = int(UtcTimes.from_iso([p["above_horizon_from_utc"]]).to_unix_us()[0])
     assert above > rise + 60_000_000  # it rises in the west, behind the 35° wall
+
+
+def test_a_hold_the_sun_is_about_to_reach_is_left_for_the_park_position():
+    """With no look-ahead on holds, a place 31° ahead of the Sun is accepted; the watchdog
+    must move the mount away before the Sun's zone reaches it."""
+    t0 = noon_us()
+    # the place the Sun will be at t0 + Δ, Δ chosen so that it is 31° from the Sun now
+    dts = np.arange(1.0, 4.0, 0.01) * 3600e6
+    saz, sel = sun_altaz_rad(t0 + dts.astype(np.int64))
+    naz, nel = sun_altaz_rad(np.array([t0]))
+    sep = np.degrees(erfa.seps(saz, sel, naz[0], nel[0]))
+    k = int(np.argmin(np.abs(sep - 31.0)))
+    place = f"{math.degrees(saz[k]):.4f} {math.degrees(sel[k]):.4f}"
+
+    async def scenario(vss, clock):
+        vs = vss.client()
+        held = await vs.request("slew", {"altaz": place})
+        samples = []
+        for _ in range(30):  # 15 minutes: the Sun closes in at ~0.25°/min
+            await clock.sleep(30.0)
+            values, t_us = await read_emulator(vss, ENCODERS)
+            samples.append((t_us, values["axis.az.position"], values["axis.el.position"]))
+        return held, samples, await vs.request("status")
+
+    held, samples, status = run_lockstep_scenario(NOON, scenario, hold_lookahead_s=0.0)
+    assert held["phase"] == "done"
+    assert status["operation"]["kind"] == "evade" and status["operation"]["phase"] == "done"
+    t, az, el = (np.array(c) for c in zip(*samples, strict=True))
+    assert sun_separation_deg(az, el, t).min() >= 30.0
+    assert abs(math.degrees(el[-1]) - 85.0) < 0.01  # parked (the stow position)

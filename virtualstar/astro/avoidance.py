@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,7 +38,7 @@ import numpy as np
 from .altaz import Horizon, MountLimits
 from .bodies import SolarSystemBody
 from .earth_orientation import EarthOrientation
-from .exceptions import SiteError
+from .exceptions import EarthOrientationWarning, SiteError
 from .site import Site
 from .slew import plan_slew
 from .timescales import UtcTimes
@@ -152,7 +153,10 @@ def _body_hour(name: str, site: Site, eop, hour: int) -> tuple[np.ndarray, np.nd
     `eop` is part of the key by identity (EarthOrientation compares by identity).
     """
     grid_us = hour * _HOUR_US + np.arange(0, _HOUR_US + _GRID_US, _GRID_US, dtype=np.int64)
-    obs = SolarSystemBody(name).observe(UtcTimes.from_unix_us(grid_us), site, eop)
+    with warnings.catch_warnings():
+        # predicted UT1 costs a zone of tens of degrees nothing: no notice for it
+        warnings.simplefilter("ignore", EarthOrientationWarning)
+        obs = SolarSystemBody(name).observe(UtcTimes.from_unix_us(grid_us), site, eop)
     ce = np.cos(obs.el_rad)
     return grid_us, np.stack([ce * np.cos(obs.az_rad), ce * np.sin(obs.az_rad),
                               np.sin(obs.el_rad)], axis=1)

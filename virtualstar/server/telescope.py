@@ -16,6 +16,7 @@ notices a mount clock that has stopped.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import math
 import time
@@ -34,6 +35,7 @@ from virtualstar.astro import (
     Satellite,
     Site,
     UtcTimes,
+    check_places,
 )
 
 from . import procedures
@@ -72,6 +74,7 @@ _LIMIT_ROLES = ("az_slew_rate_limit", "el_slew_rate_limit", "az_slew_accel_limit
 WATCH_S = 1.0  # mount seconds between the slow polls of the mount state
 STALL_WALL_S = 5.0  # paced time: a mount clock standing this long (wall) is a lost mount
 LOCKSTEP_LEAD_S = 30.0  # mount seconds of trajectory buffered in lockstep
+SUN_WATCH_US = 60_000_000  # a mount at rest is checked against the zones once a mount minute
 
 
 @dataclass(frozen=True)
@@ -98,6 +101,7 @@ class TelescopeConfig:
     max_tle_age_days: float = 14.0
     resume_timeout_s: float = 60.0  # wall seconds an interrupted track waits for the mount
     zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
+    hold_lookahead_s: float = HOLD_LOOKAHEAD_S  # a fixed hold must stay out of the zones this long
 
     @property
     def margin_speed(self) -> float:
@@ -272,6 +276,7 @@ class Telescope:
     async def _watch(self) -> None:
         """Poll the mount state once a mount second; in paced time notice a stopped clock."""
         last_t, last_wall = None, time.monotonic()
+        last_sun: int | None = None
         while True:
             await self.clock.sleep(WATCH_S)
             if not self.link.connected:
@@ -282,6 +287,9 @@ class Telescope:
                 continue
             self._saw_state(int(v["mount_state"]))
             t, wall = int(v["mount_time"]), time.monotonic()
+            if last_sun is None or t - last_sun >= SUN_WATCH_US:
+                last_sun = t
+                await self._keep_out_of_the_sun(int(v["mount_state"]), t)
             if t != last_t:
                 last_t, last_wall = t, wall
             elif not self.clock.lockstep and wall - last_wall > STALL_WALL_S:
@@ -291,6 +299,45 @@ class Telescope:
                     "without a tick)"))
                 self.link.mark_lost()
                 last_wall = wall
+
+    async def _keep_out_of_the_sun(self, state: int, t_us: int) -> None:
+        """A mount at rest the Sun (or Moon) is about to reach is moved to the park position.
+
+        Tracks and slews are guarded on their own; a hold is checked for an hour when it
+        is commanded, and this catches the rest (a hold kept longer, a mount left alone):
+        once a mount minute, the place it points to is checked now and two minutes ahead.
+        """
+        c = self.codes
+        if not self.active or state not in (c["holding"], c["off"]) or self.supervisor.busy:
+            return  # a running operation guards its own places and paths
+        op = self.op
+        if op is not None and op.info.get("allow_sun"):
+            return
+        try:
+            pos = await self.motion.position()
+        except VssError:
+            return
+        obs_az, obs_el = math.degrees(pos.az_rad), math.degrees(pos.el_rad)
+        if self.model is not None:
+            a, e = self.model.encoder_to_observed(np.array([obs_az % 360.0]), np.array([obs_el]))
+            obs_az, obs_el = float(np.asarray(a)[0]), float(np.asarray(e)[0])
+        zones = dataclasses.replace(self.safety.zones(), horizon=None, el_min_deg=-90.0)
+        # now and two checks ahead: the mount leaves before the zone reaches it
+        t = np.array([t_us, t_us + 2 * SUN_WATCH_US], np.int64)
+        hit = check_places(np.full(2, math.radians(obs_az)), np.full(2, math.radians(obs_el)), t,
+                           zones, self.config.site, self.eop)
+        if hit is None:
+            return
+        text = hit.describe("the telescope")
+        log.error("safety: %s; moving it to the park position", text)
+        self.emit("safety", {"reason": text, "action": "park"})
+        m = self.link.mapping
+
+        async def procedure(evade: Operation) -> dict[str, Any]:
+            return await procedures.hold_fixed(self, evade, m.park_az_deg, m.park_el_deg,
+                                               power_off=False)
+
+        await self.supervisor.start("evade", f"park (away from the {hit.zone})", procedure)
 
     def note_points(self, p: Points) -> None:
         """The feeder pushed points: keep the target's on-sky rate for the on-sky error."""
@@ -356,7 +403,8 @@ class Telescope:
             if kind != "park":
                 self.safety.check_place(az_deg % 360.0, el_deg,
                                         await self.motion.mount_time_us(), name,
-                                        allow_sun=allow_sun, ahead_s=HOLD_LOOKAHEAD_S)
+                                        allow_sun=allow_sun,
+                                        ahead_s=self.config.hold_lookahead_s)
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.hold_fixed(self, op, az_deg, el_deg, power_off=power_off,
