@@ -48,13 +48,13 @@ def demo(
     pace_text = "as fast as the CPU allows" if pace is None else f"up to x{pace:g}"
     t = Table(title=f"VirtualStar demo ({result.wall_s:.0f} s wall time, lockstep {pace_text})",
               title_justify="left")
-    for col in ("phase", "duration", "slew time", "encoder RMS", "encoder peak", "on-sky RMS",
-                "on-sky peak", "clock offset"):
-        t.add_column(col, justify="left" if col == "phase" else "right")
+    t.add_column("phase", overflow="fold")
+    for col in ("slew", "encoders RMS/peak", "on the sky RMS/peak", "clock"):
+        t.add_column(col, justify="right", no_wrap=True)
     for p in result.phases:
-        t.add_row(p.name, f"{(p.to_us - p.from_us) / 1e6:.1f} s", _f(p.slew_time_s, ".1f", " s"),
-                  _f(p.rms_arcsec, ".3f", "″"), _f(p.peak_arcsec, ".3f", "″"),
-                  _f(p.on_sky_rms_arcsec, ".3f", "″"), _f(p.on_sky_peak_arcsec, ".3f", "″"),
+        t.add_row(f"{p.name}, {(p.to_us - p.from_us) / 1e6:.0f} s", _f(p.slew_time_s, ".1f", " s"),
+                  f"{_f(p.rms_arcsec, '.3f')}/{_f(p.peak_arcsec, '.3f', '″')}",
+                  f"{_f(p.on_sky_rms_arcsec, '.3f')}/{_f(p.on_sky_peak_arcsec, '.3f', '″')}",
                   _f(p.clock_offset_us, ".0f", " µs"))
     Console().print(t)
     info = result.pass_info
