@@ -158,7 +158,7 @@ async def _entry_type(client: Client, name: str) -> str:
 @app.command("set")
 def set_command(url: Url, name: Annotated[str, typer.Argument(help="Variable name.", show_default=False)],
                 value: Annotated[str, typer.Argument(
-                    help="New value: 1.5, true, [1, 2, 3] (arrays as JSON), {\"a\": 1} (structs).",
+                    help="New value: 1.5, true, \\[1, 2, 3] (arrays as JSON), {\"a\": 1} (structs).",
                     show_default=False)],
                 password: Password = None, role: Role = None, cafile: Cafile = None,
                 timeout: Timeout = 10.0, as_json: Json = False) -> None:
@@ -201,7 +201,7 @@ def call_command(url: Url, name: Annotated[str, typer.Argument(help="Function na
     result = _run(main())
     if as_json:
         _print_json({"name": name, "value": result})
-    else:
+    elif result is not None:  # a function that returns nothing prints nothing
         out.print(value_to_text(result), highlight=False)
 
 

@@ -90,7 +90,7 @@ def serve(
     speed: Annotated[str, typer.Option(
         help="1 = real time, X = X times real time, 'max' = as fast as possible.")] = "1",
     config: Annotated[Path | None, typer.Option(
-        help="TOML file of parameters ([axis.az] kp = ...), [emulator] and [geometry].")] = None,
+        help="TOML file of parameters (\\[axis.az] kp = ...), \\[emulator] and \\[geometry].")] = None,
     geometry: Annotated[Path | None, typer.Option(
         help="TOML/JSON file of the hidden TPOINT terms (arcsec).")] = None,
     seed: Annotated[int | None, typer.Option(

@@ -51,8 +51,9 @@ def _errors_to_exit() -> Iterator[None]:
         yield
     except PointingModelError as exc:
         raise _fail(str(exc)) from None
-    except OSError as exc:
-        raise _fail(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
+    except OSError as exc:  # a file named on the command line that cannot be read: an argument
+        raise _fail(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": "),
+                    EXIT_USAGE) from None
     except ValueError as exc:
         raise _fail(str(exc), EXIT_USAGE) from None
 

@@ -89,3 +89,35 @@ def test_the_vss_reads_no_clock_of_its_own_for_mount_time():
     for path in modules("virtualstar/server"):
         if path.name not in allowed:
             assert "time" not in imported(path), path.name
+
+
+def test_the_vs_root_lists_each_command_with_the_first_paragraph_of_its_own_help():
+    """`vs --help` imports no command module, so its summaries are a table: it must not drift."""
+    import importlib
+
+    import typer
+
+    from virtualstar.cli.main import COMMANDS
+
+    for name, (module, attribute, summary) in COMMANDS.items():
+        target = getattr(importlib.import_module(module), attribute)
+        doc = target.info.help if isinstance(target, typer.Typer) else target.__doc__
+        assert " ".join(doc.strip().split("\n\n")[0].split()) == summary, name
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["status", "--server", "ws://127.0.0.1:9"],
+                                  ["slew", "--help"]])
+def test_vs_help_and_status_import_none_of_the_heavy_libraries(argv):
+    """The CLI starts in a fraction of a second: numpy, pandas, pyarrow, matplotlib, scipy
+    and numba stay unimported for help and for the client commands."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom virtualstar.cli.main import app\n"
+            f"sys.argv = ['vs', *{argv!r}]\n"
+            "try:\n    app()\nexcept SystemExit:\n    pass\n"
+            "heavy = ('numpy', 'pandas', 'pyarrow', 'matplotlib', 'scipy', 'numba', 'astropy')\n"
+            "print(sorted({m.split('.')[0] for m in sys.modules if m.split('.')[0] in heavy}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout + out.stderr

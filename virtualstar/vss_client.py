@@ -27,12 +27,10 @@ import itertools
 import json
 import os
 from collections.abc import AsyncIterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from websockets.asyncio.client import ClientConnection, connect
-from websockets.exceptions import ConnectionClosed, InvalidURI, WebSocketException
-
-from astcom_client.auth import client_mac, server_proof
+if TYPE_CHECKING:  # websockets is imported when a connection is made (the CLI starts faster)
+    from websockets.asyncio.client import ClientConnection
 
 __all__ = ["DEFAULT_SERVER_URL", "PASSWORD_ENV_VAR", "SERVER_ENV_VAR", "ServerUnavailable",
            "VssClient", "VssRequestError", "call_server", "default_server_url"]
@@ -93,6 +91,9 @@ class VssClient:
         return client
 
     async def _open(self, timeout_s: float) -> None:
+        from websockets.asyncio.client import connect
+        from websockets.exceptions import InvalidURI, WebSocketException
+
         try:
             ws = await asyncio.wait_for(connect(self.url, max_size=1 << 24, ping_interval=None,
                                                 open_timeout=timeout_s), timeout_s)
@@ -118,6 +119,8 @@ class VssClient:
 
     async def _authenticate(self, ws: ClientConnection, auth: dict[str, Any],
                             timeout_s: float) -> str:
+        from astcom_client.auth import client_mac, server_proof  # only when a server asks
+
         if not self._password:
             raise VssRequestError("unauthorized", f"the VirtualStar Server at {self.url} needs a "
                                   f"password: give vs --password PW or set ${PASSWORD_ENV_VAR}")
@@ -165,6 +168,8 @@ class VssClient:
                 break
 
     async def _read_until_lost(self) -> None:
+        from websockets.exceptions import ConnectionClosed
+
         ws = self._ws
         if ws is None:
             return
@@ -206,6 +211,8 @@ class VssClient:
         ws = self._ws
         if ws is None:
             raise ServerUnavailable(f"not connected to {self.url}")
+        from websockets.exceptions import ConnectionClosed
+
         rid = next(self._ids)
         fut = asyncio.get_running_loop().create_future()
         self._pending[rid] = fut

@@ -129,3 +129,43 @@ def test_where_beyond_the_iers_table_says_what_it_costs_stars_without_raw_erfa_l
     assert len(warnings) == 1, done.stderr
     assert "outside the IERS table" in warnings[0] and "stars" in warnings[0]
     assert "2030-06-01T22:00:00" in done.stdout
+
+
+def test_passes_flag_the_sunlit_passes_seen_from_a_dark_site_as_a_shadow_cylinder_says():
+    """A second implementation of 'visible': the ISS outside the Earth's cylindrical shadow
+    (sgp4 TEME positions, astropy's Sun) while the Sun is 6° below the site's horizon."""
+    import json
+
+    import astropy.units as u
+    import numpy as np
+    from astropy.coordinates import AltAz, EarthLocation, get_body
+    from astropy.time import Time
+    from sgp4.api import Satrec
+    from typer.testing import CliRunner
+
+    from catalogs import load_tle_file, sample_tle_path
+    from virtualstar.cli.main import app
+
+    res = CliRunner().invoke(app, ["passes", "--tle", str(sample_tle_path("stations")), "--sat",
+                                   "ISS", "--from", "2024-05-18T12:00:00Z", "--to",
+                                   "2024-05-19T06:00:00Z", "--min-el", "10", "--json"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)
+    rec = next(r for r in load_tle_file(sample_tle_path("stations")) if "ISS" in r.name)
+    sat = Satrec.twoline2rv(rec.line1, rec.line2)
+    site = EarthLocation.from_geodetic(16.8786 * u.deg, 52.3967 * u.deg, 85 * u.m)
+    for row in rows:
+        t = Time(row["culmination_utc"].rstrip("Z"), scale="utc")
+        _, r_km, _ = sat.sgp4(t.jd1, t.jd2)  # TEME, close enough to GCRS for a shadow
+        sun = get_body("sun", t).cartesian.xyz.to(u.km).value
+        s_hat = sun / np.linalg.norm(sun)
+        along = float(np.dot(r_km, s_hat))
+        off_axis = float(np.linalg.norm(np.asarray(r_km) - along * s_hat))
+        lit = along > 0 or off_axis > 6378.137
+        dark = get_body("sun", t).transform_to(AltAz(obstime=t, location=site)).alt.deg < -6.0
+        assert row["observer_in_darkness"] == dark, row
+        if lit and dark:
+            assert row["visible"], row
+        if not lit and not dark:
+            assert not row["visible"], row
+    assert any(r["visible"] for r in rows) and any(not r["visible"] for r in rows)

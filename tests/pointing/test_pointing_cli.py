@@ -84,7 +84,7 @@ def test_fit_auto_prints_the_selection_steps(tmp_path):
 
 
 @pytest.mark.parametrize(("args", "code", "fragment"), [
-    (["fit", "{missing}"], 1, "No such file"),
+    (["fit", "{missing}"], 2, "No such file"),  # a file named on the command line: an argument
     (["fit", "{bad}"], 1, "bad.dat:4"),
     (["fit", "{good}", "--terms", "IA,FOO"], 2, "unknown pointing term 'FOO'"),
     (["fit", "{good}", "--terms", "IA", "--auto"], 2, "either --terms or --auto"),

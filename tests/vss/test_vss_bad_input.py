@@ -71,7 +71,10 @@ def test_a_passive_server_refuses_motion_but_still_reports_status(rig):
     (["slew"], 2, "exactly one of"),
     (["slew", "--star", "Vega", "--altaz", "10 20"], 2, "exactly one of"),
     (["slew", "--star", "Vegaa"], 1, "did you mean"),
-    (["slew", "--altaz", "north 20"], 1, "must be numbers"),
+    (["slew", "--altaz", "north 20"], 2, "expected two numbers"),
+    (["slew", "--altaz", "400 45"], 2, "azimuth 400° is outside 0..360°"),
+    (["slew", "--radec", "25h61m +99d"], 2, "--radec: bad RA"),
+    (["track", "--radec", "12h00m +95d"], 2, "--radec"),
     (["track", "--tle", "/nonexistent/file.tle"], 2, "cannot read TLE file"),
     (["track", "--sat", "ISS", "--star", "Vega"], 2, "--tle"),
     (["track", "--star", "Vega", "--duration", "0"], 2, "positive"),
@@ -80,6 +83,16 @@ def test_bad_cli_arguments_exit_non_zero_with_a_clear_message(rig, args, code, w
     res = runner.invoke(app, [*args, "--server", rig.url])
     assert res.exit_code == code, res.output
     assert words in res.stderr
+
+
+def test_a_refused_command_with_json_prints_the_error_object_on_stdout(rig):
+    res = runner.invoke(app, ["slew", "--star", "Canopus", "--server", rig.url, "--json"])
+    assert res.exit_code == 1
+    error = json.loads(res.stdout)["error"]
+    assert error["code"] == "unreachable" and "Canopus" in error["message"]
+    res = runner.invoke(app, ["status", "--server", "ws://127.0.0.1:9", "--json"])
+    assert res.exit_code == 2
+    assert json.loads(res.stdout)["error"]["code"] == "server_unavailable"
 
 
 def test_the_cli_says_how_to_fix_an_unreachable_server():
@@ -109,3 +122,12 @@ def test_a_satellite_pass_beyond_the_allowed_wait_is_refused_with_its_start(rig)
         call_server(rig.url, "track", {"tle": tle, "sat": "ISS", "max_wait_s": 10})
     assert info.value.code == "unreachable"
     assert "more than the 10 s allowed" in info.value.message
+
+
+def test_watch_into_a_pipe_writes_one_line_per_update_as_it_comes(rig):
+    res = runner.invoke(app, ["watch", "--count", "3", "--interval", "0.05", "--server", rig.url])
+    assert res.exit_code == 0, res.output
+    lines = [x for x in res.stdout.splitlines() if x and not x.startswith("event")]
+    assert len(lines) == 3  # no table, no redraw codes: one line each
+    assert all(" az " in x and " el " in x and "clock" in x for x in lines), lines
+    assert "\x1b[" not in res.stdout

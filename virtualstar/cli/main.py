@@ -1,11 +1,105 @@
-"""Root of the `vs` command line; each command lives in a module of its own."""
+"""Root of the `vs` command line; each command lives in a module of its own.
 
-from typing import Annotated
+Commands are imported only when they run (or show their own help): `vs --help` and
+`vs status` must not pay for the astronomy, the recorder's Parquet stack or plotting
+(benchmarks/bench_cli_startup.py). The table below names each command's module and its
+one-line summary for the root help.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Annotated, Any
 
 import typer
+from typer.core import TyperCommand, TyperGroup
+
+__all__ = ["COMMANDS", "app", "main"]
+
+# name: (module, attribute, summary shown by `vs --help`)
+COMMANDS: dict[str, tuple[str, str, str]] = {
+    "where": ("virtualstar.cli.where", "where",
+        "Show where a target is: apparent RA/Dec, observed az/el and rates, "
+        "rise/culmination/set."),
+    "passes": ("virtualstar.cli.passes", "passes",
+        "List satellite passes: rise, culmination (time, elevation) and set; the closest "
+        "the pass comes to the Sun; with a horizon profile, when it is above that "
+        "profile."),
+    "panel": ("virtualstar.cli.panel", "panel",
+        "Serve the Robot Supervisor Panel; open the printed URL in a browser; Ctrl-C "
+        "stops."),
+    "record": ("virtualstar.cli.record", "record",
+        "Record NAME... from URL at --rate into --store until --duration or Ctrl-C."),
+    "server": ("virtualstar.cli.server", "server",
+        "Serve clients (vs status/slew/track/...) until Ctrl-C; the mount is fed "
+        "continuously."),
+    "status": ("virtualstar.cli.status", "status",
+        "Show encoder and observed position, RA/Dec, axis states, mount time and tracking "
+        "error."),
+    "slew": ("virtualstar.cli.slew", "slew",
+        "Slew to a target and wait until it lands; a sky target is then tracked until `vs "
+        "stop`."),
+    "track": ("virtualstar.cli.track", "track",
+        "Track a target; returns once tracking has begun (satellite: once the pass is "
+        "planned)."),
+    "stop": ("virtualstar.cli.stop", "stop",
+        "Stop the running operation; the mount ramps to rest and holds."),
+    "park": ("virtualstar.cli.park", "park",
+        "Park the mount (waits until parked)."),
+    "watch": ("virtualstar.cli.watch", "watch",
+        "Show status and tracking error live; keeps waiting through server restarts."),
+    "demo": ("virtualstar.cli.demo", "demo",
+        "Run the demo in one process (well under a minute) and print slew times and "
+        "tracking errors."),
+    "pointing-run": ("virtualstar.cli.pointing_run", "pointing_run",
+        "Slew to N stars, measure each with the guide camera, write a TPOINT data file."),
+    "mode": ("virtualstar.cli.mode", "mode",
+        "Switch the server between driving the mount (active) and watching it (passive)."),
+    "model": ("virtualstar.cli.model", "app",
+        "Load or drop the pointing model the server applies to every target."),
+    "data": ("virtualstar.cli.data", "app",
+        "Query, plot and export recorded signals."),
+    "experiment": ("virtualstar.cli.experiment", "app",
+        "Reproduce the paper's experiments on the mount emulator."),
+}
+
+
+class LazyGroup(TyperGroup):
+    """A Typer group that imports a command's module only when that command is used."""
+
+    _listing = False
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        return list(COMMANDS)
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        entry = COMMANDS.get(cmd_name)
+        if entry is None:
+            return None
+        module_name, attribute, summary = entry
+        if self._listing:  # the root help only needs the summaries
+            return TyperCommand(cmd_name, help=summary, short_help=summary)
+        target = getattr(importlib.import_module(module_name), attribute)
+        if isinstance(target, typer.Typer):
+            command = typer.main.get_group(target)  # a group even with one subcommand
+        else:
+            single = typer.Typer(add_completion=False)
+            single.command(cmd_name)(target)
+            command = typer.main.get_command(single)
+        command.name = cmd_name
+        return command
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        self._listing = True
+        try:
+            super().format_help(ctx, formatter)
+        finally:
+            self._listing = False
+
 
 app = typer.Typer(
     name="vs",
+    cls=LazyGroup,
     help="VirtualStar: point and track an alt-azimuth telescope mount.",
     no_args_is_help=True,
     add_completion=False,
@@ -21,42 +115,6 @@ def _root(password: Annotated[str | None, typer.Option(
     from virtualstar.cli.status import set_api_password
 
     set_api_password(password)
-
-from virtualstar.cli import data as _data  # noqa: E402
-from virtualstar.cli import demo as _demo  # noqa: E402
-from virtualstar.cli import experiment as _experiment  # noqa: E402
-from virtualstar.cli import mode as _mode  # noqa: E402
-from virtualstar.cli import model as _model  # noqa: E402
-from virtualstar.cli import panel as _panel  # noqa: E402
-from virtualstar.cli import park as _park  # noqa: E402
-from virtualstar.cli import passes as _passes  # noqa: E402
-from virtualstar.cli import pointing_run as _pointing_run  # noqa: E402
-from virtualstar.cli import record as _record  # noqa: E402
-from virtualstar.cli import server as _server  # noqa: E402
-from virtualstar.cli import slew as _slew  # noqa: E402
-from virtualstar.cli import status as _status  # noqa: E402
-from virtualstar.cli import stop as _stop  # noqa: E402
-from virtualstar.cli import track as _track  # noqa: E402
-from virtualstar.cli import watch as _watch  # noqa: E402
-from virtualstar.cli import where as _where  # noqa: E402
-
-app.command("where")(_where.where)
-app.command("passes")(_passes.passes)
-app.command("panel")(_panel.panel)
-app.command("record")(_record.record)
-app.command("server")(_server.server)
-app.command("status")(_status.status)
-app.command("slew")(_slew.slew)
-app.command("track")(_track.track)
-app.command("stop")(_stop.stop)
-app.command("park")(_park.park)
-app.command("watch")(_watch.watch)
-app.command("demo")(_demo.demo)
-app.command("pointing-run")(_pointing_run.pointing_run)
-app.command("mode")(_mode.mode)
-app.add_typer(_model.app, name="model")
-app.add_typer(_data.app, name="data")
-app.add_typer(_experiment.app, name="experiment")
 
 
 def main() -> None:

@@ -25,7 +25,7 @@ def mode(
     as_json: JsonOpt = False,
 ) -> None:
     """Switch the server between driving the mount (active) and watching it (passive)."""
-    result = ask(server, "set_mode", {"mode": which.value})
+    result = ask(server, "set_mode", {"mode": which.value}, quiet=as_json)
     if as_json:
         print_json(result)
     else:

@@ -12,7 +12,7 @@ from virtualstar.cli.status import JsonOpt, ServerOpt, ask, print_json
 __all__ = ["app"]
 
 app = typer.Typer(help="Load or drop the pointing model the server applies to every target.",
-                  no_args_is_help=True)
+                  no_args_is_help=True, add_completion=False)
 
 
 @app.command("load")
@@ -25,7 +25,8 @@ def load(
 ) -> None:
     """Load a pointing model into the server: from now on targets are corrected by it."""
     path = Path(file).expanduser()
-    result = ask(server, "load_model", {"path": str(path.resolve()) if path.exists() else file})
+    result = ask(server, "load_model",
+                 {"path": str(path.resolve()) if path.exists() else file}, quiet=as_json)
     if as_json:
         print_json(result)
         return
@@ -36,7 +37,7 @@ def load(
 @app.command("unload")
 def unload(server: ServerOpt = None, as_json: JsonOpt = False) -> None:
     """Drop the pointing model: targets go to the encoders uncorrected."""
-    result = ask(server, "unload_model")
+    result = ask(server, "unload_model", quiet=as_json)
     if as_json:
         print_json(result)
     else:

@@ -77,21 +77,41 @@ def passes(
         return
     typer.echo(f"{satellite.name}: {len(rows)} passes above {min_el:g} deg from {the_site.name}")
     typer.echo(f"{'rise UTC':24} {'az':>6}   {'culmination UTC':24} {'el':>5} {'az':>6}   "
-               f"{'set UTC':24} {'az':>6}  {'sun_sep_min':>11}"
+               f"{'set UTC':24} {'az':>6}  {'sun_sep_min':>11}  {'visible':7}"
                + (f"  {'above the horizon profile (UTC)':45}" if zones.horizon else ""))
     for r in rows:
         line = (f"{r['rise_utc'] or '(before start)':24} {_num(r['rise_az_deg'])}   "
                 f"{r['culmination_utc']:24} {r['culmination_el_deg']:5.1f} "
                 f"{r['culmination_az_deg']:6.1f}   {r['set_utc'] or '(after end)':24} "
-                f"{_num(r['set_az_deg'])}  {_num(r['sun_min_separation_deg'], 11)}")
+                f"{_num(r['set_az_deg'])}  {_num(r['sun_min_separation_deg'], 11)}  "
+                f"{_visibility(r):7}")
         if zones.horizon:
             line += (f"  {r['above_horizon_from_utc'] or '-'} .. "
                      f"{r['above_horizon_to_utc'] or '-'}")
         typer.echo(line)
 
 
+DARK_SUN_EL_DEG = -6.0  # civil twilight's end: the sky is dark enough to see a satellite
+
+
+def _sunlit(satellite, times, eop) -> np.ndarray:
+    from skyfield.api import EarthSatellite
+
+    from virtualstar.astro.bodies import skyfield_context
+
+    ctx = skyfield_context(eop)
+    sat = EarthSatellite.from_satrec(satellite.satrec, ctx.ts)
+    return np.asarray(sat.at(ctx.ts.tt_jd(*times.tt())).is_sunlit(ctx.ephemeris), bool)
+
+
 def _num(value: float | None, width: int = 6) -> str:
     return f"{value:{width}.1f}" if value is not None else f"{'-':>{width}}"
+
+
+def _visibility(r: dict) -> str:
+    if r["visible"]:
+        return "yes"
+    return "sunlit" if r["sunlit"] else "shadow"
 
 
 def _pass_sky(satellite, p, site, zones, eop) -> dict:
@@ -104,6 +124,13 @@ def _pass_sky(satellite, p, site, zones, eop) -> dict:
     sun_az, sun_el = body_places(times, site, eop, ("sun",))["sun"]
     sep = np.degrees(erfa.seps(obs.az_rad, obs.el_rad, sun_az, sun_el))
     out = {"sun_min_separation_deg": round(float(sep.min()), 3)}
+    # sunlit (out of the Earth's shadow, skyfield) while the observer is in darkness
+    # (the Sun more than 6° below the horizon): a pass the eye can see, as Heavens-Above says
+    sunlit = _sunlit(satellite, times, eop)
+    dark = np.degrees(sun_el) < DARK_SUN_EL_DEG
+    k = int(np.argmax(obs.el_rad))
+    out.update({"sunlit": bool(sunlit.any()), "observer_in_darkness": bool(dark[k]),
+                "visible": bool((sunlit & dark).any())})
     if zones.horizon is not None:
         above = np.degrees(obs.el_rad) >= zones.min_el_deg(obs.az_rad)
         idx = np.flatnonzero(above)

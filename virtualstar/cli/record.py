@@ -68,8 +68,10 @@ def record(
     try:
         summary = asyncio.run(_run(recorder, duration))
     except (RecorderError, AstcomError, OSError) as exc:
-        # 1: the endpoint refused (a wire error); 2: our mistake or no connection at all
-        code = 1 if isinstance(exc, AstcomError) and not isinstance(exc, ConnectionError) else 2
+        # 1: the endpoint refused (a wire error); 2: a bad argument (a rate or name the
+        # device cannot serve: 422), our mistake, or no connection at all
+        code = 1 if (isinstance(exc, AstcomError) and not isinstance(exc, ConnectionError)
+                     and getattr(exc, "code", None) not in (404, 422)) else 2
         raise _fail(f"{url}: {exc}", code) from None
     summary.store = ", ".join(str(s) for s in specs)
     if json_out:

@@ -57,7 +57,7 @@ def server(
     listen: Annotated[str, typer.Option(
         "--listen", help="Where clients connect: ws://HOST:PORT.")] = f"ws://127.0.0.1:{DEFAULT_PORT}",
     site_file: Annotated[Path | None, typer.Option(
-        "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a [site] table.")] = None,
+        "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a \\[site] table (and optionally \\[safety]).")] = None,
     site: Annotated[str | None, typer.Option(
         "--site", help="Site as LAT,LON,HEIGHT_M (degrees, degrees east, metres).")] = None,
     sun_radius: Annotated[float | None, typer.Option(

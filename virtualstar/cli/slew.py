@@ -26,11 +26,41 @@ StarOpt = Annotated[str | None, typer.Option(
 
 
 def target_params(radec: str | None, altaz: str | None, star: str | None) -> dict[str, Any]:
-    """Return the API target parameters of exactly one option, or exit with an error."""
+    """Return the API target parameters of exactly one option, or exit (2) with an error.
+
+    --radec and --altaz are checked here, so a malformed one is a bad argument (2), not a
+    refusal by the server (1).
+    """
     given = {k: v for k, v in (("radec", radec), ("altaz", altaz), ("star", star)) if v}
     if len(given) != 1:
         raise fail("give exactly one of --radec \"RA DEC\", --altaz \"AZ EL\" or --star NAME")
+    if radec:
+        check_radec(radec)
+    if altaz:
+        check_altaz(altaz)
     return given
+
+
+def check_radec(text: str) -> None:
+    from virtualstar.astro import AstroError, parse_radec
+
+    try:
+        parse_radec(text)
+    except AstroError as exc:
+        raise fail(f"--radec: {exc}") from None
+
+
+def check_altaz(text: str) -> None:
+    parts = text.replace(",", " ").split()
+    try:
+        az, el = (float(p) for p in parts)
+    except ValueError:
+        raise fail(f"--altaz {text!r}: expected two numbers \"AZ EL\" in degrees, e.g. "
+                   "\"180 45\"") from None
+    if not 0.0 <= az < 360.0:
+        raise fail(f"--altaz {text!r}: azimuth {az:g}° is outside 0..360° (north through east)")
+    if not -90.0 <= el <= 90.0:
+        raise fail(f"--altaz {text!r}: elevation {el:g}° is outside -90..90°")
 
 
 def op_table(op: dict[str, Any], title: str) -> Table:

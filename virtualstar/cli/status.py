@@ -15,13 +15,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from virtualstar.vss_client import (
-    SERVER_ENV_VAR,
-    ServerUnavailable,
-    VssRequestError,
-    call_server,
-    default_server_url,
-)
+from virtualstar.vss_client import SERVER_ENV_VAR, default_server_url
 
 __all__ = ["JsonOpt", "ServerOpt", "api_password", "ask", "fail", "render_status", "set_api_password",
            "status"]
@@ -55,7 +49,11 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
     """Send one command to the server and return its result, or exit with a clear error.
 
     progress=True shows the server's operation events under a spinner (humans only).
+    With `quiet` (the command's --json), a failure also prints a JSON error object on
+    stdout (`{"error": {"code", "message"}}`), so a script parses the same stream either way.
     """
+    from virtualstar.vss_client import ServerUnavailable, VssRequestError, call_server
+
     url = server or default_server_url()
     console = Console(stderr=True)
     try:
@@ -75,8 +73,12 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
                                    password=api_password())
         return call_server(url, cmd, params, password=api_password())
     except VssRequestError as exc:
+        if quiet:
+            print_json({"error": {"code": exc.code, "message": exc.message}})
         raise fail(f"the server refused {cmd}: {exc.message} [{exc.code}]", 1) from None
     except ServerUnavailable as exc:
+        if quiet:
+            print_json({"error": {"code": "server_unavailable", "message": str(exc)}})
         raise fail(str(exc), 2) from None
 
 
@@ -125,6 +127,7 @@ def render_status(st: dict[str, Any]) -> Table:
     buf = st["buffer"]
     t.add_row("trajectory buffer", f"{buf.get('points')} points, {buf['free_points']} free, "
                                    f"{buf.get('underruns')} underruns")
+    t.add_row("pointing model", st.get("pointing_model") or "none (encoders = observed)")
     op = st.get("operation")
     if op:
         t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
@@ -153,7 +156,7 @@ def _time_mode(st: dict[str, Any]) -> str:
 
 def status(server: ServerOpt = None, as_json: JsonOpt = False) -> None:
     """Show encoder and observed position, RA/Dec, axis states, mount time and tracking error."""
-    st = ask(server, "status")
+    st = ask(server, "status", quiet=as_json)
     if as_json:
         print_json(st)
     else:

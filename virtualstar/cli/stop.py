@@ -18,7 +18,7 @@ def stop(
     as_json: JsonOpt = False,
 ) -> None:
     """Stop the running operation; the mount ramps to rest and holds."""
-    result = ask(server, "stop", {"reset_faults": reset_faults})
+    result = ask(server, "stop", {"reset_faults": reset_faults}, quiet=as_json)
     if as_json:
         print_json(result)
     else:

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from virtualstar.cli.slew import AllowSunOpt, RadecOpt, StarOpt, op_table
+from virtualstar.cli.slew import AllowSunOpt, RadecOpt, StarOpt, check_radec, op_table
 from virtualstar.cli.status import JsonOpt, ServerOpt, ask, fail, print_json
 
 __all__ = ["track"]
@@ -53,6 +53,7 @@ def track(
         if sat:
             params["sat"] = sat
     elif radec:
+        check_radec(radec)
         params["radec"] = radec
     else:
         params["star"] = star

@@ -27,11 +27,13 @@ from virtualstar.astro.avoidance import body_places
 from virtualstar.astro.observed import topocentric_apparent_radec
 from virtualstar.astro.site import site_from_options
 
+SATELLITE_LOOKBACK_S = 1800.0  # a satellite up now rose within the last half hour
+
 SiteOpt = Annotated[str | None, typer.Option(
     "--site", help="Site as LAT,LON,HEIGHT_M (degrees, degrees east, metres); "
                    "default: the site TOML ($VIRTUALSTAR_SITE or the packaged default).")]
 SiteFileOpt = Annotated[Path | None, typer.Option(
-    "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a [site] table.")]
+    "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a \\[site] table.")]
 PressureOpt = Annotated[float | None, typer.Option(
     "--pressure-hpa", help="Air pressure for refraction, hPa (0 switches refraction off).")]
 TemperatureOpt = Annotated[float | None, typer.Option(
@@ -201,9 +203,10 @@ def _compute(obj: Any, times: UtcTimes, site: Site) -> tuple[Any, list[_Row], li
     rows = [dataclasses.replace(r, sun_separation_deg=round(float(d), 4))
             for r, d in zip(rows, sep, strict=True)]
     events = []
+    back_s = SATELLITE_LOOKBACK_S if isinstance(obj, Satellite) else 86400.0
     for i in range(len(times)):
-        found = find_events(obj, site, times[i], 86400.0, eop=eop)
-        events.append(_event_fields(found))
+        found = find_events(obj, site, times[i].shifted(-back_s), back_s + 86400.0, eop=eop)
+        events.append(_event_fields(found, times[i], float(obs.el_rad[i]) > 0.0))
     return obj, rows, events
 
 
@@ -214,15 +217,45 @@ def _row_fields(row: _Row) -> dict:
     return fields
 
 
-def _event_fields(found) -> dict:
+def _event_fields(found, now: UtcTimes, up_now: bool) -> dict:
+    """Rise, culmination and set of the visibility now (up) or the next one (down).
+
+    Up now: the rise is the one before now (None if it was up all the time searched),
+    then the next culmination and set. Down now: the next rise, culmination and set.
+    `visibility` says which, or `circumpolar` / `never rises` over the next 24 h.
+    """
+    def t(ev) -> float:
+        return float(ev.utc.seconds_since(now.jd1[0], now.jd2[0])[0])
+
+    past = [ev for ev in found if t(ev) <= 0]
+    future = [ev for ev in found if t(ev) > 0]
     fields: dict[str, Any] = {"rise_utc": None, "culmination_utc": None,
                               "culmination_el_deg": None, "set_utc": None}
-    for ev in found:
+    if up_now:
+        rises = [i for i, ev in enumerate(past) if ev.kind == "rise"]
+        if rises:
+            fields["rise_utc"] = past[rises[-1]].utc.iso()[0]
+        # this visibility's culmination may be behind us already
+        chosen = [ev for ev in past[rises[-1] + 1:] if ev.kind == "culmination"] \
+            if rises else []
+        chosen = chosen[-1:] + future
+    else:
+        first_rise = next((i for i, ev in enumerate(future) if ev.kind == "rise"), None)
+        chosen = future[first_rise:] if first_rise is not None else []
+    for ev in chosen:
         key = f"{ev.kind}_utc"
-        if fields[key] is None:
+        if fields[key] is None and not (ev.kind == "rise" and up_now):
             fields[key] = ev.utc.iso()[0]
             if ev.kind == "culmination":
                 fields["culmination_el_deg"] = round(ev.el_deg, 4)
+        if ev.kind == "set":
+            break
+    sets = any(ev.kind == "set" for ev in future)
+    rises = any(ev.kind == "rise" for ev in future)
+    if up_now:
+        fields["visibility"] = "up now" if sets else "circumpolar"
+    else:
+        fields["visibility"] = "down" if rises else "never rises"
     return fields
 
 
@@ -250,8 +283,11 @@ def _print_table(obj: Any, site: Site, rows: list[_Row], events: list[dict]) -> 
                    f"{row.sun_separation_deg:11.2f}")
         culm = (f"{ev['culmination_utc']} (el {ev['culmination_el_deg']:.2f})"
                 if ev["culmination_utc"] else "-")
-        typer.echo(f"{'':24} next 24 h: rise {ev['rise_utc'] or '-'}, culmination {culm}, "
-                   f"set {ev['set_utc'] or '-'}")
+        if ev["visibility"] in ("circumpolar", "never rises"):
+            typer.echo(f"{'':24} {ev['visibility']} (next 24 h); culmination {culm}")
+        else:
+            typer.echo(f"{'':24} {ev['visibility']}: rise {ev['rise_utc'] or '(before the search)'}"
+                       f", culmination {culm}, set {ev['set_utc'] or '-'}")
 
 
 __all__ = ["where"]

@@ -50,8 +50,10 @@ def parse_target(params: dict[str, Any]) -> tuple[Any, str, tuple[float, float] 
             az, el = _number(params, "az_deg"), _number(params, "el_deg")
     except AstroError as exc:
         raise BadRequest(str(exc)) from None
-    if not (math.isfinite(az) and -90.0 <= el <= 90.0):
-        raise BadRequest(f"az {az}, el {el}: expected a finite azimuth and -90 <= el <= 90 degrees")
+    if not (math.isfinite(az) and 0.0 <= az < 360.0):
+        raise BadRequest(f"az {az:g}: expected 0 <= az < 360 degrees (north through east)")
+    if not -90.0 <= el <= 90.0:
+        raise BadRequest(f"el {el:g}: expected -90 <= el <= 90 degrees")
     return None, f"az {az:g} el {el:g}", (az, el)
 
 
