@@ -86,6 +86,8 @@ class DemoResult:
     pass_info: dict[str, Any] = field(default_factory=dict)
     series: dict[str, list] = field(default_factory=dict)
     time_sync: dict[str, Any] = field(default_factory=dict)
+    spans: list[tuple[str, int, int]] = field(default_factory=list)  # what the mount did, when
+    encoder_quantum_arcsec: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {"phases": [p.as_dict() for p in self.phases], "plot": self.plot,
@@ -130,7 +132,7 @@ def run_demo(config: DemoConfig = DemoConfig(),
     clock = LockstepClock(start_us, pace=config.speed)
     result = run_lockstep(_run(config, site, sat, tle_text, rise_us, set_us, culm, say, clock),
                           clock)
-    result.plot = str(_plot(result.series, result.phases, config.out_dir))
+    result.plot = str(_plot(result, config.out_dir))
     result.wall_s = time.perf_counter() - wall0
     return result
 
@@ -175,12 +177,22 @@ async def _run(config: DemoConfig, site: Site, sat: Satellite, tle_text: str, ri
         sidereal = (await vs.request("errors", {"from_us": info["tracking_from_us"],
                                                 "to_us": info["tracking_to_us"]}))["stats"]
         result.phases.append(_phase(f"sidereal tracking {star}", star, sidereal))
+        result.spans += [(f"slew to {star}", info["slew_from_us"], landed),
+                         ("settle", landed, info["tracking_from_us"]),
+                         (f"track {star}", info["tracking_from_us"], info["tracking_to_us"])]
+        star_end = info["tracking_to_us"]
         say(f"waiting for {sat.name} (pass {_iso(rise_us)} .. {_iso(set_us)})")
         op = await vs.request("track", {"tle": tle_text, "sat": sat.name, "wait": True})
         info = op["info"]
         passing = (await vs.request("errors", {"from_us": info["tracking_from_us"],
                                                "to_us": info["tracking_to_us"]}))["stats"]
         result.phases.append(_phase(f"satellite pass {sat.name}", sat.name, passing))
+        result.spans += [("hold", star_end, info["slew_from_us"]),
+                         ("slew, wait for the pass", info["slew_from_us"],
+                          info["tracking_from_us"]),
+                         (f"{sat.name.split(' (')[0]} pass", info["tracking_from_us"],
+                          info["tracking_to_us"])]
+        result.encoder_quantum_arcsec = await _encoder_quantum_arcsec(vss)
         result.pass_info.update({k: info.get(k) for k in (
             "keyhole", "keyhole_max_error_arcsec", "max_az_rate_deg_s")})
         result.series = (await vs.request("errors", {"series": True, "max_points": 4000,
@@ -196,33 +208,66 @@ def _phase(name: str, target: str, stats: dict[str, Any], *,
                      stats["on_sky_peak_arcsec"], stats["clock_offset_us"])
 
 
-def _plot(series: dict[str, list], phases: list[DemoPhase], out_dir: Path) -> Path:
+async def _encoder_quantum_arcsec(vss) -> float:
+    """One count of the azimuth encoder on the sky (arcsec), read from the emulator."""
+    client = await vss.emulator.connect_in_memory(name="demo")
+    try:
+        bits = (await client.read(["axis.az.encoder_bits"]))["axis.az.encoder_bits"]
+    finally:
+        await client.close()
+    return 360.0 * 3600.0 / 2.0 ** float(bits)
+
+
+_SPAN_COLOURS = {"slew": "tab:orange", "settle": "tab:purple", "track": "tab:green",
+                 "hold": "tab:gray", "wait": "tab:orange", "pass": "tab:blue"}
+
+
+def _plot(result: DemoResult, out_dir: Path) -> Path:
+    """Tracking error over the whole demo: every phase labelled, per axis, and the encoder
+    quantum (below it the error is the encoders' resolution, not the tracking)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    series = result.series
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "tracking-error.png"
     t = np.asarray(series["t_us"], dtype=np.int64)
     t0 = int(t[0]) if t.size else 0
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    for p in phases:
-        if "landing" in p.name:
-            continue
-        ax.axvspan((p.from_us - t0) / 1e6, (p.to_us - t0) / 1e6, alpha=0.12,
-                   color="tab:green" if "sidereal" in p.name else "tab:blue")
-        ax.text((p.from_us - t0) / 1e6, 0.95, p.name, transform=ax.get_xaxis_transform(),
-                fontsize=8, va="top")
-    ax.semilogy((t - t0) / 1e6, np.maximum(series["peak_arcsec"], 1e-4), lw=0.6,
-                color="tab:red", label="peak per 0.1 s")
-    ax.semilogy((t - t0) / 1e6, np.maximum(series["rms_arcsec"], 1e-4), lw=0.8,
-                color="tab:blue", label="RMS per 0.1 s")
-    ax.set_xlabel(f"mount time since {_iso(t0)} [s]")
-    ax.set_ylabel("on-sky following error [arcsec]")
-    ax.set_title("VirtualStar demo: tracking error (slews, sidereal, satellite pass)")
+    x = (t - t0) / 1e6
+    fig, ax = plt.subplots(figsize=(11, 5))
+    total_s = max((x[-1] - x[0]) if x.size else 1.0, 1.0)
+    row = 0
+    for label, a, b in result.spans:
+        colour = next((c for key, c in _SPAN_COLOURS.items() if key in label), "tab:gray")
+        ax.axvspan((a - t0) / 1e6, (b - t0) / 1e6, alpha=0.13, color=colour, lw=0)
+        short = (b - a) / 1e6 < 0.03 * total_s
+        ax.text((a - t0) / 1e6 + (0 if short else (b - a) / 2e6), 0.98 - 0.05 * row, label,
+                ha="left" if short else "center", va="top", fontsize=8, color=colour,
+                transform=ax.get_xaxis_transform())
+        row = (row + 1) % 4
+    floor = 1e-4
+    ax.semilogy(x, np.maximum(series["peak_arcsec"], floor), lw=0.6, color="tab:red",
+                label="peak per 0.1 s (on the sky)")
+    ax.semilogy(x, np.maximum(series["rms_arcsec"], floor), lw=0.9, color="black",
+                label="RMS per 0.1 s (on the sky)")
+    ax.semilogy(x, np.maximum(series["az_rms_arcsec"], floor), lw=0.6, color="tab:cyan",
+                label="azimuth RMS (× cos el)")
+    ax.semilogy(x, np.maximum(series["el_rms_arcsec"], floor), lw=0.6, color="tab:olive",
+                label="elevation RMS")
+    if result.encoder_quantum_arcsec:
+        q = result.encoder_quantum_arcsec
+        ax.axhline(q, color="tab:brown", ls="--", lw=0.8)
+        ax.text(0.005, q * 1.1, f"one encoder count = {q:.4f}″: below it, the encoders' "
+                "resolution, not tracking", transform=ax.get_yaxis_transform(), fontsize=7,
+                color="tab:brown", va="bottom")
+    ax.set_xlabel(f"mount time since {_iso(t0)} UTC [s]")
+    ax.set_ylabel("following error [arcsec]")
+    ax.set_title("VirtualStar demo: tracking error through slews, sidereal tracking and an "
+                 "ISS pass (lockstep simulated time)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(loc="lower right")
+    ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -321,8 +321,9 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
     if stops is not None:
         op.info["zone_stop"] = stops
     plan = dataclasses.replace(plan, path=plan.path.between(join_us, set_us))
-    t.supervisor.phase(op, Phase.PLANNED, pass_start_us=join_us, pass_end_us=set_us,
-                       pass_start_utc=iso_utc(join_us, 3), pass_end_utc=iso_utc(set_us, 3),
+    t.supervisor.phase(op, Phase.PLANNED, slew_from_us=here.t_us, pass_start_us=join_us,
+                       pass_end_us=set_us, pass_start_utc=iso_utc(join_us, 3),
+                       pass_end_utc=iso_utc(set_us, 3),
                        pass_rise_utc=None if window.rise_us is None else iso_utc(window.rise_us, 3),
                        pass_in_progress=choice.in_progress,
                        culmination_el_deg=window.culmination_el_deg,

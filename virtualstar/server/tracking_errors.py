@@ -197,14 +197,18 @@ class TrackingErrorHistory:
 
     def series(self, from_us: int | None = None, to_us: int | None = None,
                max_points: int = 5000) -> dict[str, list]:
-        """Return per-bin (t_us, rms, peak) in arcsec, decimated to at most `max_points`."""
+        """Return per-bin (t_us, rms, peak, az and el RMS on the sky) in arcsec, decimated to
+        at most `max_points`."""
         sel = self._select(from_us, to_us)
         step = max(1, math.ceil(len(sel) / max_points))
-        out: dict[str, list] = {"t_us": [], "rms_arcsec": [], "peak_arcsec": []}
+        out: dict[str, list] = {"t_us": [], "rms_arcsec": [], "peak_arcsec": [],
+                                "az_rms_arcsec": [], "el_rms_arcsec": []}
         for k in range(0, len(sel), step):
             group = sel[k:k + step]
             n = sum(b[1] for b in group)
             out["t_us"].append(int(group[0][0] * self.bin_us))
             out["rms_arcsec"].append(math.sqrt(sum(b[2] for b in group) / n))
             out["peak_arcsec"].append(max(b[5] for b in group))
+            out["az_rms_arcsec"].append(math.sqrt(sum(b[3] for b in group) / n))
+            out["el_rms_arcsec"].append(math.sqrt(sum(b[4] for b in group) / n))
         return out
