@@ -163,3 +163,36 @@ def test_zone_radii_outside_0_to_90_are_refused():
     with pytest.raises(ValueError, match="moon_radius_deg"):
         AvoidanceZones(moon_radius_deg=120)
     assert Horizon((0.0,), (5.0,)).min_el_rad(np.array([1.0])) == pytest.approx(math.radians(5))
+
+
+def test_a_mount_inside_the_zone_may_leave_it_but_not_by_crossing_the_sun():
+    t = noon_us()
+    saz, sel = (float(x[0]) for x in astropy_body("sun", np.array([t])))
+    def same_el(sep_deg: float, side: float) -> tuple[float, float]:
+        # a place at the Sun's elevation sep_deg from it: moving in azimuth between two of
+        # them goes straight through the Sun
+        d_az = 2 * math.asin(math.sin(math.radians(sep_deg) / 2) / math.cos(sel))
+        return saz + side * d_az, sel
+
+    start = same_el(25.0, -1)  # inside, on one side
+    across = same_el(40.0, +1)  # outside, on the other side
+    away = same_el(45.0, -1)  # outside, further on the first side
+    limits, zones = MountLimits(), AvoidanceZones()
+    assert min_sun_separation_deg([start, across], t, limits) < 5.0  # straight = through it
+    legs, hit = slew_route(*start, *across, t, limits, zones, SITE)
+    assert hit is not None or min_sun_separation_deg([start, *legs], t, limits) >= 24.9
+    legs, hit = slew_route(*start, *away, t, limits, zones, SITE)
+    assert hit is None and legs == [away]  # leaving straight away from it is fine
+
+
+def test_the_stow_may_lie_inside_the_zone_but_the_way_there_goes_no_deeper():
+    t = noon_us()
+    saz, sel = (float(x[0]) for x in astropy_body("sun", np.array([t])))
+    stow = offset(saz, sel, 20.0, 0.0)  # the park position, 20° from the Sun
+    start = offset(saz, sel, 60.0, 0.0)
+    limits, zones = MountLimits(), AvoidanceZones()
+    legs, hit = slew_route(*start, *stow, t, limits, zones, SITE)
+    assert hit is not None  # not exempt: refused
+    legs, hit = slew_route(*start, *stow, t, limits, zones, SITE, target_exempt=True)
+    assert hit is None
+    assert min_sun_separation_deg([start, *legs], t, limits) >= 19.9

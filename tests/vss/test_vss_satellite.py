@@ -156,9 +156,10 @@ def test_a_pass_already_past_culmination_is_joined_where_it_is_and_tracked_to_it
     info = op["info"]
     assert info["pass_in_progress"] is True
     assert info["pass_start_us"] - start_us < 60_000_000  # joined within a minute
-    assert abs(info["pass_end_us"] - events["set"]) < 2_000_000
+    # it stops before the set, by the run-out after its end (half a 2-s ramp and 1 s)
+    assert 0 <= events["set"] - info["pass_end_us"] < 4_000_000
     assert done["phase"] == "done" and done["info"]["ended"] == "the pass ended"
-    assert done["info"]["tracking_to_us"] >= events["set"] - 2_000_000
+    assert done["info"]["tracking_to_us"] >= events["set"] - 4_000_000
     assert done["info"]["tracking_rms_arcsec"] < 2.0
     # the encoders sit on skyfield's ISS all along the part of the pass that was left
     sf = _skyfield()

@@ -51,6 +51,7 @@ DEFAULT_SUN_RADIUS_DEG = 30.0
 ROUTE_STEP_S = 0.5  # slew paths are judged every half second
 _OVER_THE_TOP_DEG = 85.0  # a detour may cross over the top at this elevation
 _CROSSING_MARGIN_DEG = 3.0  # ... or this far above or below a zone
+_DRIFT_DEG = 0.01  # the body moves a little during a slew: tolerated when leaving a zone
 
 
 @dataclass(frozen=True)
@@ -215,10 +216,13 @@ def _hit(zone: str, i, t, az, el, separation, limit) -> ZoneHit:
 
 def slew_route(from_az_rad: float, from_el_rad: float, to_az_rad: float, to_el_rad: float,
                t_us: int, limits: MountLimits, zones: AvoidanceZones, site: Site,
-               eop: EarthOrientation | None = None) -> tuple[list[tuple[float, float]], ZoneHit | None]:
+               eop: EarthOrientation | None = None, *,
+               target_exempt: bool = False) -> tuple[list[tuple[float, float]], ZoneHit | None]:
     """Return (waypoints, None) for a slew whose path keeps out of the Sun/Moon zones.
 
-    A mount that starts inside a zone may leave it; a path may not enter one.
+    A mount that starts inside a zone may leave it, moving away from the body all the
+    while; otherwise a path may not enter a zone. `target_exempt` (the park position,
+    the stow) lets the final approach end inside, moving towards its target only.
     Azimuths are mount (cable-wrap) angles. The waypoints end with the target; the
     first candidate that is clear wins: straight; azimuth first (el held); elevation
     first (az held); then across at another elevation — high (85°), just above the
@@ -235,7 +239,8 @@ def slew_route(from_az_rad: float, from_el_rad: float, to_az_rad: float, to_el_r
         candidates.append([(from_az_rad, el), (to_az_rad, el), target])
     first_hit = None
     for legs in candidates:
-        hit = _route_hit([(from_az_rad, from_el_rad), *legs], t_us, limits, zones, site, eop)
+        hit = _route_hit([(from_az_rad, from_el_rad), *legs], t_us, limits, zones, site, eop,
+                         target_exempt)
         if hit is None:
             return legs, None
         first_hit = first_hit or hit
@@ -259,7 +264,8 @@ def _crossing_elevations_rad(t_us: int, limits: MountLimits, zones: AvoidanceZon
 
 
 def _route_hit(points: list[tuple[float, float]], t_us: int, limits: MountLimits,
-               zones: AvoidanceZones, site: Site, eop) -> ZoneHit | None:
+               zones: AvoidanceZones, site: Site, eop, target_exempt: bool = False
+               ) -> ZoneHit | None:
     az_parts, el_parts, t_parts = [], [], []
     t0 = t_us
     for (a0, e0), (a1, e1) in zip(points[:-1], points[1:], strict=True):
@@ -273,16 +279,28 @@ def _route_hit(points: list[tuple[float, float]], t_us: int, limits: MountLimits
     hits = zone_hits(az, el, t, zones, site, eop, horizon=False)
     found = []
     for name, (inside, *rest) in hits.items():
-        # a mount that starts inside a zone (the Sun came to it) may leave it; only a
-        # path that enters a zone after being outside is refused
-        outside = np.flatnonzero(~inside)
-        if outside.size == 0:
-            found.append(_hit(name, len(inside) - 1, *rest))
-            continue
-        again = np.flatnonzero(inside[outside[0]:])
-        if again.size:
-            found.append(_hit(name, outside[0] + again[0], *rest))
+        sep = rest[3]
+        bad = inside.copy()
+        # a mount that starts inside a zone (the Sun came to it) may leave it, but only
+        # by moving away from the body: no sample of that first stretch may come nearer
+        lead = _run_length(inside)
+        if lead:
+            bad[:lead] = sep[:lead] < np.maximum.accumulate(sep[:lead]) - _DRIFT_DEG
+        if target_exempt:  # the stow: the last stretch may end inside, never deeper than it
+            tail = _run_length(inside[::-1])
+            if tail and tail < len(inside):
+                end = len(inside) - tail
+                bad[end:] = sep[end:] < sep[-1] - _DRIFT_DEG
+        idx = np.flatnonzero(bad)
+        if idx.size:
+            found.append(_hit(name, idx[0], *rest))
     return min(found, key=lambda h: h.index) if found else None
+
+
+def _run_length(mask: np.ndarray) -> int:
+    """Return how many leading elements of `mask` are True."""
+    off = np.flatnonzero(~mask)
+    return int(off[0]) if off.size else len(mask)
 
 
 def load_horizon_file(path: str | Path) -> Horizon:

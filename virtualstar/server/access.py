@@ -108,6 +108,8 @@ class Session:
         """Check an `auth` request; return {"role", "server_proof"}; raise Unauthorized."""
         if not self.access.required:
             return {"role": self.role.label, "server_proof": None}
+        if self.closed_for_failures:  # several auth requests in flight at once: no more guesses
+            raise Unauthorized("too many wrong passwords; closing the connection")
         unknown = sorted(set(params) - {"client_nonce", "mac", "role"})
         if unknown:
             raise BadRequest(f"auth: unknown parameters {unknown}; valid: client_nonce, mac, role")

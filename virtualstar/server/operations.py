@@ -73,7 +73,7 @@ _END = frozenset({Phase.FAILED, Phase.ABORTED, Phase.INTERRUPTED})
 
 TRANSITIONS: dict[Phase, frozenset[Phase]] = {
     Phase.STARTING: frozenset({Phase.PREPARING}) | _END,
-    Phase.PREPARING: frozenset({Phase.PLANNED, Phase.SLEWING}) | _END,
+    Phase.PREPARING: frozenset({Phase.PLANNED, Phase.SLEWING, Phase.WAITING}) | _END,
     Phase.PLANNED: frozenset({Phase.SLEWING, Phase.WAITING}) | _END,
     Phase.SLEWING: frozenset({Phase.SLEWING, Phase.WAITING, Phase.JOINING, Phase.SETTLING,
                               Phase.MEASURING}) | _END,

@@ -150,11 +150,11 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
 
 
 async def goto_safely(t: Telescope, op: Operation, az_rad: float, el_rad: float, what: str, *,
-                      allow_sun: bool):
+                      allow_sun: bool, stow: bool = False):
     """Slew to encoder angles along a path out of the Sun/Moon zones (a detour if need be)."""
     here = await t.motion.position()
     legs = t.safety.route(here.az_rad, here.el_rad, az_rad, el_rad, here.t_us, what,
-                          allow_sun=allow_sun)
+                          allow_sun=allow_sun, stow=stow)
     if len(legs) > 1:
         op.info["detour_deg"] = [[round(math.degrees(a), 3), round(math.degrees(e), 3)]
                                  for a, e in legs[:-1]]
@@ -225,7 +225,7 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
 
 
 async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, *,
-                     power_off: bool, allow_sun: bool = False) -> dict[str, Any]:
+                     power_off: bool, allow_sun: bool = False, stow: bool = False) -> dict[str, Any]:
     """Slew to a fixed observed direction, verify the landing and hold (park: power off)."""
     await prepare(t, op)
     here = await t.motion.position()
@@ -235,7 +235,7 @@ async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, 
     enc_az, enc_el = float(enc.az_rad[0]), float(enc.el_rad[0])
     t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(enc_az),
                        to_el_deg=math.degrees(enc_el))
-    pos = await goto_safely(t, op, enc_az, enc_el, op.target, allow_sun=allow_sun)
+    pos = await goto_safely(t, op, enc_az, enc_el, op.target, allow_sun=allow_sun, stow=stow)
     t.supervisor.phase(op, Phase.SETTLING)
     err = t.motion.verify_at(pos, enc_az, enc_el, t.config.arrival_tolerance_arcsec,
                              f"slew to {op.target}")
@@ -357,13 +357,18 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
 def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, int, str | None]:
     """Return (join, end, why it ends early or None) of the pass stretch outside every zone.
 
-    (`acquire` then keeps the run-up, which lies on the path before the join, outside too.)
+    (`acquire` then keeps the run-up's rest point outside too.)
     """
     p = plan.path.points
     i0, i1, hit = t.safety.safe_stretch(p.t_us, np.mod(p.az_rad, 2 * math.pi), p.el_rad,
                                         join_us, t.config.min_pass_track_s, allow_sun=allow_sun)
+    end = int(p.t_us[i1])
+    if hit is not None:
+        # the run-out after the end carries on about half a ramp along the path: end that
+        # much (and a second) earlier, so it too stays outside
+        end -= int((t.config.ramp_s / 2 + 1.0) * 1e6)
     why = None if hit is None else f"stops before: {hit.describe('the satellite')}"
-    return int(p.t_us[i0]), int(p.t_us[i1]), why
+    return int(p.t_us[i0]), end, why
 
 
 

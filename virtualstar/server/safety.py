@@ -115,11 +115,16 @@ class Safety:
         return int(t[clear[0]]) if clear.size else int(to_us)
 
     def route(self, from_az_rad: float, from_el_rad: float, to_az_rad: float, to_el_rad: float,
-              t_us: int, what: str, *, allow_sun: bool = False) -> list[tuple[float, float]]:
-        """Return the waypoints of a slew that keeps out of the Sun/Moon zones (target last)."""
+              t_us: int, what: str, *, allow_sun: bool = False,
+              stow: bool = False) -> list[tuple[float, float]]:
+        """Return the waypoints of a slew that keeps out of the Sun/Moon zones (target last).
+
+        `stow` (the park position): the target itself may lie inside a zone, the way there
+        may not go deeper.
+        """
         legs, hit = slew_route(from_az_rad, from_el_rad, to_az_rad, to_el_rad, t_us,
                                self._limits(), self.zones(allow_sun=allow_sun), self.site,
-                               self.eop)
+                               self.eop, target_exempt=stow)
         if hit is not None:
             raise InExclusionZone(f"no slew path to {what} keeps out of the "
                                   f"{hit.zone.capitalize()} exclusion zone: the straight path "

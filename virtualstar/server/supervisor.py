@@ -136,7 +136,11 @@ class Supervisor:
                 if decision is Resume.NO:
                     await self._fail(op, error)
                     return
-                await self._before_resuming(op, error, decision)
+                try:
+                    await self._before_resuming(op, error, decision)
+                except VssError as lost:  # the mount did not come back in time
+                    await self._fail(op, lost)
+                    return
         except asyncio.CancelledError:
             reason = op.end_reason or OperationAborted("cancelled")
             self._finish(op, Phase.ABORTED, _error_dict(reason))

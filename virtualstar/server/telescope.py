@@ -16,6 +16,7 @@ notices a mount clock that has stopped.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import logging
 import math
@@ -46,6 +47,7 @@ from .exceptions import (
     MountFault,
     MountUnavailable,
     NotActive,
+    OperationAborted,
     TargetUnreachable,
     VssError,
 )
@@ -309,14 +311,14 @@ class Telescope:
         """
         c = self.codes
         if not self.active or state not in (c["holding"], c["off"]) or self.supervisor.busy:
-            return  # a running operation guards its own places and paths
-        op = self.op
-        if op is not None and op.info.get("allow_sun"):
-            return
+            return  # a running operation guards its own places and paths (an override too)
         try:
             pos = await self.motion.position()
         except VssError:
             return
+        m = self.link.mapping
+        if self._near(pos, m.park_az_deg, m.park_el_deg):
+            return  # the stow is the safe place by definition
         obs_az, obs_el = math.degrees(pos.az_rad), math.degrees(pos.el_rad)
         if self.model is not None:
             a, e = self.model.encoder_to_observed(np.array([obs_az % 360.0]), np.array([obs_el]))
@@ -331,13 +333,24 @@ class Telescope:
         text = hit.describe("the telescope")
         log.error("safety: %s; moving it to the park position", text)
         self.emit("safety", {"reason": text, "action": "park"})
-        m = self.link.mapping
+
+        async def idle() -> None:  # under the lock: a command that came meanwhile wins
+            if self.supervisor.busy:
+                raise OperationAborted("a command came first")
 
         async def procedure(evade: Operation) -> dict[str, Any]:
             return await procedures.hold_fixed(self, evade, m.park_az_deg, m.park_el_deg,
-                                               power_off=False)
+                                               power_off=False, stow=True)
 
-        await self.supervisor.start("evade", f"park (away from the {hit.zone})", procedure)
+        with contextlib.suppress(OperationAborted):
+            await self.supervisor.start("evade", f"park (away from the {hit.zone})", procedure,
+                                        check=idle)
+
+    @staticmethod
+    def _near(pos, az_deg: float, el_deg: float, tolerance_deg: float = 1.0) -> bool:
+        d_az = ((math.degrees(pos.az_rad) - az_deg + 180.0) % 360.0) - 180.0
+        return (abs(math.degrees(pos.el_rad) - el_deg) < tolerance_deg
+                and (abs(d_az) < tolerance_deg or el_deg > 89.0))
 
     def note_points(self, p: Points) -> None:
         """The feeder pushed points: keep the target's on-sky rate for the on-sky error."""
@@ -350,6 +363,7 @@ class Telescope:
 
     # ------------------------------------------------------------------ commands
     def _check_can_move(self) -> None:
+        """Refuse a moving command on a passive server or without a mount (again under the lock)."""
         if not self.active:
             raise NotActive("the server is passive (it only watches the mount): run "
                             "`vs mode active` (API: set_mode with mode=active) first")
@@ -375,7 +389,12 @@ class Telescope:
 
     async def _start(self, kind: str, name: str, procedure, *, resumable: bool = False,
                      allow_sun: bool = False, check=None) -> Operation:
-        op = await self.supervisor.start(kind, name, procedure, resumable=resumable, check=check)
+        async def checks() -> None:
+            self._check_can_move()  # it may have gone passive while this waited for the lock
+            if check is not None:
+                await check()
+
+        op = await self.supervisor.start(kind, name, procedure, resumable=resumable, check=checks)
         if allow_sun:
             op.info["allow_sun"] = True
             log.warning("safety override: operation %s (%s %s) may point inside the Sun and "
@@ -408,7 +427,7 @@ class Telescope:
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.hold_fixed(self, op, az_deg, el_deg, power_off=power_off,
-                                               allow_sun=allow_sun or kind == "park")
+                                               allow_sun=allow_sun, stow=kind == "park")
 
         return await self._start(kind, name, procedure, allow_sun=allow_sun, check=check)
 
@@ -479,6 +498,7 @@ class Telescope:
         if mode not in ("active", "passive"):
             raise BadRequest(f"mode {mode!r}: expected 'active' or 'passive'")
         if mode == "passive" and self.active:
+            self.active = False  # first: a command waiting for the lock is refused under it
             await self.supervisor.stop("the server went passive",
                                        then=self.motion.halt if self.link.connected else None)
         self.active = mode == "active"
