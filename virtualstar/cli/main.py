@@ -48,6 +48,9 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
         "Park the mount (waits until parked)."),
     "watch": ("virtualstar.cli.watch", "watch",
         "Show status and tracking error live; keeps waiting through server restarts."),
+    "plan": ("virtualstar.cli.plan", "plan",
+        "Plan a night: satellite passes become fixed blocks, sidereal targets fill the gaps "
+        "by priority, slews included; every target left out is listed with the reason."),
     "demo": ("virtualstar.cli.demo", "demo",
         "Run the demo in one process (well under a minute) and print slew times and "
         "tracking errors."),

@@ -1,0 +1,298 @@
+"""Plan a night: satellite passes as fixed blocks, sidereal targets in the gaps by priority.
+
+1. Each satellite target's passes (trimmed to the part that meets its constraints) become
+   fixed blocks, as many as its `repeats`, highest priority first; a pass that would
+   overlap a block already placed (slew time included) is left out, saying whose it is.
+2. The sidereal targets, highest priority first (ties in file order), each get the
+   earliest start at which the whole block — one grid step of margin either side — meets
+   its constraints, a repeat is at least `cadence_s` after the one before, and the slew
+   from the block before and to the block after fits in between (`gap_s`: the mount's
+   point-to-point slew with its rate and acceleration limits, plus `setup_s` for the
+   VSS to acquire and settle).
+
+Slews follow the cable wrap: each block's path (its start azimuth and the signed azimuth
+it travels) is placed on the turn of the wrap the mount reaches from the block before,
+as the VSS does (`unwrap_azimuth`), starting from the park position; a slew is the
+mount's move between those turns, which may be the long way round. A placement is
+accepted only when every slew of the whole chain still fits.
+
+Deterministic: no randomness, ties broken by file order. Every target left out is listed
+with the reason: the constraint that never holds, or the blocks that took its time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from virtualstar.astro import MountLimits, UnreachablePath, UtcTimes, unwrap_azimuth
+
+from .sky import NightGrid, TargetSky, _runs, plan_slew_deg, slew_s
+
+__all__ = ["PARK_AZ_DEG", "PARK_EL_DEG", "SETUP_S", "Block", "Plan", "mount_chain", "schedule"]
+
+PARK_AZ_DEG, PARK_EL_DEG = 0.0, 85.0  # the VSS's default park position (mapping.py)
+
+SETUP_S = 15.0  # mount seconds the VSS needs besides the slew: run-up, lead, settle, margins
+EMULATOR_LIMITS = MountLimits(az_max_rate_deg_s=6.0, el_max_rate_deg_s=6.0,
+                              az_max_accel_deg_s2=3.0, el_max_accel_deg_s2=3.0)
+
+
+@dataclass(frozen=True)
+class Block:
+    """One scheduled block: a target from start to end (µs), where it is at both ends (deg)."""
+
+    target: str
+    kind: str  # star, radec or satellite
+    repeat: int  # 1-based
+    priority: float
+    start_us: int
+    end_us: int
+    start_az_deg: float
+    start_el_deg: float
+    end_az_deg: float
+    end_el_deg: float
+    slew_s: float = 0.0  # from the block before (or from the plan's start place)
+    az_travel_deg: float = 0.0  # signed azimuth the target moves during the block
+    constraints: dict[str, float] = field(default_factory=dict)  # values at the start
+
+    @property
+    def duration_s(self) -> float:
+        return (self.end_us - self.start_us) / 1e6
+
+    def as_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["start_utc"] = _iso(self.start_us)
+        d["end_utc"] = _iso(self.end_us)
+        d["duration_s"] = self.duration_s
+        return d
+
+
+@dataclass
+class Plan:
+    """A night's plan: blocks in time order and the targets left out with the reason."""
+
+    program: str
+    start_us: int
+    end_us: int
+    blocks: list[Block]
+    left_out: list[dict[str, str]]
+    site: dict[str, Any] = field(default_factory=dict)
+    setup_s: float = SETUP_S
+
+    @property
+    def weighted_hours(self) -> float:
+        """Sum of priority × hours over the blocks (the figure a scheduler maximises)."""
+        return sum(b.priority * b.duration_s / 3600.0 for b in self.blocks)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"program": self.program, "start_utc": _iso(self.start_us),
+                "end_utc": _iso(self.end_us), "start_us": self.start_us, "end_us": self.end_us,
+                "site": self.site, "setup_s": self.setup_s,
+                "priority_weighted_hours": self.weighted_hours,
+                "blocks": [b.as_dict() for b in self.blocks], "left_out": self.left_out}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> Plan:
+        keys = set(Block.__dataclass_fields__)
+        blocks = [Block(**{k: v for k, v in b.items() if k in keys}) for b in doc["blocks"]]
+        return cls(doc["program"], int(doc["start_us"]), int(doc["end_us"]), blocks,
+                   list(doc.get("left_out", [])), dict(doc.get("site", {})),
+                   float(doc.get("setup_s", SETUP_S)))
+
+
+def schedule(program: str, grid: NightGrid, skies: list[TargetSky], passes: dict[str, list],
+             satellites: list, *, limits: MountLimits = EMULATOR_LIMITS,
+             setup_s: float = SETUP_S,
+             start_place_deg: tuple[float, float] = (PARK_AZ_DEG, PARK_EL_DEG)) -> Plan:
+    """Return the plan of a night (see the module docstring).
+
+    skies: the sidereal targets observed on the grid; satellites: the satellite targets;
+    passes: {satellite target name: its trimmed pass windows (sky.satellite_windows)}.
+    """
+    blocks: list[Block] = []
+    left_out: list[dict[str, str]] = []
+    ctx = _Context(limits, setup_s, start_place_deg, int(grid.t_us[0]))
+    for target in sorted(satellites, key=lambda t: (-t.priority, t.index)):
+        placed = 0
+        reasons = []
+        for w in passes.get(target.name, []):
+            if placed >= target.repeats:
+                break
+            if (w["end_us"] - w["start_us"]) / 1e6 < 30.0:
+                reasons.append(f"the pass at {_iso(w['start_us'])} meets its constraints for "
+                               "less than 30 s")
+                continue
+            block = Block(target.name, "satellite", placed + 1, target.priority, w["start_us"],
+                          w["end_us"], w["start_az_deg"], w["start_el_deg"], w["end_az_deg"],
+                          w["end_el_deg"], az_travel_deg=w["az_travel_deg"],
+                          constraints={"culmination_el_deg": round(w["culmination_el_deg"], 3)})
+            clash = _clash(blocks, block, ctx)
+            if clash is not None:
+                reasons.append(f"the pass at {_iso(w['start_us'])} overlaps {clash}")
+                continue
+            blocks.append(block)
+            placed += 1
+        if placed == 0:
+            left_out.append({"target": target.name, "reason": "; ".join(reasons) or
+                             "no pass meets its constraints in the night"})
+        elif placed < target.repeats:
+            left_out.append({"target": target.name, "reason": f"only {placed} of "
+                             f"{target.repeats} passes fit: " + ("; ".join(reasons) if reasons
+                             else "no other pass meets its constraints in the night")})
+    for sky in sorted(skies, key=lambda s: (-s.target.priority, s.target.index)):
+        _place_sidereal(sky, grid, blocks, left_out, ctx)
+    blocks.sort(key=lambda b: b.start_us)
+    blocks = _with_slews(blocks, ctx)
+    return Plan(program, int(grid.t_us[0]), int(grid.t_us[-1]), blocks, left_out,
+                setup_s=setup_s)
+
+
+def _place_sidereal(sky: TargetSky, grid: NightGrid, blocks: list[Block], left_out: list,
+                    ctx: _Context) -> None:
+    target = sky.target
+    valid = sky.valid
+    steps = int(math.ceil(target.duration_s / grid.step_s))
+    # ok[i]: a block starting at grid index i has every grid point from i-1 to i+steps+1 valid
+    n = len(valid)
+    padded = np.r_[False, valid, False]
+    run = np.convolve(padded.astype(np.int64), np.ones(steps + 3, np.int64), "valid")
+    ok = np.zeros(n, bool)
+    ok[: len(run)] = run == steps + 3  # run[i] sums the window [i-1, i+steps+1]
+    az_path = np.unwrap(np.radians(sky.az_deg))
+    placed = 0
+    last_start: int | None = None
+    reasons: list[str] = []
+    for _ in range(target.repeats):
+        found = None
+        for i in np.flatnonzero(ok):
+            start = int(grid.t_us[i])
+            if last_start is not None and start < last_start + int(target.cadence_s * 1e6):
+                continue
+            if i + steps >= n:
+                break
+            end = start + int(round(target.duration_s * 1e6))
+            j = min(int(i + steps), n - 1)
+            block = Block(target.name, target.kind, placed + 1, target.priority, start, end,
+                          float(sky.az_deg[i]), float(sky.el_deg[i]), float(sky.az_deg[j]),
+                          float(sky.el_deg[j]),
+                          az_travel_deg=float(np.degrees(az_path[j] - az_path[i])),
+                          constraints={"el_deg": round(float(sky.el_deg[i]), 3),
+                                       "sun_el_deg": round(float(grid.sun_el_deg[i]), 3)})
+            if _clash(blocks, block, ctx) is None:
+                found = block
+                break
+        if found is None:
+            reasons.append(_why_not(sky, grid, ok, blocks, steps, placed))
+            break
+        blocks.append(found)
+        blocks.sort(key=lambda b: b.start_us)
+        placed += 1
+        last_start = found.start_us
+    if placed < target.repeats:
+        left_out.append({"target": target.name, "reason": (
+            reasons[0] if placed == 0 else f"only {placed} of {target.repeats} repeats fit: "
+            f"{reasons[0]}")})
+
+
+@dataclass(frozen=True)
+class _Context:
+    limits: MountLimits
+    setup_s: float
+    start_place_deg: tuple[float, float]
+    start_us: int
+
+
+def _clash(blocks: list[Block], new: Block, ctx: _Context) -> str | None:
+    """Return what `new` would collide with (slews and the cable wrap included), or None."""
+    # first the neighbours with the shortest-way slew (a lower bound, cheap), then the chain
+    for b in blocks:
+        if b.end_us <= new.start_us:
+            gap = slew_s(b.end_az_deg, b.end_el_deg, new.start_az_deg, new.start_el_deg,
+                         ctx.limits) + ctx.setup_s
+            if new.start_us - b.end_us < gap * 1e6:
+                return f"{b.target} (until {_iso(b.end_us)}, then {gap:.0f} s to get here)"
+        elif b.start_us >= new.end_us:
+            gap = slew_s(new.end_az_deg, new.end_el_deg, b.start_az_deg, b.start_el_deg,
+                         ctx.limits) + ctx.setup_s
+            if b.start_us - new.end_us < gap * 1e6:
+                return f"{b.target} (from {_iso(b.start_us)}, {gap:.0f} s away)"
+        else:
+            return f"{b.target} ({_iso(b.start_us)}..{_iso(b.end_us)})"
+    chain = sorted([*blocks, new], key=lambda b: b.start_us)
+    try:
+        moves = mount_chain(chain, ctx.limits, ctx.start_place_deg)
+    except UnreachablePath:
+        return "the cable wrap (its azimuth path does not fit)"
+    free_from = ctx.start_us
+    for k, (b, (slew, _, _)) in enumerate(zip(chain, moves, strict=True)):
+        if b.start_us - free_from < (slew + ctx.setup_s) * 1e6:
+            if k == 0:
+                return (f"the start of the plan ({slew + ctx.setup_s:.0f} s to get there from "
+                        f"the mount's place)")
+            return (f"the cable wrap (a {slew:.0f} s slew the long way round before "
+                    f"{b.target} at {_iso(b.start_us)})")
+        free_from = b.end_us
+    return None
+
+
+def mount_chain(blocks: list[Block], limits: MountLimits,
+                start_place_deg: tuple[float, float] = (PARK_AZ_DEG, PARK_EL_DEG),
+                ) -> list[tuple[float, float, float]]:
+    """Return (slew_s, start mount az, end mount az) per block, in the blocks' order.
+
+    Each block's azimuth path is put on the turn of the cable wrap nearest the mount's
+    azimuth after the block before (what the VSS does); the slew is the real move
+    between the two mount azimuths, the long way round when the wrap forces it.
+    """
+    here_az, here_el = start_place_deg
+    out = []
+    for b in blocks:
+        n = int(math.ceil(abs(b.az_travel_deg) / 90.0)) + 2
+        path = np.radians(np.linspace(b.start_az_deg, b.start_az_deg + b.az_travel_deg, n))
+        mount = np.degrees(unwrap_azimuth(path, limits=limits,
+                                          current_az_rad=math.radians(here_az)))
+        slew = plan_slew_deg(here_az, here_el, float(mount[0]), b.start_el_deg, limits)
+        out.append((slew, float(mount[0]), float(mount[-1])))
+        here_az, here_el = float(mount[-1]), b.end_el_deg
+    return out
+
+
+def _with_slews(blocks: list[Block], ctx: _Context) -> list[Block]:
+    moves = mount_chain(blocks, ctx.limits, ctx.start_place_deg)
+    return [Block(**{**asdict(b), "slew_s": round(slew, 2)})
+            for b, (slew, _, _) in zip(blocks, moves, strict=True)]
+
+
+def _why_not(sky: TargetSky, grid: NightGrid, ok: np.ndarray, blocks: list[Block], steps: int,
+             placed: int) -> str:
+    names = {"elevation": f"above {sky.target.min_el_deg:g}° and the horizon profile",
+             "azimuth": "inside its azimuth windows",
+             "sun_altitude": f"with the Sun below {sky.target.sun_max_el_deg:g}°",
+             "sun_zone": "out of the Sun's exclusion zone",
+             "moon_separation": f"{sky.target.moon_min_sep_deg:g}° from the Moon",
+             "window": "inside its time window"}
+    never = [names[k] for k, mask in sky.checks.items() if not mask.any()]
+    if never:
+        return "never " + " nor ".join(never) + " during the night"
+    if not ok.any():
+        runs = _runs(sky.valid)
+        longest = max(((b - a) * grid.step_s for a, b in runs), default=0.0)
+        return (f"its constraints leave no stretch of {steps * grid.step_s / 60:.0f} min "
+                f"(the longest is {longest / 60:.0f} min)")
+    takers = sorted({b.target for b in blocks if b.target != sky.target.name})
+    stretches = ", ".join(f"{_hm(grid.t_us[a])}–{_hm(grid.t_us[b])}"
+                          for a, b in _runs(ok)[:4])
+    return (f"no free time left where it can be observed ({stretches} UTC, starts): taken by "
+            f"{', '.join(takers) or 'its own earlier repeats (cadence)'}")
+
+
+def _iso(t_us: int) -> str:
+    return UtcTimes.from_unix_us(int(t_us)).iso(0)[0]
+
+
+def _hm(t_us) -> str:
+    return _iso(int(t_us))[11:16]

@@ -1,0 +1,237 @@
+"""Where the targets, the Sun and the Moon are over a night: the grids the scheduler works on.
+
+Everything here is evaluated once per night on a grid of `step_s` (a minute by default):
+the scheduler then only compares arrays. A block is accepted only if the grid points
+one step before its start and after its end satisfy its constraints too, so the smooth
+motion in between cannot break them (the tests check every block at one-second steps).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import erfa
+import numpy as np
+
+from virtualstar.astro import (
+    AvoidanceZones,
+    EarthOrientation,
+    Satellite,
+    Site,
+    UtcTimes,
+    find_events,
+    observe_mount_times,
+    resolve_target,
+    satellite_passes,
+)
+from virtualstar.astro.avoidance import body_places
+
+from .exceptions import ProgramError
+from .program import ProgramTarget
+
+__all__ = ["NightGrid", "TargetSky", "night_window", "target_sky"]
+
+DEFAULT_STEP_S = 60.0
+
+
+@dataclass(frozen=True)
+class NightGrid:
+    """Mount times of the night (µs) and the Sun's and Moon's observed places on them (deg)."""
+
+    t_us: np.ndarray
+    sun_az_deg: np.ndarray
+    sun_el_deg: np.ndarray
+    moon_az_deg: np.ndarray
+    moon_el_deg: np.ndarray
+    step_s: float
+
+    @classmethod
+    def build(cls, start_us: int, end_us: int, site: Site, eop: EarthOrientation,
+              step_s: float = DEFAULT_STEP_S) -> NightGrid:
+        t = np.arange(start_us, end_us + 1, int(step_s * 1e6), dtype=np.int64)
+        places = body_places(UtcTimes.from_unix_us(t), site, eop, ("sun", "moon"))
+        (saz, sel), (maz, mel) = places["sun"], places["moon"]
+        return cls(t, np.degrees(saz), np.degrees(sel), np.degrees(maz), np.degrees(mel), step_s)
+
+
+@dataclass(frozen=True)
+class TargetSky:
+    """A target's observed place on the grid, and which constraints hold there (masks)."""
+
+    target: ProgramTarget
+    az_deg: np.ndarray
+    el_deg: np.ndarray
+    checks: dict[str, np.ndarray]  # constraint name -> mask over the grid
+
+    @property
+    def valid(self) -> np.ndarray:
+        ok = np.ones(self.az_deg.shape, bool)
+        for mask in self.checks.values():
+            ok &= mask
+        return ok
+
+
+def night_window(date_text: str, site: Site, eop: EarthOrientation) -> tuple[int, int]:
+    """Return (sunset, sunrise) in µs of the night that begins on a local calendar date."""
+    try:
+        day = UtcTimes.from_iso([f"{date_text}T12:00:00Z"])
+    except Exception as exc:
+        raise ProgramError(f"--night {date_text!r}: expected a date, e.g. 2024-05-18 ({exc})") \
+            from None
+    # local noon: 12 h UTC shifted by the longitude, then the next set and rise of the Sun
+    noon = day.shifted(-site.lon_deg / 15.0 * 3600.0)
+    from virtualstar.astro import SolarSystemBody
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        events = find_events(SolarSystemBody("sun"), site, noon, 36 * 3600.0, eop=eop)
+    sets = [e for e in events if e.kind == "set"]
+    if not sets:
+        raise ProgramError(f"--night {date_text}: the Sun does not set at this site (polar "
+                           "day); give --from and --to")
+    sunset = sets[0].utc
+    rises = [e for e in events if e.kind == "rise"
+             and float(e.utc.seconds_since(sunset.jd1[0], sunset.jd2[0])[0]) > 0]
+    if not rises:
+        raise ProgramError(f"--night {date_text}: the Sun does not rise again within a day "
+                           "(polar night); give --from and --to")
+    return int(sunset.to_unix_us()[0]), int(rises[0].utc.to_unix_us()[0])
+
+
+def _sky_object(target: ProgramTarget):
+    from virtualstar.astro import IcrsStar, parse_radec
+
+    if target.kind == "radec":
+        ra, dec = parse_radec(target.spec)
+        return IcrsStar(ra, dec, name=target.name)
+    try:
+        return resolve_target(target.spec)
+    except KeyError as exc:
+        raise ProgramError(f"target {target.name!r}: {str(exc).strip(chr(34))}") from None
+
+
+def load_target_satellite(target: ProgramTarget) -> Satellite:
+    from catalogs import load_tle_file, select_satellite
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            records = load_tle_file(target.tle_file)
+        return Satellite.from_record(select_satellite(records, target.spec))
+    except (KeyError, ValueError) as exc:
+        raise ProgramError(f"target {target.name!r}: {str(exc).strip(chr(34))}") from None
+
+
+def target_sky(target: ProgramTarget, grid: NightGrid, site: Site, eop: EarthOrientation,
+               zones: AvoidanceZones) -> TargetSky:
+    """Observe a sidereal target on the grid and evaluate its constraints there."""
+    obs = observe_mount_times(_sky_object(target), grid.t_us, site, eop)
+    az, el = np.degrees(obs.az_rad) % 360.0, np.degrees(obs.el_rad)
+    return TargetSky(target, az, el, constraint_masks(target, az, el, grid, zones))
+
+
+def constraint_masks(target: ProgramTarget, az: np.ndarray, el: np.ndarray, grid: NightGrid,
+                     zones: AvoidanceZones) -> dict[str, np.ndarray]:
+    """Return {constraint: mask} for directions (deg) at the grid's times."""
+    floor = np.maximum(target.min_el_deg, zones.min_el_deg(np.radians(az)))
+    sun_sep = _sep(az, el, grid.sun_az_deg, grid.sun_el_deg)
+    moon_sep = _sep(az, el, grid.moon_az_deg, grid.moon_el_deg)
+    checks = {
+        "elevation": el >= floor,
+        "azimuth": target.az_allowed(az),
+        "sun_altitude": grid.sun_el_deg <= target.sun_max_el_deg,
+        "sun_zone": sun_sep >= zones.sun_radius_deg,
+    }
+    if target.moon_min_sep_deg or zones.moon_radius_deg:
+        checks["moon_separation"] = moon_sep >= max(target.moon_min_sep_deg,
+                                                    zones.moon_radius_deg or 0.0)
+    if target.window_us is not None:
+        lo, hi = target.window_us
+        checks["window"] = (grid.t_us >= lo) & (grid.t_us <= hi)
+    return checks
+
+
+def satellite_windows(target: ProgramTarget, grid: NightGrid, site: Site, eop: EarthOrientation,
+                      zones: AvoidanceZones, step_s: float = 1.0) -> list[dict]:
+    """Return the passes of a satellite target in the night, each trimmed to its part that
+    satisfies the target's constraints: [{start_us, end_us, culmination_el_deg, az/el...}]."""
+    sat = load_target_satellite(target)
+    t0, t1 = int(grid.t_us[0]), int(grid.t_us[-1])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        passes = satellite_passes(sat, site, UtcTimes.from_unix_us(t0),
+                                  UtcTimes.from_unix_us(t1), min_el_deg=target.min_el_deg,
+                                  eop=eop)
+    out = []
+    for p in passes:
+        if p.rise is None or p.set is None:
+            continue
+        a, b = int(p.rise.utc.to_unix_us()[0]), int(p.set.utc.to_unix_us()[0])
+        t = np.arange(a, b + 1, int(step_s * 1e6), dtype=np.int64)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            obs = observe_mount_times(sat, t, site, eop)
+        az, el = np.degrees(obs.az_rad) % 360.0, np.degrees(obs.el_rad)
+        fine = _fine_grid(t, site, eop, grid.step_s)
+        ok = np.ones(t.shape, bool)
+        for mask in constraint_masks(target, az, el, fine, zones).values():
+            ok &= mask
+        if target.sunlit_while_dark:
+            ok &= _sunlit(sat, t, eop) & (fine.sun_el_deg < -6.0)
+        runs = _runs(ok)
+        if not runs:
+            continue
+        i0, i1 = max(runs, key=lambda r: r[1] - r[0])
+        path = np.degrees(np.unwrap(obs.az_rad[i0:i1 + 1]))
+        out.append({"start_us": int(t[i0]), "end_us": int(t[i1]),
+                    "az_travel_deg": float(path[-1] - path[0]),
+                    "start_az_deg": float(az[i0]), "start_el_deg": float(el[i0]),
+                    "end_az_deg": float(az[i1]), "end_el_deg": float(el[i1]),
+                    "culmination_el_deg": float(el.max())})
+    return out
+
+
+def _fine_grid(t: np.ndarray, site: Site, eop, step_s: float) -> NightGrid:
+    places = body_places(UtcTimes.from_unix_us(t), site, eop, ("sun", "moon"))
+    (saz, sel), (maz, mel) = places["sun"], places["moon"]
+    return NightGrid(t, np.degrees(saz), np.degrees(sel), np.degrees(maz), np.degrees(mel), step_s)
+
+
+def _sunlit(sat: Satellite, t_us: np.ndarray, eop) -> np.ndarray:
+    from skyfield.api import EarthSatellite
+
+    from virtualstar.astro.bodies import skyfield_context
+
+    ctx = skyfield_context(eop)
+    s = EarthSatellite.from_satrec(sat.satrec, ctx.ts)
+    times = UtcTimes.from_unix_us(t_us)
+    return np.asarray(s.at(ctx.ts.tt_jd(*times.tt())).is_sunlit(ctx.ephemeris), bool)
+
+
+def _sep(az1, el1, az2, el2) -> np.ndarray:
+    return np.degrees(erfa.seps(np.radians(az1), np.radians(el1), np.radians(az2),
+                                np.radians(el2)))
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Return (first, last) index of every run of True."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def slew_s(from_az_deg: float, from_el_deg: float, to_az_deg: float, to_el_deg: float,
+           limits) -> float:
+    """Mount seconds of the point-to-point slew between two places (shortest azimuth way)."""
+    d_az = (to_az_deg - from_az_deg + 180.0) % 360.0 - 180.0
+    return plan_slew_deg(0.0, from_el_deg, d_az, to_el_deg, limits)
+
+
+def plan_slew_deg(from_az_deg: float, from_el_deg: float, to_az_deg: float, to_el_deg: float,
+                  limits) -> float:
+    """Mount seconds of the point-to-point slew between two mount positions (deg, as is)."""
+    from virtualstar.astro import plan_slew
+
+    return plan_slew(math.radians(from_az_deg), math.radians(from_el_deg),
+                     math.radians(to_az_deg), math.radians(to_el_deg), limits).duration_s
