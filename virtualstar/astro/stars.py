@@ -15,6 +15,7 @@ horizon, where refraction curves strongly.
 from __future__ import annotations
 
 import math
+import threading
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -119,16 +120,81 @@ def exact_enu(star: IcrsStar, times: UtcTimes, site: Site, eop: EarthOrientation
     apco13 (astrometry context, no refraction) + atciq (ICRS→CIRS with space
     motion, parallax, deflection, aberration) + atioq (CIRS→horizon).
     """
-    dut1, xp, yp = eop.interpolate(times.jd1, times.jd2)
+    astrom = _astrometry_context(times, site, eop)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", erfa.ErfaWarning)  # "dubious year" for future dates
-        astrom, _ = erfa.apco13(times.jd1, times.jd2, dut1, site.lon_rad, site.lat_rad,
-                                site.height_m, xp, yp, 0.0, 0.0, 0.0, 0.0)
+        warnings.simplefilter("ignore", erfa.ErfaWarning)
         ra, dec, px_arcsec = _star_at_dates(star, times)
         ri, di = erfa.atciq(ra, dec, 0.0, 0.0, px_arcsec, 0.0, astrom)
     aob, zob, *_ = erfa.atioq(ri, di, astrom)
     sz = np.sin(zob)
     return np.stack([sz * np.cos(aob), sz * np.sin(aob), np.cos(zob)], axis=-1)
+
+
+def observe_stars(stars: list[IcrsStar], times: UtcTimes, site: Site, eop: EarthOrientation,
+                  *, grid_step_s: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
+    """Return observed azimuth and elevation (rad, shape (n_stars, n_times)) of many stars.
+
+    For a night's plan: ERFA (apco13 once, then atciq + atioq for every star at once)
+    every `grid_step_s`, one cubic spline through all the stars' unit vectors, refraction
+    per the site. A star's direction is smooth: 600-s nodes give milliarcseconds.
+    """
+    ref1, ref2 = float(times.jd1[0]), float(times.jd2[0])
+    s = times.seconds_since(ref1, ref2)
+    k1 = math.ceil(float(s.max()) / grid_step_s) + 2
+    s_nodes = np.arange(-2, k1 + 1) * grid_step_s
+    nodes = UtcTimes.from_jd(np.full_like(s_nodes, ref1), ref2 + s_nodes / DAY_S)
+    astrom = _astrometry_context(nodes, site, eop)
+    col = np.newaxis
+    ra = np.radians([st.ra_deg for st in stars])[:, col]
+    dec = np.radians([st.dec_deg for st in stars])[:, col]
+    px = np.array([st.parallax_mas / 1000.0 for st in stars])[:, col]
+    pmr = np.array([st.pm_ra_cosdec_mas_yr for st in stars])[:, col] / MAS_PER_RAD / np.cos(dec)
+    pmd = np.array([st.pm_dec_mas_yr for st in stars])[:, col] / MAS_PER_RAD
+    rv = np.array([st.rv_km_s or 0.0 for st in stars])[:, col]
+    ep1 = J2000_JD + (np.array([st.epoch_jyear for st in stars])[:, col] - 2000.0) \
+        * _DAYS_PER_JULIAN_YEAR
+    tt1, tt2 = nodes.tt()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", erfa.ErfaWarning)
+        ra2, dec2, _, _, px2, _ = erfa.pmsafe(ra, dec, pmr, pmd, px, rv, ep1, 0.0, tt1, tt2)
+        px2 = np.where(px > 0, px2, 0.0)  # as _star_at_dates: no parallax, no distance
+        ri, di = erfa.atciq(ra2, dec2, 0.0, 0.0, px2, 0.0, astrom)
+    aob, zob, *_ = erfa.atioq(ri, di, astrom)
+    sz = np.sin(zob)
+    enu = np.stack([sz * np.cos(aob), sz * np.sin(aob), np.cos(zob)], axis=-1)  # (n, k, 3)
+    n = len(stars)
+    spline = CubicSpline(s_nodes, enu.transpose(1, 0, 2).reshape(len(s_nodes), n * 3), axis=0)
+    at = spline(s).reshape(len(s), n, 3).transpose(1, 0, 2).reshape(-1, 3)
+    obs = observe_enu(at, np.zeros_like(at), site)
+    return obs.az_rad.reshape(n, len(s)), obs.el_rad.reshape(n, len(s))
+
+
+_ASTROM_CACHE: dict[tuple, tuple[EarthOrientation, Any]] = {}
+_ASTROM_CACHE_SIZE = 4
+_ASTROM_LOCK = threading.Lock()
+
+
+def _astrometry_context(times: UtcTimes, site: Site, eop: EarthOrientation) -> Any:
+    """Return ERFA's star-independent context (apco13) for these times and site.
+
+    It is the costly part of observing a star (~46 ms for 600 times) and the same for
+    every star: many stars on one time grid (a night's plan) reuse it.
+    """
+    key = (np.asarray(times.jd1).tobytes(), np.asarray(times.jd2).tobytes(), site, id(eop))
+    with _ASTROM_LOCK:  # the server plans in a thread beside its own trajectories
+        hit = _ASTROM_CACHE.get(key)
+    if hit is not None and hit[0] is eop:
+        return hit[1]
+    dut1, xp, yp = eop.interpolate(times.jd1, times.jd2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", erfa.ErfaWarning)  # "dubious year" for future dates
+        astrom, _ = erfa.apco13(times.jd1, times.jd2, dut1, site.lon_rad, site.lat_rad,
+                                site.height_m, xp, yp, 0.0, 0.0, 0.0, 0.0)
+    with _ASTROM_LOCK:
+        while len(_ASTROM_CACHE) >= _ASTROM_CACHE_SIZE:
+            _ASTROM_CACHE.pop(next(iter(_ASTROM_CACHE)))
+        _ASTROM_CACHE[key] = (eop, astrom)
+    return astrom
 
 
 def _star_at_dates(star: IcrsStar, times: UtcTimes) -> tuple[Any, Any, Any]:
