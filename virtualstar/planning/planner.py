@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -9,7 +10,7 @@ from virtualstar.astro import AvoidanceZones, EarthOrientation, MountLimits, Sit
 
 from .program import Program
 from .scheduler import EMULATOR_LIMITS, PARK_AZ_DEG, PARK_EL_DEG, SETUP_S, Plan, schedule
-from .sky import DEFAULT_STEP_S, NightGrid, satellite_windows, target_sky
+from .sky import DEFAULT_STEP_S, NightGrid, satellite_windows, target_skies
 
 __all__ = ["PlanRequest", "plan_program"]
 
@@ -36,15 +37,13 @@ def plan_program(req: PlanRequest, eop: EarthOrientation | None = None) -> Plan:
     eop = eop or EarthOrientation.from_astropy_iers_data()
     grid = NightGrid.build(req.start_us, req.end_us, req.site, eop, req.step_s)
     targets = [t for t in req.program.targets if t.name not in req.skip]
-    skies = [target_sky(t, grid, req.site, eop, req.zones) for t in targets
-             if not t.is_satellite]
+    skies = target_skies([t for t in targets if not t.is_satellite], grid, req.site, eop,
+                         req.zones)
     satellites = [t for t in targets if t.is_satellite]
     passes = {t.name: satellite_windows(t, grid, req.site, eop, req.zones) for t in satellites}
     plan = schedule(req.program.name, grid, skies, passes, satellites, limits=req.limits,
                     setup_s=req.setup_s, start_place_deg=req.start_place_deg)
-    plan.site = {"name": req.site.name, "lat_deg": req.site.lat_deg,
-                 "lon_deg": req.site.lon_deg, "height_m": req.site.height_m,
-                 "pressure_hpa": req.site.pressure_hpa, "temperature_c": req.site.temperature_c,
-                 "humidity": req.site.humidity}
+    plan.site = dataclasses.asdict(req.site)
+    plan.program_spec = req.program.as_dict()
     plan.timing_s = time.perf_counter() - t0  # type: ignore[attr-defined]
     return plan

@@ -24,12 +24,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 
-from virtualstar.astro import MountLimits, UnreachablePath, UtcTimes, unwrap_azimuth
+from virtualstar.astro import MountLimits, UnreachablePath, UtcTimes
 
+from .exceptions import PlanFileError
 from .sky import NightGrid, TargetSky, _runs, plan_slew_deg, slew_s
 
 __all__ = ["PARK_AZ_DEG", "PARK_EL_DEG", "SETUP_S", "Block", "Plan", "mount_chain", "schedule"]
@@ -82,6 +84,7 @@ class Plan:
     left_out: list[dict[str, str]]
     site: dict[str, Any] = field(default_factory=dict)
     setup_s: float = SETUP_S
+    program_spec: dict[str, Any] = field(default_factory=dict)  # the program, for re-planning
 
     @property
     def weighted_hours(self) -> float:
@@ -93,15 +96,22 @@ class Plan:
                 "end_utc": _iso(self.end_us), "start_us": self.start_us, "end_us": self.end_us,
                 "site": self.site, "setup_s": self.setup_s,
                 "priority_weighted_hours": self.weighted_hours,
-                "blocks": [b.as_dict() for b in self.blocks], "left_out": self.left_out}
+                "blocks": [b.as_dict() for b in self.blocks], "left_out": self.left_out,
+                "program_spec": self.program_spec}
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> Plan:
+        """Read a plan back (vs plan --json); raise PlanFileError saying what is wrong."""
         keys = set(Block.__dataclass_fields__)
-        blocks = [Block(**{k: v for k, v in b.items() if k in keys}) for b in doc["blocks"]]
-        return cls(doc["program"], int(doc["start_us"]), int(doc["end_us"]), blocks,
-                   list(doc.get("left_out", [])), dict(doc.get("site", {})),
-                   float(doc.get("setup_s", SETUP_S)))
+        try:
+            blocks = [Block(**{k: v for k, v in b.items() if k in keys}) for b in doc["blocks"]]
+            return cls(str(doc["program"]), int(doc["start_us"]), int(doc["end_us"]), blocks,
+                       list(doc.get("left_out", [])), dict(doc.get("site", {})),
+                       float(doc.get("setup_s", SETUP_S)), dict(doc.get("program_spec", {})))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise PlanFileError(f"not a plan written by vs plan: {type(exc).__name__} {exc} "
+                                "(expected program, start_us, end_us and blocks with target, "
+                                "start_us, end_us, az/el)") from None
 
 
 def schedule(program: str, grid: NightGrid, skies: list[TargetSky], passes: dict[str, list],
@@ -166,9 +176,10 @@ def _place_sidereal(sky: TargetSky, grid: NightGrid, blocks: list[Block], left_o
     placed = 0
     last_start: int | None = None
     reasons: list[str] = []
+    duration_us = int(round(target.duration_s * 1e6))
     for _ in range(target.repeats):
         found = None
-        for i in np.flatnonzero(ok):
+        for i in _free_starts(np.flatnonzero(ok), grid, duration_us, blocks, ctx.setup_s):
             start = int(grid.t_us[i])
             if last_start is not None and start < last_start + int(target.cadence_s * 1e6):
                 continue
@@ -182,7 +193,7 @@ def _place_sidereal(sky: TargetSky, grid: NightGrid, blocks: list[Block], left_o
                           az_travel_deg=float(np.degrees(az_path[j] - az_path[i])),
                           constraints={"el_deg": round(float(sky.el_deg[i]), 3),
                                        "sun_el_deg": round(float(grid.sun_el_deg[i]), 3)})
-            if _clash(blocks, block, ctx) is None:
+            if _clash(blocks, block, ctx, explain=False) is None:
                 found = block
                 break
         if found is None:
@@ -205,11 +216,40 @@ class _Context:
     start_place_deg: tuple[float, float]
     start_us: int
 
+    @cached_property
+    def max_gap_us(self) -> int:
+        """The longest slew + setup there can be: a whole wrap in azimuth, 90° in elevation."""
+        lim = self.limits
+        worst = plan_slew_deg(lim.wrap_min_deg, 0.0, lim.wrap_max_deg, 90.0, lim)
+        return int((worst + self.setup_s) * 1e6) + 1
 
-def _clash(blocks: list[Block], new: Block, ctx: _Context) -> str | None:
-    """Return what `new` would collide with (slews and the cable wrap included), or None."""
-    # first the neighbours with the shortest-way slew (a lower bound, cheap), then the chain
+
+def _free_starts(candidates: np.ndarray, grid: NightGrid, duration_us: int, blocks: list[Block],
+                 setup_s: float) -> np.ndarray:
+    """Drop the candidate starts whose block would overlap a placed one (setup included)."""
+    starts = grid.t_us[candidates]
+    ends = starts + duration_us
+    free = np.ones(candidates.shape, bool)
+    margin = int(setup_s * 1e6)
     for b in blocks:
+        free &= (ends + margin <= b.start_us) | (starts >= b.end_us + margin)
+    return candidates[free]
+
+
+def _clash(blocks: list[Block], new: Block, ctx: _Context, *, explain: bool = True
+           ) -> str | None:
+    """Return what `new` would collide with (slews and the cable wrap included), or None.
+
+    explain=False returns "clash" instead of the description (the scheduler tries
+    thousands of starts and only keeps the first that fits).
+    """
+    # first the neighbours with the shortest-way slew (a lower bound, cheap), then the chain
+    reach_us = ctx.max_gap_us
+    for b in blocks:
+        if b.end_us + reach_us <= new.start_us or b.start_us >= new.end_us + reach_us:
+            continue  # farther than any slew: cannot collide
+        if not explain and b.start_us < new.end_us and new.start_us < b.end_us:
+            return "clash"
         if b.end_us <= new.start_us:
             gap = slew_s(b.end_az_deg, b.end_el_deg, new.start_az_deg, new.start_el_deg,
                          ctx.limits) + ctx.setup_s
@@ -226,7 +266,7 @@ def _clash(blocks: list[Block], new: Block, ctx: _Context) -> str | None:
     try:
         moves = mount_chain(chain, ctx.limits, ctx.start_place_deg)
     except UnreachablePath:
-        return "the cable wrap (its azimuth path does not fit)"
+        return "the cable wrap (its azimuth path does not fit)" if explain else "clash"
     free_from = ctx.start_us
     for k, (b, (slew, _, _)) in enumerate(zip(chain, moves, strict=True)):
         if b.start_us - free_from < (slew + ctx.setup_s) * 1e6:
@@ -251,14 +291,25 @@ def mount_chain(blocks: list[Block], limits: MountLimits,
     here_az, here_el = start_place_deg
     out = []
     for b in blocks:
-        n = int(math.ceil(abs(b.az_travel_deg) / 90.0)) + 2
-        path = np.radians(np.linspace(b.start_az_deg, b.start_az_deg + b.az_travel_deg, n))
-        mount = np.degrees(unwrap_azimuth(path, limits=limits,
-                                          current_az_rad=math.radians(here_az)))
-        slew = plan_slew_deg(here_az, here_el, float(mount[0]), b.start_el_deg, limits)
-        out.append((slew, float(mount[0]), float(mount[-1])))
-        here_az, here_el = float(mount[-1]), b.end_el_deg
+        start = _turn_deg(b.start_az_deg, b.az_travel_deg, here_az, limits)
+        slew = plan_slew_deg(here_az, here_el, start, b.start_el_deg, limits)
+        out.append((slew, start, start + b.az_travel_deg))
+        here_az, here_el = start + b.az_travel_deg, b.end_el_deg
     return out
+
+
+def _turn_deg(az_deg: float, travel_deg: float, anchor_deg: float, limits: MountLimits) -> float:
+    """Return the mount azimuth at which a path of `travel_deg` from sky azimuth `az_deg`
+    starts: unwrap_azimuth's rule (the turn of the wrap that holds the whole path, nearest
+    the anchor) for a path given by its ends, in scalars (called for every candidate)."""
+    lo, hi = min(az_deg, az_deg + travel_deg), max(az_deg, az_deg + travel_deg)
+    k_min = math.ceil((limits.wrap_min_deg - lo) / 360.0)
+    k_max = math.floor((limits.wrap_max_deg - hi) / 360.0)
+    if k_min > k_max:
+        raise UnreachablePath(f"the azimuth path spans {hi - lo:.1f} deg, more than fits in the "
+                              f"cable wrap {limits.wrap_min_deg:g}..{limits.wrap_max_deg:g} deg")
+    k = min(range(k_min, k_max + 1), key=lambda k: (abs(az_deg + 360.0 * k - anchor_deg), k))
+    return az_deg + 360.0 * k
 
 
 def _with_slews(blocks: list[Block], ctx: _Context) -> list[Block]:
@@ -283,9 +334,13 @@ def _why_not(sky: TargetSky, grid: NightGrid, ok: np.ndarray, blocks: list[Block
         longest = max(((b - a) * grid.step_s for a, b in runs), default=0.0)
         return (f"its constraints leave no stretch of {steps * grid.step_s / 60:.0f} min "
                 f"(the longest is {longest / 60:.0f} min)")
-    takers = sorted({b.target for b in blocks if b.target != sky.target.name})
+    # the blocks that took its time: those within reach of a stretch where it could start
+    reach = steps * grid.step_s * 1e6 + 300e6
+    runs = _runs(ok)
+    takers = sorted({b.target for b in blocks if b.target != sky.target.name and any(
+        b.end_us > grid.t_us[a] - 300e6 and b.start_us < grid.t_us[z] + reach for a, z in runs)})
     stretches = ", ".join(f"{_hm(grid.t_us[a])}–{_hm(grid.t_us[b])}"
-                          for a, b in _runs(ok)[:4])
+                          for a, b in runs[:4])
     return (f"no free time left where it can be observed ({stretches} UTC, starts): taken by "
             f"{', '.join(takers) or 'its own earlier repeats (cadence)'}")
 

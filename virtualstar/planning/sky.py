@@ -8,6 +8,7 @@ motion in between cannot break them (the tests check every block at one-second s
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import dataclass
@@ -23,8 +24,8 @@ from virtualstar.astro import (
     UtcTimes,
     find_events,
     observe_mount_times,
+    plan_slew,
     resolve_target,
-    satellite_passes,
 )
 from virtualstar.astro.avoidance import body_places
 
@@ -34,6 +35,7 @@ from .program import ProgramTarget
 __all__ = ["NightGrid", "TargetSky", "night_window", "target_sky"]
 
 DEFAULT_STEP_S = 60.0
+SCAN_STEP_S = 10.0  # satellites: the step of the search for passes above min_el
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,22 @@ class NightGrid:
         places = body_places(UtcTimes.from_unix_us(t), site, eop, ("sun", "moon"))
         (saz, sel), (maz, mel) = places["sun"], places["moon"]
         return cls(t, np.degrees(saz), np.degrees(sel), np.degrees(maz), np.degrees(mel), step_s)
+
+    @functools.cached_property
+    def times(self) -> UtcTimes:
+        """The grid as UtcTimes (one object: ERFA's per-grid context is cached on its values)."""
+        return UtcTimes.from_unix_us(self.t_us)
+
+    def interpolated(self, t_us: np.ndarray) -> NightGrid:
+        """The Sun and Moon at other times of the night, interpolated (they move < 0.25°
+        per minute: linear interpolation on the grid is good to a few arcseconds)."""
+        def at(values: np.ndarray, angle: bool = False) -> np.ndarray:
+            v = np.unwrap(values, period=360.0) if angle else values
+            out = np.interp(t_us, self.t_us, v)
+            return out % 360.0 if angle else out
+
+        return NightGrid(np.asarray(t_us), at(self.sun_az_deg, True), at(self.sun_el_deg),
+                         at(self.moon_az_deg, True), at(self.moon_el_deg), self.step_s)
 
 
 @dataclass(frozen=True)
@@ -113,23 +131,73 @@ def _sky_object(target: ProgramTarget):
 
 
 def load_target_satellite(target: ProgramTarget) -> Satellite:
-    from catalogs import load_tle_file, select_satellite
+    """Return the satellite of a target, from the TLE text its program carries."""
+    return _satellite(target.tle_text, target.spec, str(target.tle_file or "the TLE text"),
+                      target.name)
+
+
+@functools.lru_cache(maxsize=64)  # re-planning a night reads the same elements again
+def _satellite(tle_text: str, spec: str, source: str, name: str) -> Satellite:
+    from catalogs import select_satellite
+    from catalogs.exceptions import CatalogError
 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            records = load_tle_file(target.tle_file)
-        return Satellite.from_record(select_satellite(records, target.spec))
-    except (KeyError, ValueError) as exc:
-        raise ProgramError(f"target {target.name!r}: {str(exc).strip(chr(34))}") from None
+            records = _tle_records(tle_text, source)
+        return Satellite.from_record(select_satellite(list(records), spec))
+    except (KeyError, ValueError, CatalogError) as exc:
+        raise ProgramError(f"target {name!r}: {str(exc).strip(chr(34))}") from None
+
+
+@functools.lru_cache(maxsize=8)  # several targets of a program share one TLE file
+def _tle_records(tle_text: str, source: str) -> tuple:
+    from catalogs import parse_tle_text
+
+    return tuple(parse_tle_text(tle_text, source))
+
+
+def target_tle_text(target: ProgramTarget) -> str:
+    """Return the three TLE lines of a satellite target (its name line first)."""
+    from catalogs import parse_tle_text, select_satellite
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = select_satellite(parse_tle_text(target.tle_text, "the TLE text"), target.spec)
+    return f"{rec.name}\n{rec.line1}\n{rec.line2}\n"
+
+
+def target_skies(targets: list[ProgramTarget], grid: NightGrid, site: Site,
+                 eop: EarthOrientation, zones: AvoidanceZones) -> list[TargetSky]:
+    """Observe sidereal targets on the grid and evaluate their constraints there.
+
+    Catalog stars and RA/Dec targets are observed together (`observe_stars`: ERFA's
+    per-time work once for all of them); planets and the Moon one by one.
+    """
+    from virtualstar.astro import IcrsStar
+    from virtualstar.astro.stars import observe_stars
+
+    objects = [_sky_object(t) for t in targets]
+    stars = [k for k, obj in enumerate(objects) if isinstance(obj, IcrsStar)]
+    places: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    if stars:
+        az, el = observe_stars([objects[k] for k in stars], grid.times, site, eop)
+        places.update({k: (az[i], el[i]) for i, k in enumerate(stars)})
+    for k, obj in enumerate(objects):
+        if k not in places:
+            obs = observe_mount_times(obj, grid.t_us, site, eop)
+            places[k] = (obs.az_rad, obs.el_rad)
+    out = []
+    for k, target in enumerate(targets):
+        az, el = np.degrees(places[k][0]) % 360.0, np.degrees(places[k][1])
+        out.append(TargetSky(target, az, el, constraint_masks(target, az, el, grid, zones)))
+    return out
 
 
 def target_sky(target: ProgramTarget, grid: NightGrid, site: Site, eop: EarthOrientation,
                zones: AvoidanceZones) -> TargetSky:
-    """Observe a sidereal target on the grid and evaluate its constraints there."""
-    obs = observe_mount_times(_sky_object(target), grid.t_us, site, eop)
-    az, el = np.degrees(obs.az_rad) % 360.0, np.degrees(obs.el_rad)
-    return TargetSky(target, az, el, constraint_masks(target, az, el, grid, zones))
+    """Observe one sidereal target on the grid and evaluate its constraints there."""
+    return target_skies([target], grid, site, eop, zones)[0]
 
 
 def constraint_masks(target: ProgramTarget, az: np.ndarray, el: np.ndarray, grid: NightGrid,
@@ -159,22 +227,24 @@ def satellite_windows(target: ProgramTarget, grid: NightGrid, site: Site, eop: E
     satisfies the target's constraints: [{start_us, end_us, culmination_el_deg, az/el...}]."""
     sat = load_target_satellite(target)
     t0, t1 = int(grid.t_us[0]), int(grid.t_us[-1])
+    # where it is above min_el: a scan every SCAN_STEP_S (one vectorised SGP4 call), each
+    # stretch then widened by a scan step and sampled every `step_s`, so that the
+    # constraint masks find its edges to `step_s` (a pass shorter than a scan step is
+    # too short for a block anyway)
+    scan_us = int(SCAN_STEP_S * 1e6)
+    coarse = np.arange(t0, t1 + 1, scan_us, dtype=np.int64)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        passes = satellite_passes(sat, site, UtcTimes.from_unix_us(t0),
-                                  UtcTimes.from_unix_us(t1), min_el_deg=target.min_el_deg,
-                                  eop=eop)
+        coarse_el = np.degrees(observe_mount_times(sat, coarse, site, eop).el_rad)
     out = []
-    for p in passes:
-        if p.rise is None or p.set is None:
-            continue
-        a, b = int(p.rise.utc.to_unix_us()[0]), int(p.set.utc.to_unix_us()[0])
+    for i0, i1 in _runs(coarse_el >= target.min_el_deg):
+        a, b = max(t0, int(coarse[i0]) - scan_us), min(t1, int(coarse[i1]) + scan_us)
         t = np.arange(a, b + 1, int(step_s * 1e6), dtype=np.int64)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             obs = observe_mount_times(sat, t, site, eop)
         az, el = np.degrees(obs.az_rad) % 360.0, np.degrees(obs.el_rad)
-        fine = _fine_grid(t, site, eop, grid.step_s)
+        fine = grid.interpolated(t)
         ok = np.ones(t.shape, bool)
         for mask in constraint_masks(target, az, el, fine, zones).values():
             ok &= mask
@@ -183,20 +253,14 @@ def satellite_windows(target: ProgramTarget, grid: NightGrid, site: Site, eop: E
         runs = _runs(ok)
         if not runs:
             continue
-        i0, i1 = max(runs, key=lambda r: r[1] - r[0])
-        path = np.degrees(np.unwrap(obs.az_rad[i0:i1 + 1]))
-        out.append({"start_us": int(t[i0]), "end_us": int(t[i1]),
+        j0, j1 = max(runs, key=lambda r: r[1] - r[0])
+        path = np.degrees(np.unwrap(obs.az_rad[j0:j1 + 1]))
+        out.append({"start_us": int(t[j0]), "end_us": int(t[j1]),
                     "az_travel_deg": float(path[-1] - path[0]),
-                    "start_az_deg": float(az[i0]), "start_el_deg": float(el[i0]),
-                    "end_az_deg": float(az[i1]), "end_el_deg": float(el[i1]),
+                    "start_az_deg": float(az[j0]), "start_el_deg": float(el[j0]),
+                    "end_az_deg": float(az[j1]), "end_el_deg": float(el[j1]),
                     "culmination_el_deg": float(el.max())})
     return out
-
-
-def _fine_grid(t: np.ndarray, site: Site, eop, step_s: float) -> NightGrid:
-    places = body_places(UtcTimes.from_unix_us(t), site, eop, ("sun", "moon"))
-    (saz, sel), (maz, mel) = places["sun"], places["moon"]
-    return NightGrid(t, np.degrees(saz), np.degrees(sel), np.degrees(maz), np.degrees(mel), step_s)
 
 
 def _sunlit(sat: Satellite, t_us: np.ndarray, eop) -> np.ndarray:
@@ -231,7 +295,5 @@ def slew_s(from_az_deg: float, from_el_deg: float, to_az_deg: float, to_el_deg: 
 def plan_slew_deg(from_az_deg: float, from_el_deg: float, to_az_deg: float, to_el_deg: float,
                   limits) -> float:
     """Mount seconds of the point-to-point slew between two mount positions (deg, as is)."""
-    from virtualstar.astro import plan_slew
-
     return plan_slew(math.radians(from_az_deg), math.radians(from_el_deg),
                      math.radians(to_az_deg), math.radians(to_el_deg), limits).duration_s
