@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 from astropy.utils import iers
+from sky_truth import observed_frame
 
 from catalogs import load_tle_file, select_satellite
 from virtualstar.astro import AvoidanceZones, EarthOrientation, MountLimits, load_site
@@ -41,16 +42,7 @@ def example(eop, site):
 
 
 def _astropy_altaz(coord, t_us: np.ndarray, site):
-    import astropy.units as u
-    from astropy.coordinates import AltAz, EarthLocation
-    from astropy.time import Time
-
-    t = Time(np.asarray(t_us) / 1e6, format="unix", scale="utc")
-    loc = EarthLocation.from_geodetic(site.lon_deg * u.deg, site.lat_deg * u.deg,
-                                      site.height_m * u.m)
-    frame = AltAz(obstime=t, location=loc, pressure=site.pressure_hpa * u.hPa,
-                  temperature=site.temperature_c * u.deg_C, relative_humidity=site.humidity,
-                  obswl=site.wavelength_um * u.micron)
+    frame = observed_frame(t_us, site)
     return coord.transform_to(frame), frame
 
 

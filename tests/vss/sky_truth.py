@@ -1,4 +1,4 @@
-"""Independent truth for the VSS tests: Vega's observed place from astropy, sky distances."""
+"""Independent truth for the VSS and planning tests: observed places from astropy, sky distances."""
 
 from __future__ import annotations
 
@@ -8,29 +8,42 @@ from astropy.utils import iers
 iers.conf.auto_download = False
 
 
-def vega_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
-    """Return astropy's observed az, el (deg) of Vega at mount times (UTC µs)."""
+def observed_frame(t_us: np.ndarray, site):
+    """astropy's observed (refracted) AltAz frame of the site at mount times (UTC µs)."""
     import astropy.units as u
-    from astropy.coordinates import AltAz, Distance, EarthLocation, SkyCoord
+    from astropy.coordinates import AltAz, EarthLocation
+    from astropy.time import Time
+
+    t = Time(np.asarray(t_us) / 1e6, format="unix", scale="utc")
+    loc = EarthLocation.from_geodetic(site.lon_deg * u.deg, site.lat_deg * u.deg, site.height_m * u.m)
+    return AltAz(obstime=t, location=loc, pressure=site.pressure_hpa * u.hPa,
+                 temperature=site.temperature_c * u.deg_C, relative_humidity=site.humidity,
+                 obswl=site.wavelength_um * u.micron)
+
+
+def star_truth(name: str, t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
+    """Return astropy's observed az, el (deg) of a catalog star at mount times (UTC µs)."""
+    import astropy.units as u
+    from astropy.coordinates import Distance, SkyCoord
     from astropy.time import Time
 
     from catalogs import bright_stars
 
-    s = bright_stars().lookup("Vega")
+    s = bright_stars().lookup(name)
     star = SkyCoord(ra=s.ra_deg * u.deg, dec=s.dec_deg * u.deg,
                     pm_ra_cosdec=s.pm_ra_cosdec_mas_yr * u.mas / u.yr,
                     pm_dec=s.pm_dec_mas_yr * u.mas / u.yr,
                     distance=Distance(parallax=s.parallax_mas * u.mas),
                     radial_velocity=(s.rv_km_s or 0.0) * u.km / u.s,
                     obstime=Time(s.epoch_jyear, format="jyear", scale="tcb"), frame="icrs")
-    t = Time(np.asarray(t_us) / 1e6, format="unix", scale="utc")
-    loc = EarthLocation.from_geodetic(site.lon_deg * u.deg, site.lat_deg * u.deg, site.height_m * u.m)
-    frame = AltAz(obstime=t, location=loc, pressure=site.pressure_hpa * u.hPa,
-                  temperature=site.temperature_c * u.deg_C, relative_humidity=site.humidity,
-                  obswl=site.wavelength_um * u.micron)
-    moved = star.apply_space_motion(new_obstime=t)
-    aa = moved.transform_to(frame)
+    frame = observed_frame(t_us, site)
+    aa = star.apply_space_motion(new_obstime=frame.obstime).transform_to(frame)
     return aa.az.deg, aa.alt.deg
+
+
+def vega_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
+    """Return astropy's observed az, el (deg) of Vega at mount times (UTC µs)."""
+    return star_truth("Vega", t_us, site)
 
 
 def sky_sep_arcsec(az1, el1, az2, el2) -> np.ndarray:

@@ -12,7 +12,7 @@ from .program import Program
 from .scheduler import Plan
 from .sky import NightGrid, load_target_satellite, target_sky
 
-__all__ = ["plot_plan"]
+__all__ = ["plot_plan", "plot_run"]
 
 _TWILIGHT = [(0.0, -6.0, 0.10), (-6.0, -12.0, 0.18), (-12.0, -18.0, 0.26), (-18.0, -90.0, 0.34)]
 
@@ -68,15 +68,81 @@ def plot_plan(plan: Plan, program: Program, site: Site, path: str | Path,
                  "targets left out (darker: deeper twilight)")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper right", fontsize=8, ncol=2)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def _no_zones():
     from virtualstar.astro import AvoidanceZones
 
     return AvoidanceZones(sun_radius_deg=0.0)
+
+
+_OUTCOME_COLOURS = {"done": "tab:green", "late": "tab:olive", "missed": "tab:grey",
+                    "faulted": "tab:red", "stopped": "tab:orange"}
+
+
+def plot_run(run: dict, path: str | Path) -> Path:
+    """Write a run's PNG: planned and observed blocks per target against UTC (coloured by
+    outcome, re-plans marked), and each block's encoder and on-sky tracking error."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    records = [*run.get("done_before", []), *run["records"]]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(11, 7), height_ratios=[1.2, 1])
+    if not records:
+        top.text(0.5, 0.5, "no block was run", ha="center", transform=top.transAxes)
+    t0 = min((r["planned_start_us"] for r in records), default=0)
+    names = list(dict.fromkeys(r["target"] for r in records))
+    for r in records:
+        y = names.index(r["target"])
+        a, b = (r["planned_start_us"] - t0) / 3.6e9, (r["planned_end_us"] - t0) / 3.6e9
+        top.barh(y, b - a, left=a, height=0.7, fill=False, edgecolor="0.5", lw=0.8)
+        if r.get("start_us") is not None and r.get("end_us") is not None:
+            a, b = (r["start_us"] - t0) / 3.6e9, (r["end_us"] - t0) / 3.6e9
+            top.barh(y, max(b - a, 1e-4), left=a, height=0.5,
+                     color=_OUTCOME_COLOURS.get(r["outcome"], "k"))
+        else:
+            top.plot([a], [y], "x", color=_OUTCOME_COLOURS.get(r["outcome"], "k"))
+    for rp in run.get("replans", []):
+        top.axvline((rp["at_us"] - t0) / 3.6e9, color="tab:red", ls="--", lw=0.8)
+    top.set_yticks(range(len(names)), names)
+    top.set_ylim(-0.6, len(names) + 0.4)  # room for the legend above the last row
+    top.set_xlabel(f"hours after {UtcTimes.from_unix_us(int(t0)).iso(0)[0]} UTC" if records
+                   else "hours")
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in _OUTCOME_COLOURS.values()]
+    top.legend(handles + [plt.Line2D([], [], color="tab:red", ls="--")],
+               [*_OUTCOME_COLOURS, "re-plan"], fontsize=8, ncol=6, loc="upper right")
+    s = run.get("summary", {})
+    top.set_title(f"{run.get('program', '')}: {run.get('state', '')} — {s.get('done', 0)} done, "
+                  f"{s.get('late', 0)} late, {s.get('missed', 0)} missed, "
+                  f"{s.get('faulted', 0)} faulted; "
+                  f"{s.get('priority_weighted_hours', 0.0):.2f} priority-weighted hours "
+                  "(outline: planned, filled: observed)", fontsize=10)
+    observed = [r for r in records if r.get("encoder_rms_arcsec") is not None]
+    x = np.arange(len(observed))
+    labels = [f"{r['target']} #{r['repeat']}" for r in observed]
+    for off, key, colour in ((-0.2, "encoder", "tab:blue"), (0.2, "on_sky", "tab:purple")):
+        rms = [r[f"{key}_rms_arcsec"] or np.nan for r in observed]
+        peak = [r[f"{key}_peak_arcsec"] or np.nan for r in observed]
+        bottom.bar(x + off, rms, width=0.4, color=colour, label=f"{key.replace('_', '-')} RMS")
+        bottom.plot(x + off, peak, "v", color=colour, label=f"{key.replace('_', '-')} peak")
+    bottom.set_yscale("log")
+    bottom.set_ylabel("tracking error [arcsec]")
+    bottom.set_xticks(x, labels, rotation=45, ha="right", fontsize=8)
+    bottom.grid(True, axis="y", alpha=0.3)
+    if observed:
+        bottom.legend(fontsize=8, ncol=4)
+    return _save(fig, path)
+
+
+def _save(fig, path: str | Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -66,8 +66,32 @@ class ProgramTarget:
     az_windows_deg: tuple[tuple[float, float], ...] = ()
     window_us: tuple[int, int] | None = None
     tle_file: Path | None = None
+    tle_text: str = ""  # the TLE file's text, read once: a plan carries it to the server
     sunlit_while_dark: bool = False
     index: int = 0  # its place in the file (ties are broken by it: a plan is deterministic)
+
+    def as_dict(self) -> dict[str, Any]:
+        d = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        d["tle_file"] = None if self.tle_file is None else str(self.tle_file)
+        d["az_windows_deg"] = [list(w) for w in self.az_windows_deg]
+        d["window_us"] = None if self.window_us is None else list(self.window_us)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ProgramTarget:
+        """Rebuild a target from `as_dict` (as carried in a plan); raise ProgramError."""
+        try:
+            fields = {k: d[k] for k in cls.__dataclass_fields__ if k in d}
+            fields["tle_file"] = None if d.get("tle_file") is None else Path(d["tle_file"])
+            fields["az_windows_deg"] = tuple(tuple(float(x) for x in w)
+                                             for w in d.get("az_windows_deg", ()))
+            window = d.get("window_us")
+            fields["window_us"] = None if window is None else (int(window[0]), int(window[1]))
+            return cls(**fields)
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise ProgramError(f"a plan's program target {d.get('name', '?')!r} is incomplete "
+                               f"or malformed ({exc}): write the plan again with vs plan") \
+                from None
 
     @property
     def is_satellite(self) -> bool:
@@ -93,6 +117,19 @@ class Program:
     name: str
     targets: tuple[ProgramTarget, ...] = field(default_factory=tuple)
     source: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "source": self.source,
+                "targets": [t.as_dict() for t in self.targets]}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Program:
+        targets = d.get("targets") if isinstance(d, dict) else None
+        if not isinstance(targets, list):
+            raise ProgramError("a plan without its program (program_spec.targets): write the "
+                               "plan again with vs plan")
+        return cls(str(d.get("name", "")), tuple(ProgramTarget.from_dict(t) for t in targets),
+                   str(d.get("source", "")))
 
 
 def load_program(path: str | Path) -> Program:
@@ -151,7 +188,7 @@ def _target(path: Path, index: int, t: dict[str, Any]) -> ProgramTarget:
         duration = (number("exposures", 1, 100000) * number("exposure_s", 0.001, 86400.0)
                     + number("overhead_s", 0.0, 86400.0))
     spec = str(t[kind]) if kind != "tle_file" else str(t.get("sat", ""))
-    tle_file = None
+    tle_file, tle_text = None, ""
     if kind == "tle_file":
         tle_file = (path.parent / str(t["tle_file"])).resolve()
         if not tle_file.is_file():
@@ -159,6 +196,10 @@ def _target(path: Path, index: int, t: dict[str, Any]) -> ProgramTarget:
                                f"(looked for {tle_file})")
         if not spec:
             raise ProgramError(f"{where}: a tle_file needs sat = \"NAME\" (the satellite in it)")
+        try:
+            tle_text = tle_file.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ProgramError(f"{where}: cannot read tle_file {tle_file}: {exc}") from None
     elif kind == "radec":
         from virtualstar.astro import AstroError, parse_radec
 
@@ -195,6 +236,6 @@ def _target(path: Path, index: int, t: dict[str, Any]) -> ProgramTarget:
         min_el_deg=number("min_el_deg", -5.0, 89.0),
         sun_max_el_deg=number("sun_max_el_deg", -90.0, 90.0),
         moon_min_sep_deg=number("moon_min_sep_deg", 0.0, 180.0),
-        az_windows_deg=tuple(windows), window_us=window_us, tle_file=tle_file,
+        az_windows_deg=tuple(windows), window_us=window_us, tle_file=tle_file, tle_text=tle_text,
         sunlit_while_dark=bool(t.get("sunlit_while_dark", False)), index=index)
     return replace(target, name=target.name.strip() or f"target {index + 1}")

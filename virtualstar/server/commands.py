@@ -95,6 +95,13 @@ class WaitParams:
 
 
 @dataclass(frozen=True)
+class RunPlanParams:
+    plan: dict  # as `vs plan --json` writes it
+    done: list | None = None  # the records of a run this one resumes
+    wait: bool = False
+
+
+@dataclass(frozen=True)
 class Command:
     params: type
     handler: Callable[[Telescope, Any], Awaitable[Any]]
@@ -142,7 +149,7 @@ class OperationFailed(VssError):
 def _plain_match(value: Any, allowed: tuple) -> bool:
     if isinstance(value, bool):
         return bool in allowed
-    return (int in allowed and isinstance(value, int)) or (str in allowed and isinstance(value, str))
+    return any(kind in allowed and isinstance(value, kind) for kind in (int, str, dict, list))
 
 
 async def _result(op: Operation, *, wait_done: bool) -> dict[str, Any]:
@@ -274,6 +281,15 @@ async def _wait(t: Telescope, p: WaitParams) -> Any:
     return await _result(op, wait_done=True)
 
 
+async def _run_plan(t: Telescope, p: RunPlanParams) -> Any:
+    doc = await t.programs.start(p.plan, p.done, lambda cmd, params: execute(t, cmd, params))
+    return await t.programs.wait() if p.wait else doc
+
+
+async def _program(t: Telescope, p: NoParams) -> Any:
+    return t.programs.status()
+
+
 COMMANDS: dict[str, Command] = {
     "ping": Command(NoParams, _ping, "Answer at once (liveness)."),
     "status": Command(NoParams, _status, "Positions, RA/Dec, states, errors, mount time."),
@@ -297,7 +313,16 @@ COMMANDS: dict[str, Command] = {
     "errors": Command(ErrorsParams, _errors, "Tracking-error RMS and peak over a mount-time "
                       "window; series=true adds per-bin values."),
     "wait": Command(WaitParams, _wait, "Wait until the running operation ends; return its summary."),
+    "run_plan": Command(RunPlanParams, _run_plan, "Run a plan (vs plan's JSON) block by block, "
+                        "re-planning after a missed, late or faulted block; answers when it "
+                        "has begun, or at its end with wait=true."),
+    "program": Command(NoParams, _program, "The program run: state, current block, the "
+                       "blocks done with their tracking figures, re-plans, the plan."),
 }
+
+# Commands that move the mount or change who drives it: they end a running program first.
+ENDS_PROGRAM = frozenset({"slew", "track", "stop", "reset_faults", "park", "pointing_sample",
+                          "set_mode"})
 
 
 async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any]) -> Any:
@@ -305,4 +330,13 @@ async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any]) -> An
     command = COMMANDS.get(cmd)
     if command is None:
         raise UnknownCommand(f"unknown command {cmd!r}; valid commands: {', '.join(COMMANDS)}")
+    checked = _check(command.params, params, cmd)
+    if cmd in ENDS_PROGRAM and telescope.programs.running:
+        await telescope.programs.cancel(f"ended by a client's {cmd}")
+    return await command.handler(telescope, checked)
+
+
+async def execute(telescope: Telescope, cmd: str, params: dict[str, Any]) -> Any:
+    """Run a command for the server's own program run (it does not end the program)."""
+    command = COMMANDS[cmd]
     return await command.handler(telescope, _check(command.params, params, cmd))

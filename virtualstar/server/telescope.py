@@ -55,6 +55,7 @@ from .feeder import FeederConfig
 from .motion import Motion
 from .mount_link import MountLink
 from .operations import Operation
+from .programs import ProgramControl
 from .safety import HOLD_LOOKAHEAD_S, Safety
 from .supervisor import Supervisor
 from .timesync import TimeSync
@@ -163,6 +164,7 @@ class Telescope:
         self.last_fault = ""
         self._mount_state: int | None = None
         self._tasks: set[asyncio.Task] = set()
+        self.programs = ProgramControl(self, lambda kind, data: self.emit(kind, data))
 
     @property
     def op(self) -> Operation | None:
@@ -178,6 +180,7 @@ class Telescope:
 
     async def close(self) -> None:
         """Stop everything: a running operation is ended (the mount brought to rest), tasks too."""
+        await self.programs.cancel("the server is shutting down")
         await self.supervisor.stop("the server is shutting down",
                                    then=self.motion.halt_quietly if self.link.connected else None)
         tasks = set(self._tasks)

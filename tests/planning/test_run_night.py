@@ -1,0 +1,289 @@
+"""`run_plan` / `vs run`: a plan executed on the emulator through the VSS API, in lockstep.
+
+The mount's own encoders, read straight from the emulator during the run, must be on each
+block's target (astropy for the stars, skyfield for the ISS); a mount fault injected
+mid-block makes the run re-plan and go on; a stop ends it and nothing moves afterwards;
+a resumed run does not observe again what was done."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from astropy.utils import iers
+from sky_truth import star_truth
+from typer.testing import CliRunner
+from vss_rig import read_emulator, run_lockstep_scenario
+
+from virtualstar.astro import UtcTimes, load_site
+from virtualstar.cli.main import app
+from virtualstar.planning import PlanRequest, load_program, plan_program
+
+iers.conf.auto_download = False
+iers.conf.auto_max_age = None
+
+ENCODERS = ["axis.az.position", "axis.el.position"]
+PROGRAM = """
+[defaults]
+duration_s = 120
+min_el_deg = 20
+sun_max_el_deg = -6
+[[target]]
+star = "Vega"
+[[target]]
+star = "Arcturus"
+priority = 2
+[[target]]
+name = "ISS"
+tle_file = "stations.tle"
+sat = "ISS"
+priority = 5
+[[target]]
+star = "Deneb"
+"""
+STARS_ONLY = """
+[defaults]
+duration_s = 120
+min_el_deg = 20
+sun_max_el_deg = -6
+[[target]]
+star = "Arcturus"
+priority = 3
+[[target]]
+star = "Deneb"
+priority = 2
+[[target]]
+star = "Vega"
+"""
+
+
+def _us(iso: str) -> int:
+    return int(UtcTimes.from_iso([iso]).to_unix_us()[0])
+
+
+def _plan(tmp, text: str, start: str, end: str) -> dict:
+    (tmp / "stations.tle").write_text(Path("catalogs/data/stations.tle").read_text())
+    (tmp / "program.toml").write_text(text)
+    plan = plan_program(PlanRequest(load_program(tmp / "program.toml"), _us(start), _us(end),
+                                    load_site()))
+    return plan.as_dict()
+
+
+@pytest.fixture(scope="module")
+def night(tmp_path_factory):
+    return _plan(tmp_path_factory.mktemp("night"), PROGRAM, "2024-05-18T21:22:00Z",
+                 "2024-05-18T21:40:00Z")
+
+
+@pytest.fixture(scope="module")
+def stars(tmp_path_factory):
+    return _plan(tmp_path_factory.mktemp("stars"), STARS_ONLY, "2024-05-18T21:22:00Z",
+                 "2024-05-18T21:36:00Z")
+
+
+async def _sample(vss, clock, every_s: float, until):
+    """Read the encoders straight from the emulator every `every_s` mount seconds."""
+    reads = []
+    while not until.done():
+        values, t_us = await read_emulator(vss, ENCODERS)
+        reads.append((t_us, np.degrees(values["axis.az.position"]) % 360.0,
+                      np.degrees(values["axis.el.position"])))
+        await clock.sleep(every_s)
+    return reads
+
+
+def _iss_truth(t_us: np.ndarray, site):
+    from datetime import UTC, datetime
+
+    from skyfield.api import EarthSatellite, wgs84
+
+    from catalogs import load_tle_file, select_satellite
+    from virtualstar.astro import EarthOrientation
+    from virtualstar.astro.bodies import skyfield_context
+
+    sf = skyfield_context(EarthOrientation.from_astropy_iers_data())
+    rec = select_satellite(load_tle_file("catalogs/data/stations.tle"), "ISS")
+    sat = EarthSatellite(rec.line1, rec.line2, rec.name, sf.ts)
+    earth = sf.ephemeris["earth"]
+    observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
+    ts = sf.ts.from_datetimes([datetime.fromtimestamp(t / 1e6, tz=UTC) for t in t_us])
+    # the apparent direction (light time, aberration), as a telescope sees it, lifted by
+    # ERFA's refraction constants for the site's air (skyfield's own formula ignores
+    # humidity and wavelength: arcseconds at 20°)
+    import erfa
+
+    alt, az, _ = observer.at(ts).observe(earth + sat).apparent().altaz()
+    refa, refb = erfa.refco(site.pressure_hpa, site.temperature_c, site.humidity,
+                            site.wavelength_um)
+    tan_z = np.tan(np.pi / 2 - alt.radians)
+    return az.degrees, alt.degrees + np.degrees(refa * tan_z + refb * tan_z ** 3)
+
+
+def _sep_arcsec(az1, el1, az2, el2):
+    import erfa
+
+    return np.degrees(erfa.seps(np.radians(az1), np.radians(el1), np.radians(az2),
+                                np.radians(el2))) * 3600.0
+
+
+def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
+    site = load_site()
+
+    async def scenario(vss, clock):
+        events = vss.server.subscribe(maxsize=10_000)
+        run = asyncio.ensure_future(vss.server.call("run_plan", {"plan": night, "wait": True}))
+        reads = await _sample(vss, clock, 5.0, run)
+        program = await vss.server.call("program")
+        status = await vss.server.call("status")
+        seen = []
+        while not events.empty():
+            kind, data = events.get_nowait()
+            if kind == "program":
+                seen.append(data["state"])
+        return await run, program, status, reads, seen
+
+    result, program, status, reads, seen = run_lockstep_scenario("2024-05-18T21:20:00Z",
+                                                                 scenario, site=site)
+    assert result["state"] == "done" and program["records"] == result["records"]
+    assert seen[0] == "running" and seen[-1] == "done"
+    planned = [(b["target"], b["start_us"], b["end_us"]) for b in night["blocks"]]
+    records = result["records"]
+    assert [(r["target"], r["planned_start_us"], r["planned_end_us"]) for r in records] == planned
+    assert all(r["outcome"] == "done" for r in records), records
+    assert {r["target"] for r in records} == {"Vega", "Arcturus", "Deneb", "ISS"}
+    t, az, el = (np.array(c) for c in zip(*reads, strict=True))
+    for r in records:
+        assert r["start_us"] == r["planned_start_us"] and r["end_us"] == r["planned_end_us"]
+        assert r["samples"] > 0 and r["encoder_rms_arcsec"] < r["encoder_peak_arcsec"] < 1.0
+        inside = (t >= r["start_us"]) & (t <= r["end_us"])
+        assert inside.sum() >= 20, r["target"]
+        truth = (_iss_truth(t[inside], site) if r["target"] == "ISS"
+                 else star_truth(r["target"], t[inside], site))
+        sep = _sep_arcsec(az[inside], el[inside], *truth)
+        assert sep.max() < 1.0, (r["target"], sep.max())
+    assert result["summary"]["done"] == 4 and result["summary"]["faulted"] == 0
+    assert status["operation"]["phase"] in ("done", "aborted")  # the mount was brought to rest
+
+
+def test_a_mount_fault_mid_block_makes_the_run_reset_replan_and_go_on(stars):
+    site = load_site()
+    first, second = stars["blocks"][0], stars["blocks"][1]
+
+    async def scenario(vss, clock):
+        run = asyncio.ensure_future(vss.server.call("run_plan", {"plan": stars, "wait": True}))
+        mid = (second["start_us"] + second["end_us"]) // 2
+        await clock.sleep((mid - clock.now_us) / 1e6)
+        client = await vss.emulator.connect_in_memory(name="test-fault")
+        await client.write({"axis.az.inject_encoder_fault": 1.0})
+        await clock.sleep(0.5)
+        await client.write({"axis.az.inject_encoder_fault": 0.0})
+        await client.close()
+        return await run
+
+    result = run_lockstep_scenario("2024-05-18T21:20:00Z", scenario, site=site)
+    records = result["records"]
+    assert records[0]["target"] == first["target"] and records[0]["outcome"] == "done"
+    faulted = records[1]
+    assert faulted["target"] == second["target"] and faulted["outcome"] == "faulted"
+    assert faulted["error"]["code"] == "mount_fault"
+    assert len(result["replans"]) >= 1
+    assert result["replans"][0]["reason"].startswith(f"{second['target']} #1 faulted")
+    after = records[2:]
+    assert after and all(r["outcome"] == "done" for r in after), records
+    assert all(r["planned_start_us"] > faulted["end_us"] for r in after)
+    assert result["state"] == "done"
+
+
+def test_a_stop_ends_the_run_nothing_moves_after_and_resume_skips_what_was_done(stars):
+    site = load_site()
+    first = stars["blocks"][0]
+
+    async def scenario(vss, clock):
+        vs = vss.client()
+        run = asyncio.ensure_future(vs.request("run_plan", {"plan": stars, "wait": True}))
+        await clock.sleep((first["end_us"] + 20_000_000 - clock.now_us) / 1e6)
+        await vs.request("stop")
+        stopped = await run
+        still = []
+        for _ in range(6):
+            values, t_us = await read_emulator(vss, ENCODERS)
+            still.append((values["axis.az.position"], values["axis.el.position"]))
+            await clock.sleep(10.0)
+        again = await vs.request("run_plan", {"plan": stars, "done": stopped["records"],
+                                              "wait": True})
+        return stopped, still, again
+
+    stopped, still, again = run_lockstep_scenario("2024-05-18T21:20:00Z", scenario, site=site)
+    assert stopped["state"] == "stopped"
+    assert [r["outcome"] for r in stopped["records"]] == ["done", "stopped"]
+    assert stopped["error"]["message"] == "ended by a client's stop"
+    az, el = np.array(still).T
+    assert np.ptp(az) < 1e-6 and np.ptp(el) < 1e-6  # stop is final: at rest, for a minute
+    assert again["state"] == "done"
+    redone = {r["target"] for r in again["records"]}
+    assert first["target"] not in redone and redone  # the rest was observed, not the first
+    assert again["replans"][0]["reason"].startswith("resumed")
+
+
+def test_another_clients_motion_command_ends_the_program(stars):
+    async def scenario(vss, clock):
+        vs = vss.client()
+        await vs.request("run_plan", {"plan": stars})
+        with pytest.raises(Exception) as second:
+            await vs.request("run_plan", {"plan": stars})
+        await clock.sleep(30.0)
+        await vs.request("slew", {"altaz": "180 50"})
+        return second.value, await vs.request("program")
+
+    refused, program = run_lockstep_scenario("2024-05-18T21:20:00Z", scenario,
+                                             site=load_site())
+    assert getattr(refused, "code", "") == "bad_request" and "already running" in str(refused)
+    assert program["state"] == "stopped"
+    assert program["error"]["message"] == "ended by a client's slew"
+
+
+@pytest.mark.parametrize(("plan", "expected"), [
+    ({"blocks": []}, "not a plan written by vs plan"),
+    ("text", "wrong type"),
+])
+def test_a_wrong_plan_is_refused_and_the_server_keeps_serving(plan, expected):
+    async def scenario(vss, clock):
+        vs = vss.client()
+        with pytest.raises(Exception) as refused:
+            await vs.request("run_plan", {"plan": plan})
+        return refused.value, await vs.request("ping")
+
+    refused, pong = run_lockstep_scenario("2024-05-18T21:20:00Z", scenario, site=load_site())
+    assert getattr(refused, "code", "") == "bad_request" and expected in str(refused)
+    assert pong == {"pong": True}
+
+
+def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(stars, tmp_path):
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps(stars))
+    out, png = tmp_path / "run.json", tmp_path / "run.png"
+    result = CliRunner().invoke(app, ["run", str(plan), "--emulator", "--speed", "max",
+                                      "-o", str(out), "--png", str(png)])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(out.read_text())
+    assert doc["state"] == "done" and doc["summary"]["done"] == len(stars["blocks"])
+    assert all(r["target"] in result.stdout for r in doc["records"])
+    assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize(("content", "expected"), [
+    (None, "cannot read plan"),
+    ("{not json", "not JSON"),
+    ('{"program": "x"}', "not a plan written by vs plan"),
+])
+def test_vs_run_refuses_a_wrong_plan_file(tmp_path, content, expected):
+    plan = tmp_path / "plan.json"
+    if content is not None:
+        plan.write_text(content)
+    result = CliRunner().invoke(app, ["run", str(plan), "--emulator"])
+    assert result.exit_code == 2 and expected in result.output
+
+

@@ -1,0 +1,193 @@
+"""`vs run`: run a plan on a VSS (or the embedded emulator), block by block."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from virtualstar.cli.status import JsonOpt, ServerOpt, api_password, print_json
+from virtualstar.cli.status import fail as status_fail
+
+__all__ = ["run"]
+
+
+def run(
+    plan: Annotated[Path, typer.Argument(
+        help="Plan file written by `vs plan ... -o PLAN.json`.", show_default=False)],
+    server: ServerOpt = None,
+    emulator: Annotated[bool, typer.Option(
+        "--emulator", help="Run on the embedded emulator in lockstep simulated time instead "
+                           "of a server (the whole night, as fast as --speed allows).")] = False,
+    speed: Annotated[str, typer.Option(
+        "--speed", help="With --emulator: 'max' (as fast as the CPU allows) or at most N× "
+                        "real time.")] = "max",
+    resume: Annotated[Path | None, typer.Option(
+        "--resume", help="A previous run's result (-o/--json of vs run): its finished blocks "
+                         "count, and the rest of the night is planned again from now.")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "-o", "--out", help="Write the run's result here (JSON; give it to --resume).")] = None,
+    png: Annotated[Path | None, typer.Option(
+        "--png", help="Write a picture: planned and observed blocks, re-plans, tracking "
+                      "error per block.")] = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Run a plan block by block through the VSS API: each block's start and end, slew time and
+    tracking error (encoder and on sky, RMS and peak); the rest of the night is planned again
+    after a missed, late or faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on."""
+
+    def fail(message: str, code: int = 2):
+        if as_json:
+            print_json({"error": {"code": "bad_input" if code == 2 else "refused",
+                                  "message": message}})
+        return status_fail(message, code)
+
+    try:
+        doc = json.loads(plan.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise fail(f"cannot read plan {plan}: {exc.strerror or exc}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise fail(f"{plan}: not JSON ({exc}); write a plan with vs plan PROGRAM --night DATE "
+                   "-o PLAN.json") from None
+    from virtualstar.planning import PlanningError
+    from virtualstar.planning.program import Program
+    from virtualstar.planning.scheduler import Plan
+
+    try:
+        if not isinstance(doc, dict):
+            raise PlanningError("not a plan (a JSON object written by vs plan) ")
+        Program.from_dict(Plan.from_dict(doc).program_spec)
+    except PlanningError as exc:
+        raise fail(f"{plan}: {exc}") from None
+    done = None
+    if resume is not None:
+        try:
+            previous = json.loads(resume.read_text(encoding="utf-8"))
+            done = [*previous.get("done_before", []), *previous["records"]]
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise fail(f"--resume {resume}: not a vs run result ({exc})") from None
+    show = _Progress(quiet=as_json)
+    if emulator:
+        from virtualstar.cli.server import parse_speed
+        from virtualstar.planning.emulated import run_plan_on_emulator
+
+        pace = parse_speed(speed)
+        try:
+            result = run_plan_on_emulator(doc, speed=pace, done=done, on_event=show)
+        except KeyboardInterrupt:
+            raise fail("interrupted: the simulated night ends with the process", 130) from None
+    else:
+        result = _on_server(server, doc, done, show, fail)
+    _report(result, out, png, as_json, fail)
+    if result.get("state") == "failed":
+        raise typer.Exit(1)
+
+
+def _on_server(server: str | None, doc: dict, done, show, fail) -> dict[str, Any]:
+    from virtualstar.vss_client import (
+        ServerUnavailable,
+        VssRequestError,
+        call_server,
+        default_server_url,
+    )
+
+    url = server or default_server_url()
+    try:
+        return call_server(url, "run_plan", {"plan": doc, "done": done, "wait": True},
+                           on_event=show, password=api_password())
+    except KeyboardInterrupt:
+        typer.echo("stopping the program (the mount comes to rest) ...", err=True)
+        try:
+            call_server(url, "stop", {}, password=api_password())
+            return call_server(url, "program", {}, password=api_password())
+        except (VssRequestError, ServerUnavailable) as exc:
+            raise fail(f"could not stop the program: {exc}", 1) from None
+    except VssRequestError as exc:
+        raise fail(f"the server refused run_plan: {exc.message} [{exc.code}]", 1) from None
+    except ServerUnavailable as exc:
+        raise fail(str(exc)) from None
+
+
+class _Progress:
+    """Print one line per finished block (and re-plan) as the server reports them."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.seen = 0
+        self.replans = 0
+
+    def __call__(self, kind: str, data: dict[str, Any]) -> None:
+        if self.quiet or kind != "program":
+            return
+        last, blocks = data.get("last"), (data.get("summary") or {}).get("blocks", 0)
+        if last is not None and blocks > self.seen:
+            self.seen = blocks
+            print(_block_line(last), file=sys.stderr, flush=True)
+        if data.get("replans", 0) > self.replans:
+            self.replans = data["replans"]
+            print(f"  re-planned the rest of the night ({self.replans})", file=sys.stderr,
+                  flush=True)
+
+
+def _block_line(r: dict[str, Any]) -> str:
+    figs = ("" if r.get("encoder_rms_arcsec") is None else
+            f" encoder {r['encoder_rms_arcsec']:.3f}″ RMS / {r['encoder_peak_arcsec']:.3f}″ peak,"
+            f" on sky {r['on_sky_rms_arcsec']:.3f}″ / {r['on_sky_peak_arcsec']:.3f}″")
+    err = f" ({r['error']['message']})" if r.get("error") else ""
+    slew = "" if r.get("slew_s") is None else f" slew {r['slew_s']:.0f} s"
+    return (f"{(r.get('start_utc') or r['planned_start_utc'])[11:19]} {r['target']} "
+            f"#{r['repeat']}: {r['outcome']}{slew}{figs}{err}")
+
+
+def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json: bool,
+            fail) -> None:
+    if out is not None:
+        try:
+            out.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        except OSError as exc:
+            raise fail(f"cannot write {out}: {exc.strerror or exc}") from None
+    if png is not None:
+        from virtualstar.planning.plot import plot_run
+
+        try:
+            plot_run(result, png)
+        except OSError as exc:
+            raise fail(f"cannot write {png}: {exc.strerror or exc}") from None
+    if as_json:
+        print_json(result)
+        return
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+
+    s = result.get("summary", {})
+    wall = f", {result['wall_s']:.0f} s wall time" if "wall_s" in result else ""
+    t = Table(title=f"{result.get('program')}: {result.get('state')} — {s.get('done', 0)} done, "
+                    f"{s.get('late', 0)} late, {s.get('missed', 0)} missed, "
+                    f"{s.get('faulted', 0)} faulted, {len(result.get('replans', []))} re-plans; "
+                    f"{s.get('priority_weighted_hours', 0.0):.2f} priority-weighted h{wall}",
+              title_justify="left", box=box.SIMPLE_HEAD)
+    for col in ("start", "min", "block", "outcome", "slew", "enc″ RMS/pk", "sky″ RMS/pk"):
+        t.add_column(col, justify="left" if col in ("start", "block", "outcome") else "right")
+
+    def pair(r: dict[str, Any], key: str) -> str:
+        if r.get(f"{key}_rms_arcsec") is None:
+            return "-"
+        return f"{r[f'{key}_rms_arcsec']:.3f}/{r[f'{key}_peak_arcsec']:.3f}"
+
+    for r in result.get("records", []):
+        minutes = "-" if r.get("observed_s") is None else f"{r['observed_s'] / 60:.1f}"
+        t.add_row((r.get("start_utc") or r["planned_start_utc"])[11:19], minutes,
+                  f"{r['target']} #{r['repeat']}", r["outcome"],
+                  "-" if r.get("slew_s") is None else f"{r['slew_s']:.0f} s",
+                  pair(r, "encoder"), pair(r, "on_sky"))
+    console = Console()
+    console.print(t)
+    for rp in result.get("replans", []):
+        console.print(f"re-planned at {rp['at_utc'][11:19]}: {rp['reason']} → {rp['blocks']} "
+                      "blocks", markup=False)
+    if result.get("error"):
+        console.print(f"ended: {result['error']['message']}", markup=False)
