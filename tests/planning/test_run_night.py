@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from astropy.utils import iers
-from sky_truth import star_truth
+from sky_truth import sky_sep_arcsec, star_truth
 from typer.testing import CliRunner
 from vss_rig import read_emulator, run_lockstep_scenario
 
@@ -122,13 +122,6 @@ def _iss_truth(t_us: np.ndarray, site):
     return az.degrees, alt.degrees + np.degrees(refa * tan_z + refb * tan_z ** 3)
 
 
-def _sep_arcsec(az1, el1, az2, el2):
-    import erfa
-
-    return np.degrees(erfa.seps(np.radians(az1), np.radians(el1), np.radians(az2),
-                                np.radians(el2))) * 3600.0
-
-
 def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
     site = load_site()
 
@@ -162,7 +155,7 @@ def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
         assert inside.sum() >= 20, r["target"]
         truth = (_iss_truth(t[inside], site) if r["target"] == "ISS"
                  else star_truth(r["target"], t[inside], site))
-        sep = _sep_arcsec(az[inside], el[inside], *truth)
+        sep = sky_sep_arcsec(az[inside], el[inside], *truth)
         assert sep.max() < 1.0, (r["target"], sep.max())
     assert result["summary"]["done"] == 4 and result["summary"]["faulted"] == 0
     assert status["operation"]["phase"] in ("done", "aborted")  # the mount was brought to rest
@@ -272,6 +265,56 @@ def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(stars,
     assert doc["state"] == "done" and doc["summary"]["done"] == len(stars["blocks"])
     assert all(r["target"] in result.stdout for r in doc["records"])
     assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_vs_run_records_the_chosen_signals_for_every_block(stars, tmp_path):
+    from virtualstar.recorder import ParquetStoreReader
+
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps(stars))
+    out, store = tmp_path / "run.json", tmp_path / "store"
+    signals = ["axis.az.position_deg", "axis.el.position_deg", "axis.az.error_arcsec"]
+    args = ["run", str(plan), "--emulator", "-o", str(out), "--record-rate", "10",
+            "--store", f"parquet:{store}"]
+    for name in signals:
+        args += ["--record", name]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    doc = json.loads(out.read_text())
+    assert doc["recording"]["lost"] == 0 and doc["recording"]["names"] == signals
+    reader = ParquetStoreReader(store)
+    assert reader.gaps() == []
+    site = load_site()
+    for r in doc["records"]:
+        w = reader.window(r["start_us"], r["end_us"], signals)
+        # 10 samples per mount second, every one of the block's
+        assert abs(len(w) - (r["end_us"] - r["start_us"]) / 1e5) <= 1, r["target"]
+        az_deg, el_deg = star_truth(r["target"], w.t_us, site)
+        sep = sky_sep_arcsec(w.columns["axis.az.position_deg"] % 360.0,
+                             w.columns["axis.el.position_deg"], az_deg, el_deg)
+        assert sep.max() < 1.0, (r["target"], sep.max())
+        assert np.abs(w.columns["axis.az.error_arcsec"]).max() <= r["encoder_peak_arcsec"] + 0.05
+
+
+@pytest.mark.parametrize(("extra", "expected"), [
+    (["--record", "axis.az.nonsense"], "no signal axis.az.nonsense"),
+    (["--record", "axis.az.position", "--record-rate", "0"], "--record-rate 0"),
+    (["--record", "axis.az.position", "--store", "ftp:somewhere"], "store"),
+    (["--store", "parquet:x"], "go with --record"),
+])
+def test_vs_run_refuses_wrong_recording_options_before_running(stars, tmp_path, extra, expected):
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps(stars))
+    result = CliRunner().invoke(app, ["run", str(plan), "--emulator", *extra])
+    assert result.exit_code == 2, result.output
+    assert expected in result.output
+
+
+def test_vs_run_on_a_server_needs_the_mount_url_to_record(stars, tmp_path):
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps(stars))
+    result = CliRunner().invoke(app, ["run", str(plan), "--record", "axis.az.position"])
+    assert result.exit_code == 2 and "--mount URL" in result.output
 
 
 @pytest.mark.parametrize(("content", "expected"), [

@@ -3,10 +3,6 @@
 from __future__ import annotations
 
 import json
-import socket
-import subprocess
-import sys
-import time
 
 import numpy as np
 import pytest
@@ -17,26 +13,6 @@ from typer.testing import CliRunner
 from virtualstar.cli.main import app
 
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def device_url():
-    """Serve the example device (1 kHz, real time) on a loopback TCP port."""
-    port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "astcom_client.example_device",
-                             f"tcp://127.0.0.1:{port}", "--duration", "60"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 30
-    while True:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-            break
-        except OSError:
-            assert time.monotonic() < deadline and proc.poll() is None, "device did not start"
-            time.sleep(0.05)
-    yield f"tcp://127.0.0.1:{port}"
-    proc.terminate()
-    proc.wait(10)
 
 
 @pytest.fixture(scope="module")

@@ -33,11 +33,27 @@ def run(
     png: Annotated[Path | None, typer.Option(
         "--png", help="Write a picture: planned and observed blocks, re-plans, tracking "
                       "error per block.")] = None,
+    record: Annotated[list[str] | None, typer.Option(
+        "--record", help="Record this signal for the whole run (repeat for several; "
+                         "`astcom list URL` shows the names), e.g. axis.az.error_arcsec.",
+        show_default=False)] = None,
+    record_rate: Annotated[float, typer.Option(
+        "--record-rate", help="Samples per second per recorded signal.")] = 100.0,
+    store: Annotated[list[str] | None, typer.Option(
+        "--store", help="Where --record writes: parquet:DIR or "
+                        "influx:http://127.0.0.1:8086/DB (repeat for several).",
+        show_default="parquet:run-recording")] = None,
+    mount: Annotated[str | None, typer.Option(
+        "--mount", help="With --server and --record: the mount's ASTCom endpoint to record "
+                        "from (password: ASTCOM_PASSWORD).", show_default=False)] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Run a plan block by block through the VSS API: each block's start and end, slew time and
     tracking error (encoder and on sky, RMS and peak); the rest of the night is planned again
-    after a missed, late or faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on."""
+    after a missed, late or faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on.
+
+    --record NAME records mount signals for the whole run into --store (the blocks' mount
+    times in the result select each block's samples: `vs data`)."""
 
     def fail(message: str, code: int = 2):
         if as_json:
@@ -69,6 +85,9 @@ def run(
             done = [*previous.get("done_before", []), *previous["records"]]
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise fail(f"--resume {resume}: not a vs run result ({exc})") from None
+    from virtualstar.recorder.exceptions import RecorderError  # pyarrow: not for --help
+
+    recording = _recording(record, record_rate, store, emulator, server, mount, fail)
     show = _Progress(quiet=as_json)
     if emulator:
         from virtualstar.cli.server import parse_speed
@@ -76,14 +95,57 @@ def run(
 
         pace = parse_speed(speed)
         try:
-            result = run_plan_on_emulator(doc, speed=pace, done=done, on_event=show)
+            result = run_plan_on_emulator(doc, speed=pace, done=done, on_event=show,
+                                          record=recording)
         except KeyboardInterrupt:
             raise fail("interrupted: the simulated night ends with the process", 130) from None
+        except RecorderError as exc:
+            raise fail(f"--record: {exc}") from None
+    elif recording is not None:
+        result = _on_server_recorded(server, mount, doc, done, show, fail, recording)
     else:
         result = _on_server(server, doc, done, show, fail)
     _report(result, out, png, as_json, fail)
     if result.get("state") == "failed":
         raise typer.Exit(1)
+
+
+def _recording(names, rate_hz: float, stores, emulator: bool, server, mount, fail):
+    """The --record options checked before anything runs (None: nothing to record)."""
+    from virtualstar.planning.recording import DEFAULT_RECORD_STORE, RunRecording
+    from virtualstar.recorder.exceptions import RecorderError
+
+    if not names:
+        if stores or mount:
+            raise fail("--store and --mount go with --record NAME (the signals to record)")
+        return None
+    if not emulator and mount is None:
+        raise fail("--record on a server needs --mount URL, the mount's ASTCom endpoint "
+                   "(e.g. ws://127.0.0.1:8765); with --emulator the run records in process")
+    try:
+        return RunRecording(tuple(names), rate_hz, tuple(stores or [DEFAULT_RECORD_STORE]))
+    except RecorderError as exc:
+        raise fail(str(exc)) from None
+
+
+def _on_server_recorded(server, mount: str, doc, done, show, fail, recording) -> dict[str, Any]:
+    import os
+
+    from astcom_client import AstcomError
+    from virtualstar.planning.recording import ThreadedRecording
+    from virtualstar.recorder.exceptions import RecorderError
+
+    rec = ThreadedRecording(recording, mount, password=os.environ.get("ASTCOM_PASSWORD"))
+    try:
+        rec.start()
+    except (RecorderError, AstcomError, OSError) as exc:
+        raise fail(f"--record from {mount}: {exc}") from None
+    try:
+        result = _on_server(server, doc, done, show, fail)
+    finally:
+        summary = rec.stop()
+    result["recording"] = summary
+    return result
 
 
 def _on_server(server: str | None, doc: dict, done, show, fail) -> dict[str, Any]:

@@ -14,6 +14,7 @@ from typing import Any
 
 from virtualstar.astro import Site, load_site
 
+from .recording import RunRecording, record_beside
 from .scheduler import Plan
 
 __all__ = ["EMULATOR_LEAD_S", "run_plan_on_emulator"]
@@ -25,12 +26,13 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
                          start_us: int | None = None, site: Site | None = None,
                          done: list[dict[str, Any]] | None = None,
                          on_event: Callable[[str, dict[str, Any]], None] = lambda k, d: None,
-                         ) -> dict[str, Any]:
+                         record: RunRecording | None = None) -> dict[str, Any]:
     """Run the plan on a fresh emulator + VSS; return the run (as the `program` command).
 
     speed: None runs as fast as the CPU allows, else at most ×speed real time;
-    start_us: the mount time to start at (default: EMULATOR_LEAD_S before the plan).
-    The result gains `wall_s`.
+    start_us: the mount time to start at (default: EMULATOR_LEAD_S before the plan);
+    record: signals recorded from the emulator for the whole run (the result gains
+    `recording`, the recorder's summary). The result gains `wall_s`.
     """
     from virtualstar.launcher import embedded_vss
     from virtualstar.lockstep import LockstepClock, run_lockstep
@@ -42,20 +44,32 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
 
     async def main() -> dict[str, Any]:
         async with embedded_vss(clock=clock, site=site or _plan_site(plan)) as vss:
-            events = vss.server.subscribe(maxsize=100_000)
-            task = asyncio.ensure_future(vss.server.call(
-                "run_plan", {"plan": plan_doc, "done": done, "wait": True}))
-            while not task.done():
-                getter = asyncio.ensure_future(events.get())
-                await asyncio.wait({task, getter}, return_when=asyncio.FIRST_COMPLETED)
-                if getter.done():
-                    on_event(*getter.result())
-                else:
-                    getter.cancel()
-            while not events.empty():
-                on_event(*events.get_nowait())
-            vss.server.unsubscribe(events)
-            return task.result()
+            if record is None:
+                return await follow(vss)
+
+            async def connect():
+                return await vss.emulator.connect_in_memory(name="vs-run-recorder")
+
+            result, summary = await record_beside(record, connect, "embedded emulator",
+                                                  follow(vss))
+            result["recording"] = summary
+            return result
+
+    async def follow(vss) -> dict[str, Any]:
+        events = vss.server.subscribe(maxsize=100_000)
+        task = asyncio.ensure_future(vss.server.call(
+            "run_plan", {"plan": plan_doc, "done": done, "wait": True}))
+        while not task.done():
+            getter = asyncio.ensure_future(events.get())
+            await asyncio.wait({task, getter}, return_when=asyncio.FIRST_COMPLETED)
+            if getter.done():
+                on_event(*getter.result())
+            else:
+                getter.cancel()
+        while not events.empty():
+            on_event(*events.get_nowait())
+        vss.server.unsubscribe(events)
+        return task.result()
 
     result = run_lockstep(main(), clock)
     result["wall_s"] = time.perf_counter() - t0

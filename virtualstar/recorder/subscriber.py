@@ -189,6 +189,7 @@ class Recorder:
         self.summary = RecordingSummary(self.names, self.rate_hz)
         self._progress = asyncio.Event()
         self._stop = asyncio.Event()
+        self.started = asyncio.Event()  # set once the stream runs and the store has begun
         self.signals: list[SignalInfo] = []
 
     def stop(self) -> None:
@@ -238,6 +239,7 @@ class Recorder:
         deadline = None if duration_s is None else t0 + duration_s
         try:
             client, stream = await self._open(first=True)
+            self.started.set()
             delay = self.reconnect_delay_s
             while True:
                 ended = await self._consume(stream, deadline)
