@@ -52,8 +52,7 @@ def run(
     tracking error (encoder and on sky, RMS and peak); the rest of the night is planned again
     after a missed, late or faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on.
 
-    --record NAME records mount signals for the whole run into --store (the blocks' mount
-    times in the result select each block's samples: `vs data`)."""
+    --record NAME records mount signals for the whole run into --store (read with vs data)."""
 
     def fail(message: str, code: int = 2):
         if as_json:
