@@ -9,7 +9,6 @@ from typing import Annotated
 import typer
 
 from virtualstar.cli.status import fail as status_fail
-from virtualstar.cli.status import print_json
 
 __all__ = ["plan"]
 
@@ -46,9 +45,7 @@ def plan(
     from virtualstar.planning.sky import night_window
 
     def fail(message: str):  # with --json, the error goes to stdout as JSON too
-        if as_json:
-            print_json({"error": {"code": "bad_input", "message": message}})
-        return status_fail(message)
+        return status_fail(message, as_json=as_json)
 
     if (night is None) == (start is None and end is None) or ((start is None) != (end is None)):
         raise fail("give either --night DATE or both --from and --to")

@@ -54,11 +54,8 @@ def run(
 
     --record NAME records mount signals for the whole run into --store (read with vs data)."""
 
-    def fail(message: str, code: int = 2):
-        if as_json:
-            print_json({"error": {"code": "bad_input" if code == 2 else "refused",
-                                  "message": message}})
-        return status_fail(message, code)
+    def fail(message: str, code: int = 2):  # with --json, the error goes to stdout too
+        return status_fail(message, code, as_json=as_json)
 
     try:
         doc = json.loads(plan.read_text(encoding="utf-8"))

@@ -38,8 +38,15 @@ ServerOpt = Annotated[str | None, typer.Option(
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON for scripts instead of tables.")]
 
 
-def fail(message: str, code: int = 2) -> typer.Exit:
-    """Print `error: message` to stderr and return the Exit to raise."""
+def fail(message: str, code: int = 2, *, as_json: bool = False) -> typer.Exit:
+    """Print `error: message` to stderr and return the Exit to raise.
+
+    With `as_json` the error also goes to stdout as `{"error": {"code", "message"}}`
+    (code `bad_input` for exit code 2, else `refused`), so a script reads one stream.
+    """
+    if as_json:
+        print_json({"error": {"code": "bad_input" if code == 2 else "refused",
+                              "message": message}})
     typer.echo(f"error: {message}", err=True)
     return typer.Exit(code)
 
