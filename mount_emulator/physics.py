@@ -290,7 +290,8 @@ def hermite_sample(traj_t, traj_p, traj_v, state, t_us, out):
 
 @_inline
 def _hermite_sample(traj_t, traj_p, traj_v, state, t_us, out):
-    """`hermite_sample`, inlined into the tick loop."""
+    """`hermite_sample`, inlined into the tick loop (a call out of `_ticks` would bring
+    back the reference counting that loop is compiled without)."""
     cap = traj_t.shape[0]
     head = int(state[G_TRAJ_HEAD])
     tail = int(state[G_TRAJ_TAIL])

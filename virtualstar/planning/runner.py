@@ -148,8 +148,8 @@ class ProgramRunner:
                         await self._reset_faults()
                     await self._replan(f"{block.target} #{block.repeat} {record.outcome}"
                                        + (f": {record.error['message']}" if record.error else ""))
-                    queue = [b for b in self.plan.blocks
-                             if b.start_us >= (await self.api.now_us())]
+                    now = await self.api.now_us()
+                    queue = [b for b in self.plan.blocks if b.start_us >= now]
             self.state = "done"
             with contextlib.suppress(Exception):
                 await self.api.call("stop", {})  # the mount comes to rest at the end

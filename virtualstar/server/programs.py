@@ -63,7 +63,6 @@ class ProgramControl:
         self.emit = emit
         self.runner = None
         self.task: asyncio.Task | None = None
-        self.last: dict[str, Any] | None = None
 
     @property
     def running(self) -> bool:
@@ -130,7 +129,6 @@ class ProgramControl:
         return self.runner.as_dict()
 
     def _changed(self, doc: dict[str, Any]) -> None:
-        self.last = doc
         last = doc["records"][-1] if doc["records"] else None
         self.emit("program", {"state": doc["state"], "program": doc["program"],
                               "current": doc["current"], "last": last,
