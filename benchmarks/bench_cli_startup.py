@@ -48,7 +48,9 @@ def main() -> None:
                               cwd=Path(__file__).parents[1],
                               env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
-        server.stdout.readline()  # "VirtualStar Server on ..." once it listens
+        line = server.stdout.readline()  # "VirtualStar Server on ..." once it listens
+        if url not in line:
+            raise SystemExit(f"the server did not start (it said {line!r}); nothing to time")
         rows = [("python -c pass (reference)", timed([sys.executable, "-c", "pass"], args.runs)),
                 ("vs --help", timed([*VS, "--help"], args.runs)),
                 ("vs status", timed([*VS, "status", "--server", url], args.runs)),

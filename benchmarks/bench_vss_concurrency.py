@@ -93,12 +93,12 @@ class ServerThread:
         self.thread.join(30)
 
 
-async def client_session(url: str, sends: list[tuple[str, dict]], rng: random.Random,
+async def client_session(url: str, index: int, sends: list[tuple[str, dict]], rng: random.Random,
                          answers: Counter, latencies: dict, sent: list, outcomes: Counter) -> None:
     async with connect(url, max_size=1 << 24) as ws:
         await ws.recv()  # hello
         waiting: dict[int, float] = {}
-        prefix = id(ws) % 100_000 * 10_000
+        prefix = (index + 1) * 1_000_000  # request ids unique across clients (shared Counter)
 
         async def reader() -> None:
             async for text in ws:
@@ -162,7 +162,7 @@ def main() -> None:
 
     async def clients() -> list[float]:
         pings = asyncio.ensure_future(ping_latency(url))
-        await asyncio.gather(*(client_session(url, plan, random.Random(args.seed * 100 + i),
+        await asyncio.gather(*(client_session(url, i, plan, random.Random(args.seed * 100 + i),
                                               answers, latencies, sent, outcomes)
                                for i, plan in enumerate(plans)))
         return await pings

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import tempfile
 import time
 from pathlib import Path
@@ -105,8 +104,6 @@ def main() -> None:
     print(f"  reference: the emulator's step alone for the same mount time {bare:.1f} s "
           f"({mount_s / bare:.0f}× real time); the VSS adds {wall - bare:.1f} s "
           f"({(wall - bare) / mount_s * 1e3:.2f} ms per mount second)")
-    if not math.isfinite(wall):
-        raise SystemExit(1)
 
 
 if __name__ == "__main__":

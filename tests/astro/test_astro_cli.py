@@ -155,17 +155,21 @@ def test_passes_flag_the_sunlit_passes_seen_from_a_dark_site_as_a_shadow_cylinde
     sat = Satrec.twoline2rv(rec.line1, rec.line2)
     site = EarthLocation.from_geodetic(16.8786 * u.deg, 52.3967 * u.deg, 85 * u.m)
     for row in rows:
-        t = Time(row["culmination_utc"].rstrip("Z"), scale="utc")
-        _, r_km, _ = sat.sgp4(t.jd1, t.jd2)  # TEME, close enough to GCRS for a shadow
-        sun = get_body("sun", t).cartesian.xyz.to(u.km).value
-        s_hat = sun / np.linalg.norm(sun)
-        along = float(np.dot(r_km, s_hat))
-        off_axis = float(np.linalg.norm(np.asarray(r_km) - along * s_hat))
-        lit = along > 0 or off_axis > 6378.137
-        dark = get_body("sun", t).transform_to(AltAz(obstime=t, location=site)).alt.deg < -6.0
-        assert row["observer_in_darkness"] == dark, row
-        if lit and dark:
-            assert row["visible"], row
-        if not lit and not dark:
-            assert not row["visible"], row
+        # every second from rise to set, as the flag is defined (sunlit and dark at once)
+        t0 = Time(row["rise_utc"].rstrip("Z"), scale="utc")
+        span_s = (Time(row["set_utc"].rstrip("Z"), scale="utc") - t0).sec
+        t = t0 + np.arange(0.0, span_s, 1.0) * u.s
+        _, r_km, _ = sat.sgp4_array(t.jd1, t.jd2)  # TEME, close enough to GCRS for a shadow
+        sun = get_body("sun", t)
+        s_xyz = sun.cartesian.xyz.to(u.km).value.T
+        s_hat = s_xyz / np.linalg.norm(s_xyz, axis=1)[:, None]
+        along = np.sum(r_km * s_hat, axis=1)
+        off_axis = np.linalg.norm(r_km - along[:, None] * s_hat, axis=1)
+        lit = (along > 0) | (off_axis > 6378.137)
+        dark = sun.transform_to(AltAz(obstime=t, location=site)).alt.deg < -6.0
+        k = int(np.argmin(np.abs((t - Time(row["culmination_utc"].rstrip("Z"),
+                                            scale="utc")).sec)))
+        assert row["observer_in_darkness"] == bool(dark[k]), row
+        assert row["sunlit"] == bool(lit.any()), row
+        assert row["visible"] == bool((lit & dark).any()), row
     assert any(r["visible"] for r in rows) and any(not r["visible"] for r in rows)

@@ -138,16 +138,31 @@ def test_satellite_blocks_lie_in_skyfields_passes_and_meet_sunlit_while_dark(exa
                                                pressure_mbar=site.pressure_hpa)
         assert alt.degrees.min() >= target.min_el_deg - 0.01
         assert sat.at(ts).is_sunlit(sf.ephemeris).all()
-        sun_alt = (sf.ephemeris["earth"] + topos).at(ts).observe(sf.ephemeris["sun"]) \
-            .apparent().altaz()[0].degrees
-        assert sun_alt.max() <= target.sun_max_el_deg + 0.02
-        # the block is the whole sunlit-and-dark part: one second beyond an end, it fails
-        edges = sf.ts.from_datetimes([_dt(block.start_us - 2_000_000),
-                                      _dt(block.end_us + 2_000_000)])
-        e_alt = (sat - topos).at(edges).altaz(temperature_C=site.temperature_c,
-                                              pressure_mbar=site.pressure_hpa)[0].degrees
-        e_lit = sat.at(edges).is_sunlit(sf.ephemeris)
-        assert not (e_alt >= target.min_el_deg).all() or not e_lit.all(), block
+        assert _sun_alt_deg(sf, topos, ts).max() <= target.sun_max_el_deg + 0.02
+        assert _moon_sep_deg(sat, sf, topos, ts).min() >= target.moon_min_sep_deg - 0.02
+        # the block is the whole part that meets every constraint: two seconds beyond
+        # each end (inside the night), one of them fails there
+        for edge_us in (block.start_us - 2_000_000, block.end_us + 2_000_000):
+            if not plan.start_us <= edge_us <= plan.end_us:
+                continue
+            e = sf.ts.from_datetimes([_dt(edge_us)])
+            e_alt = (sat - topos).at(e).altaz(temperature_C=site.temperature_c,
+                                              pressure_mbar=site.pressure_hpa)[0].degrees[0]
+            holds = (e_alt >= target.min_el_deg and sat.at(e).is_sunlit(sf.ephemeris)[0]
+                     and _sun_alt_deg(sf, topos, e)[0] <= target.sun_max_el_deg
+                     and _moon_sep_deg(sat, sf, topos, e)[0] >= target.moon_min_sep_deg)
+            assert not holds, (block, edge_us)
+
+
+def _sun_alt_deg(sf, topos, ts) -> np.ndarray:
+    return (sf.ephemeris["earth"] + topos).at(ts).observe(sf.ephemeris["sun"]) \
+        .apparent().altaz()[0].degrees
+
+
+def _moon_sep_deg(sat, sf, topos, ts) -> np.ndarray:
+    """The satellite's distance from the Moon as the site sees them (degrees)."""
+    moon = (sf.ephemeris["earth"] + topos).at(ts).observe(sf.ephemeris["moon"]).apparent()
+    return (sat - topos).at(ts).separation_from(moon).degrees
 
 
 def _dt(t_us: int):

@@ -15,9 +15,13 @@ def test_a_threaded_recording_stores_every_sample_while_the_caller_blocks(device
     store = tmp_path / "store"
     rec = ThreadedRecording(RunRecording(("counter",), 200.0, (f"parquet:{store}",)), device_url)
     rec.start()
-    time.sleep(1.0)  # the caller's thread is busy elsewhere (the blocking API call)
+    # the caller's thread is busy elsewhere (the blocking API call) while samples arrive;
+    # the deadline only bounds a broken recorder, however slow the host
+    deadline = time.monotonic() + 60.0
+    while rec.recorder.sink.samples < 200 and time.monotonic() < deadline:
+        time.sleep(0.05)
     summary = rec.stop()
-    assert "error" not in summary and summary["lost"] == 0 and summary["samples"] > 100
+    assert "error" not in summary and summary["lost"] == 0 and summary["samples"] >= 200
     block = ParquetStoreReader(store).window(summary["first_t_us"], summary["last_t_us"] + 1)  # [from, to)
     assert len(block) == summary["samples"]
     # the device's counter counts its ticks: at 200 Hz of a 1 kHz loop, 5 apart, none skipped
