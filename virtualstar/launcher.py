@@ -30,7 +30,6 @@ class EmbeddedEmulator:
 
     url: str
     emulator: Any
-    lockstep: bool = False
     _memory_ends: list[Any] = field(default_factory=list)
 
     @property
@@ -113,7 +112,7 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
     bound = await emulator.start(url, run_loop=clock is None)
     if clock is not None:
         clock.add_driver(emulator.run_until)
-    return EmbeddedEmulator(bound, emulator, lockstep=clock is not None)
+    return EmbeddedEmulator(bound, emulator)
 
 
 @dataclass
@@ -157,14 +156,16 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
     if clock is not None:
         async def connector():
             return await emu.connect_in_memory(password=password, name="virtualstar-server")
-    server = build_server(mount_url=emu.url if clock is None else "in-process emulator",
-                          password=password, speed=speed, site=site, clock=clock,
-                          connector=connector, **server_options)
-    try:
+    server = None
+    try:  # from here on the emulator runs: it stops however the block ends, a refused set-up too
+        server = build_server(mount_url=emu.url if clock is None else "in-process emulator",
+                              password=password, speed=speed, site=site, clock=clock,
+                              connector=connector, **server_options)
         url = await server.start(listen)
         await server.telescope.link.wait_connected(connect_timeout_s)
         await server.telescope.first_samples(connect_timeout_s)
         yield EmbeddedVss(emu, server, url)
     finally:
-        await server.close()
+        if server is not None:
+            await server.close()
         await emu.stop()

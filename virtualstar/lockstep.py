@@ -76,7 +76,6 @@ class LockstepClock:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._step_scheduled = False
         self._anchor: tuple[float, int] | None = None  # (wall monotonic s, mount µs) for pacing
-        self.steps = 0
         self.error: BaseException | None = None
         self.frozen = False
         self._settled: list[asyncio.Future[None]] = []
@@ -85,9 +84,6 @@ class LockstepClock:
     def add_driver(self, driver: Callable[[int], Any]) -> None:
         """Call `driver(t_us)` at every step: it must compute everything up to mount time `t_us`."""
         self._drivers.append(driver)
-
-    def now_s(self) -> float:
-        return self.now_us / 1e6
 
     async def sleep_until_us(self, t_us: int) -> None:
         """Return when mount time has reached `t_us` (at once, after one yield, if it has)."""
@@ -192,7 +188,6 @@ class LockstepClock:
             self._sleepers.clear()
             return
         self.now_us = target_us
-        self.steps += 1
         heap = self._sleepers
         while heap and heap[0][0] <= target_us:
             _, _, fut = heapq.heappop(heap)

@@ -119,13 +119,13 @@ class VssClient:
 
     async def _authenticate(self, ws: ClientConnection, auth: dict[str, Any],
                             timeout_s: float) -> str:
-        from astcom_client.auth import client_mac, server_proof  # only when a server asks
+        from astcom_client.auth import client_mac, new_nonce, server_proof  # when asked
 
         if not self._password:
             raise VssRequestError("unauthorized", f"the VirtualStar Server at {self.url} needs a "
                                   f"password: give vs --password PW or set ${PASSWORD_ENV_VAR}")
         server_nonce = bytes.fromhex(auth["nonce"])
-        client_nonce = os.urandom(32)
+        client_nonce = new_nonce()
         mac = client_mac(self._password, server_nonce, client_nonce)
         await ws.send(json.dumps({"id": "auth", "cmd": "auth", "params": {
             "client_nonce": client_nonce.hex(), "mac": mac.hex()}}))
@@ -269,6 +269,8 @@ class VssClient:
         if self._reader is not None:
             self._reader.cancel()
             await asyncio.wait({self._reader})
+            if not self._reader.cancelled():
+                self._reader.exception()  # retrieved: the connection is closed either way
         self._fail_pending(ServerUnavailable("the client closed the connection"))
 
     async def __aenter__(self) -> VssClient:

@@ -141,8 +141,9 @@ class Session:
             raise Unauthorized(f"{cmd}: authenticate first: this server needs a password "
                                "(vs --password PW, or VS_PASSWORD)")
         if self.role == Role.OBSERVER and cmd not in OBSERVER_COMMANDS:
-            raise Forbidden(f"{cmd}: the observer role may only watch (status, errors, wait); "
-                            "log in with the operator password to move or configure the telescope")
+            watching = ", ".join(sorted(OBSERVER_COMMANDS - OPEN_COMMANDS))
+            raise Forbidden(f"{cmd}: the observer role may only watch ({watching}); log in "
+                            "with the operator password to move or configure the telescope")
 
     @property
     def may_watch(self) -> bool:

@@ -325,18 +325,22 @@ ENDS_PROGRAM = frozenset({"slew", "track", "stop", "reset_faults", "park", "poin
                           "set_mode"})
 
 
-async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any]) -> Any:
-    """Check parameters and run one command; raise VssError subclasses for the client."""
+async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any], *,
+                   ends_program: bool = True) -> Any:
+    """Check parameters and run one command; raise VssError subclasses for the client.
+
+    A client's command that moves the mount ends a running program first; the program's
+    own commands (`execute`) do not.
+    """
     command = COMMANDS.get(cmd)
     if command is None:
         raise UnknownCommand(f"unknown command {cmd!r}; valid commands: {', '.join(COMMANDS)}")
     checked = _check(command.params, params, cmd)
-    if cmd in ENDS_PROGRAM and telescope.programs.running:
+    if ends_program and cmd in ENDS_PROGRAM and telescope.programs.running:
         await telescope.programs.cancel(f"ended by a client's {cmd}")
     return await command.handler(telescope, checked)
 
 
 async def execute(telescope: Telescope, cmd: str, params: dict[str, Any]) -> Any:
     """Run a command for the server's own program run (it does not end the program)."""
-    command = COMMANDS[cmd]
-    return await command.handler(telescope, _check(command.params, params, cmd))
+    return await dispatch(telescope, cmd, params, ends_program=False)

@@ -17,6 +17,7 @@ import erfa
 import numpy as np
 
 from virtualstar.astro import MountLimits, plan_slew
+from virtualstar.astro.constants import ARCSEC_PER_RAD
 
 from .clock import MountClock
 from .exceptions import MountFault, NotArrived, OperationAborted, TargetUnreachable, VssError
@@ -24,11 +25,10 @@ from .feeder import Feeder, FeederConfig
 from .mount_link import MountLink
 from .trajectories import Path, RampIn
 
-__all__ = ["ARCSEC_PER_RAD", "Motion", "Position", "sky_distance_arcsec"]
+__all__ = ["Motion", "Position", "sky_distance_arcsec"]
 
 log = logging.getLogger("virtualstar.server")
 
-ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
 HALT_TIMEOUT_S = 120.0  # mount seconds for a moving mount to come to rest
 SLEW_TIMEOUT_MARGIN_S = 30.0  # mount seconds allowed beyond a slew's planned duration
 

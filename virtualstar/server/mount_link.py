@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from astcom_client import AstcomError, Client, ConnectionClosed, DeviceError, Stream
+from virtualstar.astro.constants import ARCSEC_PER_RAD
 
 from .exceptions import MappingError, MountRejected, MountUnavailable
 from .mapping import RoleMapping
@@ -32,7 +33,6 @@ __all__ = ["LinkConfig", "MountCall", "MountLink"]
 
 log = logging.getLogger("virtualstar.server.mount")
 
-ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
 _ERROR_ROLES = ("az_error", "el_error")
 CALL_LOG = 4096  # function calls kept in `MountLink.calls`
 

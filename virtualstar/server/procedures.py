@@ -44,14 +44,15 @@ from virtualstar.astro import (
     satellite_passes,
     unwrap_azimuth,
 )
+from virtualstar.astro.constants import ARCSEC_PER_RAD
 from virtualstar.astro.exceptions import SatelliteError
 
 from .exceptions import InExclusionZone, StaleElements, TargetUnreachable
 from .feeder import Feeder
-from .motion import ARCSEC_PER_RAD
 from .operations import Operation, Phase
 from .pass_selection import choose_pass, windows_from_passes
 from .trajectories import (
+    SLEW_MARGIN,
     Path,
     Points,
     RampIn,
@@ -261,7 +262,7 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
     # where the star will be when the mount has landed and settled
     first = _observed_deg(t, target, here.t_us)
     slew_s = t.motion.plan_slew_s(here, math.radians(first[0]), math.radians(first[1]), t.limits)
-    t_exp = here.t_us + int((slew_s * 1.05 + 1.0 + settle_s) * 1e6)
+    t_exp = here.t_us + int((slew_s * SLEW_MARGIN + 1.0 + settle_s) * 1e6)
     star_az, star_el = _observed_deg(t, target, t_exp)
     if not t.limits.el_min_deg <= star_el <= t.limits.el_max_deg:
         raise TargetUnreachable(f"{name} is at elevation {star_el:.2f} deg, outside the "
@@ -421,7 +422,7 @@ def _choose_pass(t: Telescope, sat: Satellite, here):
         o = observe_mount_times(sat, np.array([join_us], np.int64), cfg.site, t.eop)
         to_az = float(unwrap_azimuth(o.az_rad, limits=t.limits, current_az_rad=here.az_rad)[0])
         slew_s = t.motion.plan_slew_s(here, to_az, float(o.el_rad[0]), t.limits)
-        return slew_s * 1.05 + 3.0 + cfg.start_lead_s + cfg.ramp_s
+        return slew_s * SLEW_MARGIN + 3.0 + cfg.start_lead_s + cfg.ramp_s
 
     with _sgp4_errors(sat, here.t_us):
         choice = choose_pass(windows_from_passes(passes), here.t_us, prepare_s=prepare_s,

@@ -322,10 +322,7 @@ class Telescope:
         m = self.link.mapping
         if self._near(pos, m.park_az_deg, m.park_el_deg):
             return  # the stow is the safe place by definition
-        obs_az, obs_el = math.degrees(pos.az_rad), math.degrees(pos.el_rad)
-        if self.model is not None:
-            a, e = self.model.encoder_to_observed(np.array([obs_az % 360.0]), np.array([obs_el]))
-            obs_az, obs_el = float(np.asarray(a)[0]), float(np.asarray(e)[0])
+        obs_az, obs_el = self._observed_deg(pos.az_rad, pos.el_rad)
         zones = dataclasses.replace(self.safety.zones(), horizon=None, el_min_deg=-90.0)
         # now and two checks ahead: the mount leaves before the zone reaches it
         t = np.array([t_us, t_us + 2 * SUN_WATCH_US], np.int64)
@@ -379,16 +376,20 @@ class Telescope:
         """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped)."""
         self._check_can_move()
 
-        async def check() -> None:
-            self.safety.check_target(target, await self.motion.mount_time_us(), name,
-                                     allow_sun=allow_sun)
-
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.follow_sky_target(self, op, target, duration_s=duration_s,
                                                       allow_sun=allow_sun)
 
+        check = self._target_check(target, name, allow_sun)
         return await self._start(kind, name, procedure, resumable=True, allow_sun=allow_sun,
                                  check=check)
+
+    def _target_check(self, target, name: str, allow_sun: bool):
+        """The check a sky target passes under the supervisor's lock before it starts."""
+        async def check() -> None:
+            self.safety.check_target(target, await self.motion.mount_time_us(), name,
+                                     allow_sun=allow_sun)
+        return check
 
     async def _start(self, kind: str, name: str, procedure, *, resumable: bool = False,
                      allow_sun: bool = False, check=None) -> Operation:
@@ -455,14 +456,11 @@ class Telescope:
             raise BadRequest(f"settle_s={settle_s}: expected >= 0 mount seconds")
         self._check_can_move()
 
-        async def check() -> None:
-            self.safety.check_target(target, await self.motion.mount_time_us(), name,
-                                     allow_sun=allow_sun)
-
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.measure_pointing(self, op, target, name, settle_s=settle_s,
                                                      allow_sun=allow_sun)
 
+        check = self._target_check(target, name, allow_sun)
         return await self._start("pointing_sample", name, procedure, allow_sun=allow_sun,
                                  check=check)
 
@@ -524,6 +522,15 @@ class Telescope:
         return {"pointing_model": None}
 
     # -- status ------------------------------------------------------------------------------
+    def _observed_deg(self, enc_az_rad: float, enc_el_rad: float) -> tuple[float, float]:
+        """The sky place (degrees) of an encoder place: through the pointing model if loaded
+        (its azimuth then in 0..360), else the encoder angles themselves."""
+        obs_az, obs_el = math.degrees(enc_az_rad), math.degrees(enc_el_rad)
+        if self.model is not None:
+            a, e = self.model.encoder_to_observed(np.array([obs_az % 360.0]), np.array([obs_el]))
+            obs_az, obs_el = float(np.asarray(a)[0]), float(np.asarray(e)[0])
+        return obs_az, obs_el
+
     async def status(self) -> dict[str, Any]:
         """Return encoder and observed positions, RA/Dec, states, mount time, error statistics."""
         cfg = self.config
@@ -546,10 +553,7 @@ class Telescope:
         roles = list(_STATUS_ROLES) + [r for r in _OPTIONAL_STATUS if m.has(r)]
         v = await self.link.read(roles)
         enc_az, enc_el, t_us = float(v["az_position"]), float(v["el_position"]), int(v["mount_time"])
-        obs_az, obs_el = math.degrees(enc_az), math.degrees(enc_el)
-        if self.model is not None:
-            a, e = self.model.encoder_to_observed(np.array([obs_az % 360.0]), np.array([obs_el]))
-            obs_az, obs_el = float(np.asarray(a)[0]), float(np.asarray(e)[0])
+        obs_az, obs_el = self._observed_deg(enc_az, enc_el)
         ra, dec = self._radec(obs_az % 360.0, obs_el, t_us)
         out.update({
             "mount_time_us": t_us, "mount_time_utc": procedures.iso_utc(t_us, 3),

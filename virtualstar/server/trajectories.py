@@ -221,20 +221,17 @@ def plan_run_up(path: Path, *, az_rad: float, el_rad: float, now_us: int,
     (a pass that has not risen). Where the rest point is depends on the join, so the
     two are refined together (three rounds suffice: the path moves little meanwhile).
     """
-    guess_s = 0.0
-    join = now_us
+    def join_after(slew_s: float) -> int:
+        join = now_us + int((slew_s + lead_s + ramp_s) * 1e6)
+        return join if not_before_us is None else max(join, int(not_before_us))
+
+    join = join_after(0.0)
     for _ in range(3):
-        join = now_us + int((guess_s + lead_s + ramp_s) * 1e6)
-        if not_before_us is not None:
-            join = max(join, int(not_before_us))
         p = path.sample(np.array([join], np.int64))
         rest = ramp_start(np.array([p.az_rad[0], p.el_rad[0]]),
                           np.array([p.az_rate_rad_s[0], p.el_rate_rad_s[0]]), ramp_s)
-        guess_s = (plan_slew(az_rad, el_rad, float(rest[0]), float(rest[1]), limits).duration_s
-                   * SLEW_MARGIN + SLEW_SETTLE_S)
-    join = now_us + int((guess_s + lead_s + ramp_s) * 1e6)
-    if not_before_us is not None:
-        join = max(join, int(not_before_us))
+        join = join_after(plan_slew(az_rad, el_rad, float(rest[0]), float(rest[1]),
+                                    limits).duration_s * SLEW_MARGIN + SLEW_SETTLE_S)
     return RampIn(path, join, ramp_s)
 
 
