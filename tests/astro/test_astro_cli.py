@@ -78,6 +78,28 @@ def test_passes_json_lists_the_library_passes(eop):
     assert not math.isnan(rows[0]["rise_az_deg"])
 
 
+def test_a_pass_already_up_at_the_search_start_is_judged_from_that_start(tmp_path):
+    """The part of a cut pass inside the window counts whole: above a flat 5° profile it is
+    from the window's first second, not from its culmination."""
+    whole = _run("passes", "--tle", str(TLE_PATH), "--from", "2024-05-18T00:00:00",
+                 "--to", "2024-05-19T00:00:00", "--min-el", "10", *SITE_ARGS, "--json")
+    p = json.loads(whole.stdout)[0]
+    culm = UtcTimes.from_iso([p["culmination_utc"]]).to_unix_us()[0]
+    start_us = (int(UtcTimes.from_iso([p["rise_utc"]]).to_unix_us()[0]) + int(culm)) // 2
+    start = UtcTimes.from_unix_us(np.array([start_us // 1_000_000 * 1_000_000])).iso(0)[0]
+    profile = tmp_path / "flat.txt"
+    profile.write_text("0 5\n180 5\n")
+    cut = _run("passes", "--tle", str(TLE_PATH), "--from", start, "--to",
+               "2024-05-19T00:00:00", "--min-el", "10", "--horizon", str(profile), *SITE_ARGS,
+               "--json")
+    assert cut.exit_code == 0, cut.output
+    row = json.loads(cut.stdout)[0]
+    assert row["rise_utc"] is None and row["culmination_utc"] == p["culmination_utc"]
+    first_us = UtcTimes.from_iso([row["above_horizon_from_utc"]]).to_unix_us()[0]
+    assert first_us == start_us // 1_000_000 * 1_000_000  # the window's first second
+    assert row["above_horizon_to_utc"] is not None
+
+
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [(["where", "Vegaa"], "did you mean: Vega"),

@@ -69,6 +69,20 @@ def skyfield_context(eop: EarthOrientation) -> SkyfieldContext:
     return SkyfieldContext(ts, ephemeris)
 
 
+#: The Sun below this (civil twilight's end): the sky is dark enough to see a satellite.
+DARK_SUN_EL_DEG = -6.0
+
+
+def satellite_sunlit(satrec: Any, times: UtcTimes, eop: EarthOrientation) -> np.ndarray:
+    """Whether a satellite (its sgp4 `Satrec`) is out of the Earth's shadow at `times`
+    (skyfield's `is_sunlit`, DE421's Sun)."""
+    from skyfield.api import EarthSatellite
+
+    ctx = skyfield_context(eop)
+    sat = EarthSatellite.from_satrec(satrec, ctx.ts)
+    return np.asarray(sat.at(ctx.ts.tt_jd(*times.tt())).is_sunlit(ctx.ephemeris), bool)
+
+
 @dataclass(frozen=True)
 class SolarSystemBody:
     """The Sun, the Moon or a planet (by name, case-insensitive)."""

@@ -12,6 +12,7 @@ import typer
 
 from virtualstar.astro import AstroError, EarthOrientation, avoidance_from_options, satellite_passes
 from virtualstar.astro.avoidance import body_places
+from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
 from virtualstar.cli.where import (
     HumidityOpt,
     JsonOpt,
@@ -68,7 +69,8 @@ def passes(
         eop = EarthOrientation.from_astropy_iers_data()
         satellite = load_satellite(tle, sat)
         found = satellite_passes(satellite, the_site, t0, t1, min_el_deg=min_el, eop=eop)
-        return satellite, [{**_pass_fields(p), **_pass_sky(satellite, p, the_site, zones, eop)}
+        return satellite, [{**_pass_fields(p),
+                            **_pass_sky(satellite, p, the_site, zones, eop, t0, t1)}
                            for p in found]
 
     satellite, rows = run_collecting_warnings(work)
@@ -91,19 +93,6 @@ def passes(
         typer.echo(line)
 
 
-DARK_SUN_EL_DEG = -6.0  # civil twilight's end: the sky is dark enough to see a satellite
-
-
-def _sunlit(satellite, times, eop) -> np.ndarray:
-    from skyfield.api import EarthSatellite
-
-    from virtualstar.astro.bodies import skyfield_context
-
-    ctx = skyfield_context(eop)
-    sat = EarthSatellite.from_satrec(satellite.satrec, ctx.ts)
-    return np.asarray(sat.at(ctx.ts.tt_jd(*times.tt())).is_sunlit(ctx.ephemeris), bool)
-
-
 def _num(value: float | None, width: int = 6) -> str:
     return f"{value:{width}.1f}" if value is not None else f"{'-':>{width}}"
 
@@ -114,10 +103,14 @@ def _visibility(r: dict) -> str:
     return "sunlit" if r["sunlit"] else "shadow"
 
 
-def _pass_sky(satellite, p, site, zones, eop) -> dict:
-    """The pass sampled every second: its closest approach to the Sun, its time above the profile."""
-    lo = p.rise.utc if p.rise is not None else p.culmination.utc
-    hi = p.set.utc if p.set is not None else p.culmination.utc
+def _pass_sky(satellite, p, site, zones, eop, t0, t1) -> dict:
+    """The pass sampled every second: its closest approach to the Sun, its time above the profile.
+
+    A pass already up at the search's start (no rise) or still up at its end (no set) is
+    sampled from that start or to that end: the part inside the window counts whole.
+    """
+    lo = p.rise.utc if p.rise is not None else t0
+    hi = p.set.utc if p.set is not None else t1
     span = float(hi.seconds_since(lo.jd1[0], lo.jd2[0])[0])
     times = lo.shifted(np.arange(0.0, span + 1.0, 1.0))
     obs = satellite.observe(times, site, eop)
@@ -126,7 +119,7 @@ def _pass_sky(satellite, p, site, zones, eop) -> dict:
     out = {"sun_min_separation_deg": round(float(sep.min()), 3)}
     # sunlit (out of the Earth's shadow, skyfield) while the observer is in darkness
     # (the Sun more than 6° below the horizon): a pass the eye can see, as Heavens-Above says
-    sunlit = _sunlit(satellite, times, eop)
+    sunlit = satellite_sunlit(satellite.satrec, times, eop)
     dark = np.degrees(sun_el) < DARK_SUN_EL_DEG
     k = int(np.argmax(obs.el_rad))
     out.update({"sunlit": bool(sunlit.any()), "observer_in_darkness": bool(dark[k]),

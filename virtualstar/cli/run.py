@@ -81,13 +81,12 @@ def run(
             done = [*previous.get("done_before", []), *previous["records"]]
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise fail(f"--resume {resume}: not a vs run result ({exc})") from None
-    from virtualstar.recorder.exceptions import RecorderError  # pyarrow: not for --help
-
     recording = _recording(record, record_rate, store, emulator, server, mount, fail)
     show = _Progress(quiet=as_json)
     if emulator:
         from virtualstar.cli.server import parse_speed
         from virtualstar.planning.emulated import run_plan_on_emulator
+        from virtualstar.recorder.exceptions import RecorderError
 
         pace = parse_speed(speed)
         try:
@@ -108,13 +107,13 @@ def run(
 
 def _recording(names, rate_hz: float, stores, emulator: bool, server, mount, fail):
     """The --record options checked before anything runs (None: nothing to record)."""
-    from virtualstar.planning.recording import DEFAULT_RECORD_STORE, RunRecording
-    from virtualstar.recorder.exceptions import RecorderError
-
     if not names:
         if stores or mount:
             raise fail("--store and --mount go with --record NAME (the signals to record)")
         return None
+    from virtualstar.planning.recording import DEFAULT_RECORD_STORE, RunRecording
+    from virtualstar.recorder.exceptions import RecorderError  # loads pyarrow: only to record
+
     if not emulator and mount is None:
         raise fail("--record on a server needs --mount URL, the mount's ASTCom endpoint "
                    "(e.g. ws://127.0.0.1:8765); with --emulator the run records in process")

@@ -10,12 +10,14 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from virtualstar.astro import Site, load_site
 
-from .recording import RunRecording, record_beside
 from .scheduler import Plan
+
+if TYPE_CHECKING:
+    from .recording import RunRecording  # the recorder (pyarrow) loads only to record
 
 __all__ = ["EMULATOR_LEAD_S", "run_plan_on_emulator"]
 
@@ -46,6 +48,8 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
         async with embedded_vss(clock=clock, site=site or _plan_site(plan)) as vss:
             if record is None:
                 return await follow(vss)
+
+            from .recording import record_beside
 
             async def connect():
                 return await vss.emulator.connect_in_memory(name="vs-run-recorder")

@@ -28,6 +28,7 @@ from virtualstar.astro import (
     resolve_target,
 )
 from virtualstar.astro.avoidance import body_places
+from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
 
 from .exceptions import ProgramError
 from .program import ProgramTarget
@@ -249,7 +250,8 @@ def satellite_windows(target: ProgramTarget, grid: NightGrid, site: Site, eop: E
         for mask in constraint_masks(target, az, el, fine, zones).values():
             ok &= mask
         if target.sunlit_while_dark:
-            ok &= _sunlit(sat, t, eop) & (fine.sun_el_deg < -6.0)
+            ok &= (satellite_sunlit(sat.satrec, UtcTimes.from_unix_us(t), eop)
+                   & (fine.sun_el_deg < DARK_SUN_EL_DEG))
         runs = _runs(ok)
         if not runs:
             continue
@@ -261,17 +263,6 @@ def satellite_windows(target: ProgramTarget, grid: NightGrid, site: Site, eop: E
                     "end_az_deg": float(az[j1]), "end_el_deg": float(el[j1]),
                     "culmination_el_deg": float(el.max())})
     return out
-
-
-def _sunlit(sat: Satellite, t_us: np.ndarray, eop) -> np.ndarray:
-    from skyfield.api import EarthSatellite
-
-    from virtualstar.astro.bodies import skyfield_context
-
-    ctx = skyfield_context(eop)
-    s = EarthSatellite.from_satrec(sat.satrec, ctx.ts)
-    times = UtcTimes.from_unix_us(t_us)
-    return np.asarray(s.at(ctx.ts.tt_jd(*times.tt())).is_sunlit(ctx.ephemeris), bool)
 
 
 def _sep(az1, el1, az2, el2) -> np.ndarray:
