@@ -30,6 +30,7 @@ from virtualstar.astro import (
     Satellite,
     Site,
     UtcTimes,
+    iso_utc,
     load_site,
     observe_mount_times,
     resolve_target,
@@ -155,11 +156,11 @@ async def _run(config: DemoConfig, site: Site, sat: Satellite, tle_text: str, ri
 
     start_us = clock.now_us
     star = pick_star(site, start_us + 30_000_000)
-    result = DemoResult(pass_info={"satellite": sat.name, "rise_utc": _iso(rise_us),
-                                   "set_utc": _iso(set_us), "culmination_deg": culm})
+    result = DemoResult(pass_info={"satellite": sat.name, "rise_utc": iso_utc(rise_us),
+                                   "set_utc": iso_utc(set_us), "culmination_deg": culm})
     pace = "as fast as the CPU allows" if config.speed is None else f"up to x{config.speed:g}"
-    say(f"simulated clock {_iso(start_us)} in lockstep ({pace}), site {site.name}; "
-        f"{sat.name} rises {_iso(rise_us)}, culminates at {culm:.1f}°")
+    say(f"simulated clock {iso_utc(start_us)} in lockstep ({pace}), site {site.name}; "
+        f"{sat.name} rises {iso_utc(rise_us)}, culminates at {culm:.1f}°")
     async with embedded_vss(clock=clock, site=site) as vss:
         vs = vss.client()
         settle_s = vss.server.telescope.config.settle_s
@@ -181,7 +182,7 @@ async def _run(config: DemoConfig, site: Site, sat: Satellite, tle_text: str, ri
                          ("settle", landed, info["tracking_from_us"]),
                          (f"track {star}", info["tracking_from_us"], info["tracking_to_us"])]
         star_end = info["tracking_to_us"]
-        say(f"waiting for {sat.name} (pass {_iso(rise_us)} .. {_iso(set_us)})")
+        say(f"waiting for {sat.name} (pass {iso_utc(rise_us)} .. {iso_utc(set_us)})")
         op = await vs.request("track", {"tle": tle_text, "sat": sat.name, "wait": True})
         info = op["info"]
         passing = (await vs.request("errors", {"from_us": info["tracking_from_us"],
@@ -262,7 +263,7 @@ def _plot(result: DemoResult, out_dir: Path) -> Path:
         ax.text(0.005, q * 1.1, f"one encoder count = {q:.4f}″: below it, the encoders' "
                 "resolution, not tracking", transform=ax.get_yaxis_transform(), fontsize=7,
                 color="tab:brown", va="bottom")
-    ax.set_xlabel(f"mount time since {_iso(t0)} UTC [s]")
+    ax.set_xlabel(f"mount time since {iso_utc(t0)} UTC [s]")
     ax.set_ylabel("following error [arcsec]")
     ax.set_title("VirtualStar demo: tracking error through slews, sidereal tracking and an "
                  "ISS pass (lockstep simulated time)")
@@ -274,5 +275,3 @@ def _plot(result: DemoResult, out_dir: Path) -> Path:
     return path
 
 
-def _iso(t_us: int) -> str:
-    return UtcTimes.from_unix_us(int(t_us)).iso(0)[0]

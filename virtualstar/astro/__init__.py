@@ -48,7 +48,7 @@ from .targets import (
     parse_radec,
     resolve_target,
 )
-from .timescales import UtcTimes
+from .timescales import UtcTimes, iso_utc
 
 __all__ = [
     "AstroError",
@@ -78,6 +78,7 @@ __all__ = [
     "UnknownTarget",
     "UnreachablePath",
     "UtcTimes",
+    "iso_utc",
     "ZoneHit",
     "avoidance_from_options",
     "check_places",

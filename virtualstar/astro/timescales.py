@@ -154,6 +154,12 @@ class UtcTimes:
         return out
 
 
+def iso_utc(t_us: int, digits: int = 0) -> str:
+    """Return one time in µs since 1970 (UTC; mount time) as ISO-8601 UTC text with
+    `digits` decimals of the second."""
+    return UtcTimes.from_unix_us(int(t_us)).iso(digits)[0]
+
+
 def day_length_s(jd1: np.ndarray) -> np.ndarray | float:
     """Return the length in seconds of the UTC days whose JD (at 0h, jd1 ≡ .5) is given.
 

@@ -122,17 +122,21 @@ def server(
         raise fail(str(exc)) from None
     _warn_once_about_earth_orientation(start_us)
     try:
-        if emulator and pace != 1.0:
-            from virtualstar.lockstep import LockstepClock, run_lockstep
+        if emulator:
+            clock = None  # real time: the emulator runs its own loop at ×1
+            if pace != 1.0:
+                from virtualstar.lockstep import LockstepClock
 
-            clock = LockstepClock(start_us if start_us is not None else time.time_ns() // 1000,
-                                  pace=pace)
-            run_lockstep(_serve_embedded(clock, 1.0, start_us, password, listen, the_site,
-                                         mapping, pointing_model, passive, geometry_arcsec,
-                                         zones, access), clock)
-        elif emulator:
-            asyncio.run(_serve_embedded(None, 1.0, start_us, password, listen, the_site, mapping,
-                                        pointing_model, passive, geometry_arcsec, zones, access))
+                clock = LockstepClock(start_us if start_us is not None
+                                      else time.time_ns() // 1000, pace=pace)
+            serve = _serve_embedded(clock, start_us, password, listen, the_site, mapping,
+                                    pointing_model, passive, geometry_arcsec, zones, access)
+            if clock is None:
+                asyncio.run(serve)
+            else:
+                from virtualstar.lockstep import run_lockstep
+
+                run_lockstep(serve, clock)
         else:
             asyncio.run(_serve(pace, mount, password, mapping, listen, the_site,
                                pointing_model, passive, zones, access))
@@ -180,12 +184,12 @@ def _stop_event() -> asyncio.Event:
     return stop
 
 
-async def _serve_embedded(clock, speed, start_us, password, listen, site, mapping,
+async def _serve_embedded(clock, start_us, password, listen, site, mapping,
                           pointing_model, passive, geometry_arcsec, zones, access) -> None:
     from virtualstar.launcher import embedded_vss
 
     stop = _stop_event()
-    async with embedded_vss(clock=clock, speed=speed, start_us=start_us, site=site,
+    async with embedded_vss(clock=clock, speed=1.0, start_us=start_us, site=site,
                             listen=listen, password=password, geometry_arcsec=geometry_arcsec,
                             mapping_path=mapping, active=not passive,
                             pointing_model=pointing_model, zones=zones, access=access) as vss:

@@ -250,12 +250,12 @@ def _event_fields(found, now: UtcTimes, up_now: bool) -> dict:
                 fields["culmination_el_deg"] = round(ev.el_deg, 4)
         if ev.kind == "set":
             break
-    sets = any(ev.kind == "set" for ev in future)
-    rises = any(ev.kind == "rise" for ev in future)
+    will_set = any(ev.kind == "set" for ev in future)
+    will_rise = any(ev.kind == "rise" for ev in future)
     if up_now:
-        fields["visibility"] = "up now" if sets else "circumpolar"
+        fields["visibility"] = "up now" if will_set else "circumpolar"
     else:
-        fields["visibility"] = "down" if rises else "never rises"
+        fields["visibility"] = "down" if will_rise else "never rises"
     return fields
 
 

@@ -10,7 +10,7 @@ from virtualstar.astro import EarthOrientation, Site, UtcTimes
 
 from .program import Program
 from .scheduler import Plan
-from .sky import NightGrid, load_target_satellite, target_sky
+from .sky import NightGrid, load_target_satellite, target_skies
 
 __all__ = ["plot_plan", "plot_run"]
 
@@ -37,9 +37,14 @@ def plot_plan(plan: Plan, program: Program, site: Site, path: str | Path,
         ax.fill_between(hours, 0, 90, where=band, color="midnightblue", alpha=alpha, lw=0,
                         step="mid")
     by_name = {t.name: t for t in program.targets}
+    planned = [by_name[n] for n in dict.fromkeys(b.target for b in plan.blocks)]
+    sidereal = [t for t in planned if not t.is_satellite]
+    # every sidereal target at once: ERFA's per-time work is shared (observe_stars)
+    el_of = {t.name: s.el_deg for t, s in
+             zip(sidereal, target_skies(sidereal, grid, site, eop, _no_zones()), strict=True)}
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for k, name in enumerate(dict.fromkeys(b.target for b in plan.blocks)):
-        target = by_name[name]
+    for k, target in enumerate(planned):
+        name = target.name
         colour = colours[k % len(colours)]
         if target.is_satellite:
             sat = load_target_satellite(target)
@@ -49,11 +54,11 @@ def plot_plan(plan: Plan, program: Program, site: Site, path: str | Path,
                 ax.plot((t - grid.t_us[0]) / 3.6e9, el, color=colour, lw=3,
                         label=name if b.repeat == 1 else None)
             continue
-        sky = target_sky(target, grid, site, eop, _no_zones())
-        ax.plot(hours, sky.el_deg, color=colour, lw=0.8, alpha=0.6)
+        el = el_of[name]
+        ax.plot(hours, el, color=colour, lw=0.8, alpha=0.6)
         for b in (b for b in plan.blocks if b.target == name):
             sel = (grid.t_us >= b.start_us) & (grid.t_us <= b.end_us)
-            ax.plot(hours[sel], sky.el_deg[sel], color=colour, lw=3.5,
+            ax.plot(hours[sel], el[sel], color=colour, lw=3.5,
                     label=name if b.repeat == 1 else None)
     ax.set_ylim(0, 90)
     ax.set_xlim(hours[0], hours[-1])

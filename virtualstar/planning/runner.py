@@ -33,7 +33,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from virtualstar.astro import UtcTimes
+from virtualstar.astro import iso_utc
 
 from .program import Program
 from .scheduler import Block, Plan
@@ -97,7 +97,7 @@ class BlockRecord:
         d = dataclasses.asdict(self)
         for key in ("planned_start", "planned_end", "start", "end"):
             t = d[f"{key}_us"]
-            d[f"{key}_utc"] = None if t is None else _iso(t)
+            d[f"{key}_utc"] = None if t is None else iso_utc(t)
         d["observed_s"] = (None if self.start_us is None or self.end_us is None
                            else (self.end_us - self.start_us) / 1e6)
         return d
@@ -114,7 +114,7 @@ class ProgramRunner:
     plan: Plan
     program: Program
     api: RunApi
-    on_change: Callable[[dict[str, Any]], None] = lambda doc: None
+    on_change: Callable[[dict[str, Any]], None] = lambda doc: None  # a progress() each change
     done_before: list[BlockRecord] = field(default_factory=list)  # a resumed run's history
     late_s: float = LATE_S
     state: str = "starting"  # running, done, stopped, failed
@@ -191,8 +191,8 @@ class ProgramRunner:
         if now > block.start_us + int(self.late_s * 1e6) or now >= block.end_us:
             rec.outcome = "missed"
             rec.error = {"code": "late", "message": f"could not begin before "
-                         f"{_iso(block.start_us + int(self.late_s * 1e6))}: the mount was busy "
-                         f"until {_iso(now)}"}
+                         f"{iso_utc(block.start_us + int(self.late_s * 1e6))}: the mount was busy "
+                         f"until {iso_utc(now)}"}
             return rec
         params = self._track_params(block, target, now)
         try:
@@ -297,7 +297,7 @@ class ProgramRunner:
             new = await self.api.replan(program, start, self.plan.end_us,
                                         await self.api.place_deg())
             self.plan = dataclasses.replace(new, program_spec=self.plan.program_spec)
-        self.replans.append({"at_us": now, "at_utc": _iso(now), "reason": reason,
+        self.replans.append({"at_us": now, "at_utc": iso_utc(now), "reason": reason,
                              "blocks": len(self.plan.blocks)})
         self._changed()
 
@@ -311,16 +311,24 @@ class ProgramRunner:
     def as_dict(self) -> dict[str, Any]:
         return {"state": self.state, "program": self.plan.program,
                 "started_us": self.started_us, "ended_us": self.ended_us,
-                "started_utc": None if self.started_us is None else _iso(self.started_us),
-                "ended_utc": None if self.ended_us is None else _iso(self.ended_us),
+                "started_utc": None if self.started_us is None else iso_utc(self.started_us),
+                "ended_utc": None if self.ended_us is None else iso_utc(self.ended_us),
                 "current": None if self.current is None else self.current.as_dict(),
                 "records": [r.as_dict() for r in self.records],
                 "done_before": [r.as_dict() for r in self.done_before],
                 "replans": self.replans, "error": self.error,
                 "plan": self.plan.as_dict(), "summary": run_summary(self.records)}
 
+    def progress(self) -> dict[str, Any]:
+        """What changed, in short (the `program` event): not the plan or every record."""
+        return {"state": self.state, "program": self.plan.program,
+                "current": None if self.current is None else self.current.as_dict(),
+                "last": self.records[-1].as_dict() if self.records else None,
+                "replans": len(self.replans), "summary": run_summary(self.records),
+                "error": self.error}
+
     def _changed(self) -> None:
-        self.on_change(self.as_dict())
+        self.on_change(self.progress())
 
 
 class _EndedEarly(RuntimeError):
@@ -345,6 +353,4 @@ def run_summary(records: list[BlockRecord]) -> dict[str, Any]:
             "worst_on_sky_rms_arcsec": worst("on_sky_rms_arcsec")}
 
 
-def _iso(t_us: int) -> str:
-    return UtcTimes.from_unix_us(int(t_us)).iso(0)[0]
 

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from virtualstar.astro import MountLimits, UnreachablePath, UtcTimes
+from virtualstar.astro import MountLimits, UnreachablePath, iso_utc
 
 from .exceptions import PlanFileError
 from .sky import NightGrid, TargetSky, _runs, plan_slew_deg, slew_s
@@ -67,8 +67,8 @@ class Block:
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
-        d["start_utc"] = _iso(self.start_us)
-        d["end_utc"] = _iso(self.end_us)
+        d["start_utc"] = iso_utc(self.start_us)
+        d["end_utc"] = iso_utc(self.end_us)
         d["duration_s"] = self.duration_s
         return d
 
@@ -92,8 +92,8 @@ class Plan:
         return sum(b.priority * b.duration_s / 3600.0 for b in self.blocks)
 
     def as_dict(self) -> dict[str, Any]:
-        return {"program": self.program, "start_utc": _iso(self.start_us),
-                "end_utc": _iso(self.end_us), "start_us": self.start_us, "end_us": self.end_us,
+        return {"program": self.program, "start_utc": iso_utc(self.start_us),
+                "end_utc": iso_utc(self.end_us), "start_us": self.start_us, "end_us": self.end_us,
                 "site": self.site, "setup_s": self.setup_s,
                 "priority_weighted_hours": self.weighted_hours,
                 "blocks": [b.as_dict() for b in self.blocks], "left_out": self.left_out,
@@ -133,7 +133,7 @@ def schedule(program: str, grid: NightGrid, skies: list[TargetSky], passes: dict
             if placed >= target.repeats:
                 break
             if (w["end_us"] - w["start_us"]) / 1e6 < 30.0:
-                reasons.append(f"the pass at {_iso(w['start_us'])} meets its constraints for "
+                reasons.append(f"the pass at {iso_utc(w['start_us'])} meets its constraints for "
                                "less than 30 s")
                 continue
             block = Block(target.name, "satellite", placed + 1, target.priority, w["start_us"],
@@ -142,7 +142,7 @@ def schedule(program: str, grid: NightGrid, skies: list[TargetSky], passes: dict
                           constraints={"culmination_el_deg": round(w["culmination_el_deg"], 3)})
             clash = _clash(blocks, block, ctx)
             if clash is not None:
-                reasons.append(f"the pass at {_iso(w['start_us'])} overlaps {clash}")
+                reasons.append(f"the pass at {iso_utc(w['start_us'])} overlaps {clash}")
                 continue
             blocks.append(block)
             placed += 1
@@ -254,14 +254,14 @@ def _clash(blocks: list[Block], new: Block, ctx: _Context, *, explain: bool = Tr
             gap = slew_s(b.end_az_deg, b.end_el_deg, new.start_az_deg, new.start_el_deg,
                          ctx.limits) + ctx.setup_s
             if new.start_us - b.end_us < gap * 1e6:
-                return f"{b.target} (until {_iso(b.end_us)}, then {gap:.0f} s to get here)"
+                return f"{b.target} (until {iso_utc(b.end_us)}, then {gap:.0f} s to get here)"
         elif b.start_us >= new.end_us:
             gap = slew_s(new.end_az_deg, new.end_el_deg, b.start_az_deg, b.start_el_deg,
                          ctx.limits) + ctx.setup_s
             if b.start_us - new.end_us < gap * 1e6:
-                return f"{b.target} (from {_iso(b.start_us)}, {gap:.0f} s away)"
+                return f"{b.target} (from {iso_utc(b.start_us)}, {gap:.0f} s away)"
         else:
-            return f"{b.target} ({_iso(b.start_us)}..{_iso(b.end_us)})"
+            return f"{b.target} ({iso_utc(b.start_us)}..{iso_utc(b.end_us)})"
     chain = sorted([*blocks, new], key=lambda b: b.start_us)
     try:
         moves = mount_chain(chain, ctx.limits, ctx.start_place_deg)
@@ -274,7 +274,7 @@ def _clash(blocks: list[Block], new: Block, ctx: _Context, *, explain: bool = Tr
                 return (f"the start of the plan ({slew + ctx.setup_s:.0f} s to get there from "
                         f"the mount's place)")
             return (f"the cable wrap (a {slew:.0f} s slew the long way round before "
-                    f"{b.target} at {_iso(b.start_us)})")
+                    f"{b.target} at {iso_utc(b.start_us)})")
         free_from = b.end_us
     return None
 
@@ -345,9 +345,7 @@ def _why_not(sky: TargetSky, grid: NightGrid, ok: np.ndarray, blocks: list[Block
             f"{', '.join(takers) or 'its own earlier repeats (cadence)'}")
 
 
-def _iso(t_us: int) -> str:
-    return UtcTimes.from_unix_us(int(t_us)).iso(0)[0]
 
 
 def _hm(t_us) -> str:
-    return _iso(int(t_us))[11:16]
+    return iso_utc(int(t_us))[11:16]

@@ -33,7 +33,7 @@ from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
 from .exceptions import ProgramError
 from .program import ProgramTarget
 
-__all__ = ["NightGrid", "TargetSky", "night_window", "target_sky"]
+__all__ = ["NightGrid", "TargetSky", "night_window", "target_skies"]
 
 DEFAULT_STEP_S = 60.0
 SCAN_STEP_S = 10.0  # satellites: the step of the search for passes above min_el
@@ -160,11 +160,11 @@ def _tle_records(tle_text: str, source: str) -> tuple:
 
 def target_tle_text(target: ProgramTarget) -> str:
     """Return the three TLE lines of a satellite target (its name line first)."""
-    from catalogs import parse_tle_text, select_satellite
+    from catalogs import select_satellite
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rec = select_satellite(parse_tle_text(target.tle_text, "the TLE text"), target.spec)
+        rec = select_satellite(list(_tle_records(target.tle_text, "the TLE text")), target.spec)
     return f"{rec.name}\n{rec.line1}\n{rec.line2}\n"
 
 
@@ -195,18 +195,11 @@ def target_skies(targets: list[ProgramTarget], grid: NightGrid, site: Site,
     return out
 
 
-def target_sky(target: ProgramTarget, grid: NightGrid, site: Site, eop: EarthOrientation,
-               zones: AvoidanceZones) -> TargetSky:
-    """Observe one sidereal target on the grid and evaluate its constraints there."""
-    return target_skies([target], grid, site, eop, zones)[0]
-
-
 def constraint_masks(target: ProgramTarget, az: np.ndarray, el: np.ndarray, grid: NightGrid,
                      zones: AvoidanceZones) -> dict[str, np.ndarray]:
     """Return {constraint: mask} for directions (deg) at the grid's times."""
     floor = np.maximum(target.min_el_deg, zones.min_el_deg(np.radians(az)))
     sun_sep = _sep(az, el, grid.sun_az_deg, grid.sun_el_deg)
-    moon_sep = _sep(az, el, grid.moon_az_deg, grid.moon_el_deg)
     checks = {
         "elevation": el >= floor,
         "azimuth": target.az_allowed(az),
@@ -214,6 +207,7 @@ def constraint_masks(target: ProgramTarget, az: np.ndarray, el: np.ndarray, grid
         "sun_zone": sun_sep >= zones.sun_radius_deg,
     }
     if target.moon_min_sep_deg or zones.moon_radius_deg:
+        moon_sep = _sep(az, el, grid.moon_az_deg, grid.moon_el_deg)
         checks["moon_separation"] = moon_sep >= max(target.moon_min_sep_deg,
                                                     zones.moon_radius_deg or 0.0)
     if target.window_us is not None:

@@ -40,6 +40,7 @@ from virtualstar.astro import (
     FixedAltAz,
     Satellite,
     UtcTimes,
+    iso_utc,
     observe_mount_times,
     satellite_passes,
     unwrap_azimuth,
@@ -439,6 +440,3 @@ def sky_rate_arcsec_s(p: Points) -> np.ndarray:
     return np.hypot(p.az_rate_rad_s * np.cos(p.el_rad), p.el_rate_rad_s) * ARCSEC_PER_RAD
 
 
-def iso_utc(t_us: int, digits: int = 0) -> str:
-    """Return mount time µs as ISO-8601 UTC text (`digits` decimals of the second)."""
-    return UtcTimes.from_unix_us(int(t_us)).iso(digits)[0]

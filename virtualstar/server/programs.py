@@ -107,7 +107,7 @@ class ProgramControl:
             await runner.run()
         except asyncio.CancelledError:
             runner.state = "stopped"
-            self._changed(runner.as_dict())
+            self._changed(runner.progress())
 
     async def wait(self) -> dict[str, Any]:
         if self.task is not None:
@@ -128,9 +128,5 @@ class ProgramControl:
             return {"state": "none"}
         return self.runner.as_dict()
 
-    def _changed(self, doc: dict[str, Any]) -> None:
-        last = doc["records"][-1] if doc["records"] else None
-        self.emit("program", {"state": doc["state"], "program": doc["program"],
-                              "current": doc["current"], "last": last,
-                              "replans": len(doc["replans"]), "summary": doc["summary"],
-                              "error": doc["error"]})
+    def _changed(self, progress: dict[str, Any]) -> None:
+        self.emit("program", progress)

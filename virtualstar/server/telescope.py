@@ -37,6 +37,7 @@ from virtualstar.astro import (
     Site,
     UtcTimes,
     check_places,
+    iso_utc,
 )
 
 from . import procedures
@@ -300,7 +301,7 @@ class Telescope:
             elif not self.clock.lockstep and wall - last_wall > STALL_WALL_S:
                 log.error("the mount clock has not moved for %.0f s", wall - last_wall)
                 self.supervisor.interrupt(MountUnavailable(
-                    f"the mount clock stopped at {procedures.iso_utc(t)} ({wall - last_wall:.0f} s "
+                    f"the mount clock stopped at {iso_utc(t)} ({wall - last_wall:.0f} s "
                     "without a tick)"))
                 self.link.mark_lost()
                 last_wall = wall
@@ -556,7 +557,7 @@ class Telescope:
         obs_az, obs_el = self._observed_deg(enc_az, enc_el)
         ra, dec = self._radec(obs_az % 360.0, obs_el, t_us)
         out.update({
-            "mount_time_us": t_us, "mount_time_utc": procedures.iso_utc(t_us, 3),
+            "mount_time_us": t_us, "mount_time_utc": iso_utc(t_us, 3),
             "mount_state": m.state_name(int(v["mount_state"])),
             "encoder": {"az_deg": math.degrees(enc_az), "el_deg": math.degrees(enc_el)},
             "observed": {"az_deg": obs_az % 360.0, "el_deg": obs_el},
