@@ -296,6 +296,52 @@ def test_vs_run_records_the_chosen_signals_for_every_block(stars, tmp_path):
         assert np.abs(w.columns["axis.az.error_arcsec"]).max() <= r["encoder_peak_arcsec"] + 0.05
 
 
+def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars, tmp_path):
+    """The server path end to end: `vs server --emulator` in its own process (lockstep paced
+    at ×50), `vs run --server` following it, the recorder on the emulator's ASTCom URL."""
+    import os
+    import re
+    import signal
+    import socket
+    import subprocess
+    import sys
+
+    from virtualstar.recorder import ParquetStoreReader
+
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps(stars))
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        url = f"ws://127.0.0.1:{s.getsockname()[1]}"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
+         "--emulator", "--speed", "50", "--start", "2024-05-18T21:12:00Z", "--listen", url],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        line = proc.stdout.readline()
+        mount = re.search(r"endpoint for other clients: (\S+)\)", line)
+        assert mount, (line, proc.stderr.read() if proc.poll() is not None else "")
+        out, store = tmp_path / "run.json", tmp_path / "store"
+        result = CliRunner().invoke(app, [
+            "run", str(plan), "--server", url, "-o", str(out), "--record",
+            "axis.az.error_arcsec", "--record-rate", "10", "--mount", mount.group(1),
+            "--store", f"parquet:{store}"])
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=30)
+    assert result.exit_code == 0, result.output
+    doc = json.loads(out.read_text())
+    assert doc["state"] == "done" and doc["records"], doc.get("error")
+    assert doc["recording"]["lost"] == 0 and "error" not in doc["recording"]
+    reader = ParquetStoreReader(store)
+    observed = [r for r in doc["records"] if r["outcome"] in ("done", "late")]
+    assert observed, [r["outcome"] for r in doc["records"]]
+    for r in observed:  # every observed second of every block is in the store
+        w = reader.window(r["start_us"], r["end_us"])
+        assert abs(len(w) - (r["end_us"] - r["start_us"]) / 1e5) <= 1, r["target"]
+
+
 @pytest.mark.parametrize(("extra", "expected"), [
     (["--record", "axis.az.nonsense"], "no signal axis.az.nonsense"),
     (["--record", "axis.az.position", "--record-rate", "0"], "--record-rate 0"),

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 import typer
 
-from virtualstar.cli.status import JsonOpt, ServerOpt, api_password, print_json
+from virtualstar.cli.status import JsonOpt, ServerOpt, ask, print_json
 from virtualstar.cli.status import fail as status_fail
 
 __all__ = ["run"]
@@ -97,9 +97,9 @@ def run(
         except RecorderError as exc:
             raise fail(f"--record: {exc}") from None
     elif recording is not None:
-        result = _on_server_recorded(server, mount, doc, done, show, fail, recording)
+        result = _on_server_recorded(server, mount, doc, done, show, fail, recording, as_json)
     else:
-        result = _on_server(server, doc, done, show, fail)
+        result = _on_server(server, doc, done, show, as_json)
     _report(result, out, png, as_json, fail)
     if result.get("state") == "failed":
         raise typer.Exit(1)
@@ -123,7 +123,8 @@ def _recording(names, rate_hz: float, stores, emulator: bool, server, mount, fai
         raise fail(str(exc)) from None
 
 
-def _on_server_recorded(server, mount: str, doc, done, show, fail, recording) -> dict[str, Any]:
+def _on_server_recorded(server, mount: str, doc, done, show, fail, recording,
+                        as_json: bool) -> dict[str, Any]:
     import os
 
     from astcom_client import AstcomError
@@ -136,36 +137,21 @@ def _on_server_recorded(server, mount: str, doc, done, show, fail, recording) ->
     except (RecorderError, AstcomError, OSError) as exc:
         raise fail(f"--record from {mount}: {exc}") from None
     try:
-        result = _on_server(server, doc, done, show, fail)
+        result = _on_server(server, doc, done, show, as_json)
     finally:
         summary = rec.stop()
     result["recording"] = summary
     return result
 
 
-def _on_server(server: str | None, doc: dict, done, show, fail) -> dict[str, Any]:
-    from virtualstar.vss_client import (
-        ServerUnavailable,
-        VssRequestError,
-        call_server,
-        default_server_url,
-    )
-
-    url = server or default_server_url()
+def _on_server(server: str | None, doc: dict, done, show, as_json: bool) -> dict[str, Any]:
     try:
-        return call_server(url, "run_plan", {"plan": doc, "done": done, "wait": True},
-                           on_event=show, password=api_password())
+        return ask(server, "run_plan", {"plan": doc, "done": done, "wait": True},
+                   quiet=as_json, on_event=show)
     except KeyboardInterrupt:
         typer.echo("stopping the program (the mount comes to rest) ...", err=True)
-        try:
-            call_server(url, "stop", {}, password=api_password())
-            return call_server(url, "program", {}, password=api_password())
-        except (VssRequestError, ServerUnavailable) as exc:
-            raise fail(f"could not stop the program: {exc}", 1) from None
-    except VssRequestError as exc:
-        raise fail(f"the server refused run_plan: {exc.message} [{exc.code}]", 1) from None
-    except ServerUnavailable as exc:
-        raise fail(str(exc)) from None
+        ask(server, "stop", {}, quiet=as_json)
+        return ask(server, "program", {}, quiet=as_json)
 
 
 class _Progress:

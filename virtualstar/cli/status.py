@@ -52,10 +52,11 @@ def fail(message: str, code: int = 2, *, as_json: bool = False) -> typer.Exit:
 
 
 def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
-        progress: bool = False, quiet: bool = False) -> Any:
+        progress: bool = False, quiet: bool = False, on_event=None) -> Any:
     """Send one command to the server and return its result, or exit with a clear error.
 
-    progress=True shows the server's operation events under a spinner (humans only).
+    progress=True shows the server's operation events under a spinner (humans only);
+    `on_event(kind, data)` sees every event instead.
     With `quiet` (the command's --json), a failure also prints a JSON error object on
     stdout (`{"error": {"code", "message"}}`), so a script parses the same stream either way.
     """
@@ -64,7 +65,7 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
     url = server or default_server_url()
     console = Console(stderr=True)
     try:
-        if progress and not quiet and console.is_terminal:
+        if on_event is None and progress and not quiet and console.is_terminal:
             with console.status(f"{cmd}...") as spinner:
                 def on_event(kind: str, data: dict[str, Any]) -> None:
                     if kind == "operation":
@@ -78,7 +79,7 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
 
                 return call_server(url, cmd, params, on_event=on_event,
                                    password=api_password())
-        return call_server(url, cmd, params, password=api_password())
+        return call_server(url, cmd, params, on_event=on_event, password=api_password())
     except VssRequestError as exc:
         if quiet:
             print_json({"error": {"code": exc.code, "message": exc.message}})
