@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from astropy.utils import iers
-from sky_truth import sky_sep_arcsec, star_truth
+from sky_truth import iss_truth, sky_sep_arcsec, star_truth
 from typer.testing import CliRunner
 from vss_rig import read_emulator, run_lockstep_scenario
 
@@ -95,33 +95,6 @@ async def _sample(vss, clock, every_s: float, until):
     return reads
 
 
-def _iss_truth(t_us: np.ndarray, site):
-    from datetime import UTC, datetime
-
-    from skyfield.api import EarthSatellite, wgs84
-
-    from catalogs import load_tle_file, select_satellite
-    from virtualstar.astro import EarthOrientation
-    from virtualstar.astro.bodies import skyfield_context
-
-    sf = skyfield_context(EarthOrientation.from_astropy_iers_data())
-    rec = select_satellite(load_tle_file("catalogs/data/stations.tle"), "ISS")
-    sat = EarthSatellite(rec.line1, rec.line2, rec.name, sf.ts)
-    earth = sf.ephemeris["earth"]
-    observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
-    ts = sf.ts.from_datetimes([datetime.fromtimestamp(t / 1e6, tz=UTC) for t in t_us])
-    # the apparent direction (light time, aberration), as a telescope sees it, lifted by
-    # ERFA's refraction constants for the site's air (skyfield's own formula ignores
-    # humidity and wavelength: arcseconds at 20°)
-    import erfa
-
-    alt, az, _ = observer.at(ts).observe(earth + sat).apparent().altaz()
-    refa, refb = erfa.refco(site.pressure_hpa, site.temperature_c, site.humidity,
-                            site.wavelength_um)
-    tan_z = np.tan(np.pi / 2 - alt.radians)
-    return az.degrees, alt.degrees + np.degrees(refa * tan_z + refb * tan_z ** 3)
-
-
 def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
     site = load_site()
 
@@ -153,7 +126,7 @@ def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
         assert r["samples"] > 0 and r["encoder_rms_arcsec"] < r["encoder_peak_arcsec"] < 1.0
         inside = (t >= r["start_us"]) & (t <= r["end_us"])
         assert inside.sum() >= 20, r["target"]
-        truth = (_iss_truth(t[inside], site) if r["target"] == "ISS"
+        truth = (iss_truth(t[inside], site) if r["target"] == "ISS"
                  else star_truth(r["target"], t[inside], site))
         sep = sky_sep_arcsec(az[inside], el[inside], *truth)
         assert sep.max() < 1.0, (r["target"], sep.max())

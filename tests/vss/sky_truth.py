@@ -46,6 +46,42 @@ def vega_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
     return star_truth("Vega", t_us, site)
 
 
+def skyfield_iss():
+    """The bundled ISS elements as a skyfield satellite, and the skyfield context (offline)."""
+    from skyfield.api import EarthSatellite
+
+    from catalogs import load_tle_file, sample_tle_path, select_satellite
+    from virtualstar.astro import EarthOrientation
+    from virtualstar.astro.bodies import skyfield_context
+
+    sf = skyfield_context(EarthOrientation.from_astropy_iers_data())
+    rec = select_satellite(load_tle_file(sample_tle_path("stations")), "ISS")
+    return EarthSatellite(rec.line1, rec.line2, rec.name, sf.ts), sf
+
+
+def iss_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
+    """Return skyfield's observed az, el (deg) of the ISS at mount times (UTC µs).
+
+    The apparent direction (light time, aberration), as a telescope sees it, lifted by
+    ERFA's refraction constants for the site's air (skyfield's own formula ignores
+    humidity and wavelength: arcseconds at 20°); a site without air gets none.
+    """
+    from datetime import UTC, datetime
+
+    import erfa
+    from skyfield.api import wgs84
+
+    sat, sf = skyfield_iss()
+    earth = sf.ephemeris["earth"]
+    observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
+    ts = sf.ts.from_datetimes([datetime.fromtimestamp(t / 1e6, tz=UTC) for t in t_us])
+    alt, az, _ = observer.at(ts).observe(earth + sat).apparent().altaz()
+    refa, refb = erfa.refco(site.pressure_hpa, site.temperature_c, site.humidity,
+                            site.wavelength_um)
+    tan_z = np.tan(np.pi / 2 - alt.radians)
+    return az.degrees, alt.degrees + np.degrees(refa * tan_z + refb * tan_z ** 3)
+
+
 def sky_sep_arcsec(az1, el1, az2, el2) -> np.ndarray:
     import erfa
 

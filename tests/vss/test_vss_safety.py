@@ -17,9 +17,10 @@ import astropy.units as u
 import erfa
 import numpy as np
 import pytest
-from astropy.coordinates import AltAz, EarthLocation, SkyCoord, get_body
+from astropy.coordinates import EarthLocation, SkyCoord, get_body
 from astropy.time import Time
 from astropy.utils import iers
+from sky_truth import observed_frame
 from vss_rig import read_emulator, run_lockstep_scenario
 
 from catalogs import bright_stars, load_tle_file, sample_tle_path
@@ -34,16 +35,9 @@ LOC = EarthLocation.from_geodetic(SITE.lon_deg * u.deg, SITE.lat_deg * u.deg, SI
 ENCODERS = ["axis.az.position", "axis.el.position", "mount.state_name"]
 
 
-def altaz_frame(t_us) -> AltAz:
-    t = Time(np.asarray(t_us) / 1e6, format="unix", scale="utc")
-    return AltAz(obstime=t, location=LOC, pressure=SITE.pressure_hpa * u.hPa,
-                 temperature=SITE.temperature_c * u.deg_C, relative_humidity=SITE.humidity,
-                 obswl=SITE.wavelength_um * u.micron)
-
-
 def sun_altaz_rad(t_us) -> tuple[np.ndarray, np.ndarray]:
     t = Time(np.asarray(t_us) / 1e6, format="unix", scale="utc")
-    aa = get_body("sun", t, LOC).transform_to(altaz_frame(t_us))
+    aa = get_body("sun", t, LOC).transform_to(observed_frame(t_us, SITE))
     return np.atleast_1d(aa.az.rad), np.atleast_1d(aa.alt.rad)
 
 
@@ -64,7 +58,7 @@ def targets_near_the_sun() -> list[tuple[str, dict, float]]:
     """(label, request target, astropy's separation from the Sun in degrees) at noon."""
     t = noon_us()
     tt = Time(t / 1e6, format="unix", scale="utc")
-    frame = altaz_frame(t)
+    frame = observed_frame(t, SITE)
     sun = get_body("sun", tt, LOC)
     sun_aa = sun.transform_to(frame)
     elnath = bright_stars().lookup("Elnath")
@@ -223,7 +217,7 @@ def test_the_horizon_profile_refuses_a_place_behind_it_and_stops_a_track_before_
     """A wall 40° high in the east; a star setting in the west meets a 1.5°-higher bump."""
     start = "2024-05-18T19:40:00Z"
     t0 = int(UtcTimes.from_iso([start]).to_unix_us()[0])
-    frame = altaz_frame(t0)
+    frame = observed_frame(t0, SITE)
     # a bright star low in the west, setting
     cands = []
     for name in ("Regulus", "Procyon", "Pollux", "Castor", "Alphard", "Capella"):
@@ -250,7 +244,7 @@ def test_the_horizon_profile_refuses_a_place_behind_it_and_stops_a_track_before_
     assert op["phase"] == "done" and "below the horizon limit" in info["ended"]
     stop_t = info["tracking_to_us"]
     stop_aa = SkyCoord(bright_stars().lookup(name).ra_deg * u.deg,
-                       bright_stars().lookup(name).dec_deg * u.deg).transform_to(altaz_frame(stop_t))
+                       bright_stars().lookup(name).dec_deg * u.deg).transform_to(observed_frame(stop_t, SITE))
     assert stop_aa.alt.deg >= bump - 0.01  # it stopped before the star sank behind the bump
     assert (stop_t - info["tracking_from_us"]) / 1e6 < 1800.0
 
@@ -294,8 +288,8 @@ def test_where_and_passes_show_the_sun_separation_astropy_and_skyfield_agree_on(
     row = json.loads(res.stdout)[0]
     t = noon_us()
     elnath = bright_stars().lookup("Elnath")
-    star = SkyCoord(elnath.ra_deg * u.deg, elnath.dec_deg * u.deg).transform_to(altaz_frame(t))
-    sun = get_body("sun", Time(t / 1e6, format="unix"), LOC).transform_to(altaz_frame(t))
+    star = SkyCoord(elnath.ra_deg * u.deg, elnath.dec_deg * u.deg).transform_to(observed_frame(t, SITE))
+    sun = get_body("sun", Time(t / 1e6, format="unix"), LOC).transform_to(observed_frame(t, SITE))
     assert row["sun_separation_deg"] == pytest.approx(star.separation(sun).deg, abs=0.02)
     horizon = tmp_path / "horizon.txt"
     horizon.write_text("0 5\n200 5\n205 35\n335 35\n340 5\n")
