@@ -24,7 +24,7 @@ BAD_FRAMES = [
     ('{"id": 5, "cmd": "slew", "params": {}}', "bad_request", "exactly one target"),
     ('{"id": 6, "cmd": "slew", "params": {"radec": "25h61m +99d"}}', "bad_request", "RA"),
     ('{"id": 7, "cmd": "slew", "params": {"star": "Vegaa"}}', "bad_request", "Vega"),
-    ('{"id": 8, "cmd": "slew", "params": {"altaz": "10 95"}}', "bad_request", "-90 <= el <= 90"),
+    ('{"id": 8, "cmd": "slew", "params": {"altaz": "10 95"}}', "bad_request", "elevation 95° is outside -90..90°"),
     ('{"id": 9, "cmd": "track", "params": {"tle": "1 2 3"}}', "bad_request", "line"),
     ('{"id": 10, "cmd": "track", "params": {"star": "Vega", "duration_s": -5}}', "bad_request",
      "positive"),

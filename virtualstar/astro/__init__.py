@@ -45,6 +45,7 @@ from .targets import (
     FixedAltAz,
     Target,
     observe_mount_times,
+    parse_altaz,
     parse_radec,
     resolve_target,
 )
@@ -89,6 +90,7 @@ __all__ = [
     "load_site",
     "observe_enu",
     "observe_mount_times",
+    "parse_altaz",
     "parse_radec",
     "parse_site_option",
     "plan_keyhole",

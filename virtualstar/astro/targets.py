@@ -94,6 +94,25 @@ def parse_radec(text: str) -> tuple[float, float]:
     return ra, dec
 
 
+def parse_altaz(text: str) -> tuple[float, float]:
+    """Parse a fixed direction "AZ EL" given by a user (degrees, comma or spaces between);
+    return (az_deg, el_deg): 0 <= az < 360 (north through east), -90 <= el <= 90.
+
+    Raises CoordinateParseError saying what was wrong and what is expected.
+    """
+    try:
+        az, el = (float(p) for p in text.replace(",", " ").split())
+    except ValueError:
+        raise CoordinateParseError(f"{text!r}: expected two numbers \"AZ EL\" in degrees, "
+                                   "e.g. \"180 45\"") from None
+    if not (math.isfinite(az) and 0.0 <= az < 360.0):
+        raise CoordinateParseError(f"{text!r}: azimuth {az:g}° is outside 0..360° (north "
+                                   "through east)")
+    if not -90.0 <= el <= 90.0:
+        raise CoordinateParseError(f"{text!r}: elevation {el:g}° is outside -90..90°")
+    return az, el
+
+
 def _split_pair(text: str) -> tuple[str, str]:
     if "," in text:
         parts = [p.strip() for p in text.split(",")]

@@ -51,16 +51,12 @@ def check_radec(text: str) -> None:
 
 
 def check_altaz(text: str) -> None:
-    parts = text.replace(",", " ").split()
+    from virtualstar.astro import AstroError, parse_altaz
+
     try:
-        az, el = (float(p) for p in parts)
-    except ValueError:
-        raise fail(f"--altaz {text!r}: expected two numbers \"AZ EL\" in degrees, e.g. "
-                   "\"180 45\"") from None
-    if not 0.0 <= az < 360.0:
-        raise fail(f"--altaz {text!r}: azimuth {az:g}° is outside 0..360° (north through east)")
-    if not -90.0 <= el <= 90.0:
-        raise fail(f"--altaz {text!r}: elevation {el:g}° is outside -90..90°")
+        parse_altaz(text)
+    except AstroError as exc:
+        raise fail(f"--altaz {exc}") from None
 
 
 def op_table(op: dict[str, Any], title: str) -> Table:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from virtualstar.astro import IcrsStar, parse_radec, resolve_target
+from virtualstar.astro import IcrsStar, parse_altaz, parse_radec, resolve_target
 from virtualstar.astro.exceptions import AstroError
 
 from .exceptions import BadRequest
@@ -37,15 +37,10 @@ def parse_target(params: dict[str, Any]) -> tuple[Any, str, tuple[float, float] 
             target = resolve_target(str(params["star"]))
             return target, getattr(target, "name", "") or str(params["star"]), None
         if key == "altaz":
-            parts = str(params["altaz"]).replace(",", " ").split()
-            if len(parts) != 2:
-                raise BadRequest(f"altaz {params['altaz']!r}: expected \"AZ EL\" in degrees, "
-                                 "e.g. \"180 45\"")
             try:
-                az, el = float(parts[0]), float(parts[1])
-            except ValueError:
-                raise BadRequest(f"altaz {params['altaz']!r}: both values must be numbers "
-                                 "(degrees), e.g. \"180 45\"") from None
+                az, el = parse_altaz(str(params["altaz"]))
+            except AstroError as exc:
+                raise BadRequest(f"altaz {exc}") from None
         else:
             az, el = _number(params, "az_deg"), _number(params, "el_deg")
     except AstroError as exc:
