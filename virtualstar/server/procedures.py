@@ -231,13 +231,8 @@ async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, 
     """Slew to a fixed observed direction, verify the landing and hold (park: power off)."""
     await prepare(t, op)
     here = await t.motion.position()
-    enc = TargetPath(FixedAltAz(az_deg % 360.0, el_deg), t.config.site, limits=t.limits,
-                     eop=t.eop, model=t.model, current_az_rad=here.az_rad).sample(
-        np.array([here.t_us], np.int64))
-    enc_az, enc_el = float(enc.az_rad[0]), float(enc.el_rad[0])
-    t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(enc_az),
-                       to_el_deg=math.degrees(enc_el))
-    pos = await goto_safely(t, op, enc_az, enc_el, op.target, allow_sun=allow_sun, stow=stow)
+    pos, enc_az, enc_el = await _slew_to_fixed(t, op, here, az_deg % 360.0, el_deg, here.t_us,
+                                               op.target, allow_sun=allow_sun, stow=stow)
     t.supervisor.phase(op, Phase.SETTLING)
     err = t.motion.verify_at(pos, enc_az, enc_el, t.config.arrival_tolerance_arcsec,
                              f"slew to {op.target}")
@@ -247,6 +242,19 @@ async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, 
     return {"slew_time_s": (pos.t_us - here.t_us) / 1e6, "landing_rms_arcsec": err,
             "landing_peak_arcsec": err, "landing_error_arcsec": err, "slew_from_us": here.t_us,
             "landed_us": pos.t_us}
+
+
+async def _slew_to_fixed(t: Telescope, op: Operation, here, az_deg: float, el_deg: float,
+                         at_us: int, name: str, *, allow_sun: bool, stow: bool = False):
+    """Slew to the encoder place of an observed direction (through the pointing model, in
+    the cable wrap nearest `here`) as it is at `at_us`; return (landed position, enc az, el)."""
+    enc = TargetPath(FixedAltAz(az_deg, el_deg), t.config.site, limits=t.limits, eop=t.eop,
+                     model=t.model, current_az_rad=here.az_rad).sample(np.array([at_us], np.int64))
+    enc_az, enc_el = float(enc.az_rad[0]), float(enc.el_rad[0])
+    t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(enc_az),
+                       to_el_deg=math.degrees(enc_el))
+    pos = await goto_safely(t, op, enc_az, enc_el, name, allow_sun=allow_sun, stow=stow)
+    return pos, enc_az, enc_el
 
 
 async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, *,
@@ -269,12 +277,8 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
         raise TargetUnreachable(f"{name} is at elevation {star_el:.2f} deg, outside the "
                                 f"limits {t.limits.el_min_deg:g}..{t.limits.el_max_deg:g} deg")
     t.safety.check_place(star_az, star_el, t_exp, name, allow_sun=allow_sun)
-    enc = TargetPath(FixedAltAz(star_az, star_el), cfg.site, limits=t.limits, eop=t.eop,
-                     model=t.model, current_az_rad=here.az_rad).sample(np.array([t_exp], np.int64))
-    enc_az, enc_el = float(enc.az_rad[0]), float(enc.el_rad[0])
-    t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(enc_az),
-                       to_el_deg=math.degrees(enc_el))
-    pos = await goto_safely(t, op, enc_az, enc_el, name, allow_sun=allow_sun)
+    pos, enc_az, enc_el = await _slew_to_fixed(t, op, here, star_az, star_el, t_exp, name,
+                                               allow_sun=allow_sun)
     t.motion.verify_at(pos, enc_az, enc_el, cfg.arrival_tolerance_arcsec, f"slew to {name}")
     t.supervisor.phase(op, Phase.MEASURING)
     await t.motion.wait_until(max(pos.t_us + int(settle_s * 1e6), t_exp), op.info)

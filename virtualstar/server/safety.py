@@ -73,14 +73,14 @@ class Safety:
     def check_target(self, target, t_us: int, what: str, *, allow_sun: bool = False,
                      ahead_s: float = 0.0) -> None:
         """Refuse a sky target inside a zone at `t_us` (and over the next `ahead_s`)."""
-        t = t_us + np.round(np.arange(0.0, ahead_s + 1.0, _LOOKAHEAD_STEP_S) * 1e6).astype(np.int64)
+        t = _lookahead_us(t_us, ahead_s)
         obs = observe_mount_times(target, t, self.site, self.eop)
         self._check(obs.az_rad, obs.el_rad, t, what, allow_sun, horizon_now_only=True)
 
     def check_place(self, az_deg: float, el_deg: float, t_us: int, what: str, *,
                     allow_sun: bool = False, ahead_s: float = 0.0) -> None:
         """Refuse a fixed observed place inside a zone now or over the next `ahead_s`."""
-        t = t_us + np.round(np.arange(0.0, ahead_s + 1.0, _LOOKAHEAD_STEP_S) * 1e6).astype(np.int64)
+        t = _lookahead_us(t_us, ahead_s)
         az = np.full(t.shape, math.radians(az_deg))
         el = np.full(t.shape, math.radians(el_deg))
         self._check(az, el, t, what, allow_sun, horizon_now_only=False)
@@ -168,3 +168,8 @@ class Safety:
         if first is None:
             raise TargetUnreachable(f"less than {min_s:g} s of the pass is left to track")
         raise refusal(first, "the pass")
+
+
+def _lookahead_us(t_us: int, ahead_s: float) -> np.ndarray:
+    """Mount times from `t_us` over the next `ahead_s`, every _LOOKAHEAD_STEP_S."""
+    return t_us + np.round(np.arange(0.0, ahead_s + 1.0, _LOOKAHEAD_STEP_S) * 1e6).astype(np.int64)

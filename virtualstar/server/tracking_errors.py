@@ -167,7 +167,6 @@ class TrackingErrorHistory:
                               int(from_us or 0), int(to_us or 0))
         sky2 = sum(b[2] for b in sel)
         clock = self._clock_terms(sel)
-        worst = max(range(len(sel)), key=lambda k: clock[k][0]) if sel else 0
         return ErrorStats(
             int(n),
             math.sqrt(sky2 / n),
@@ -179,7 +178,7 @@ class TrackingErrorHistory:
             on_sky_rms_arcsec=math.sqrt((sky2 + sum(b[1] * c[0] ** 2 for b, c in
                                                     zip(sel, clock, strict=True))) / n),
             on_sky_peak_arcsec=max(b[5] + c[0] for b, c in zip(sel, clock, strict=True)),
-            clock_error_peak_arcsec=clock[worst][0],
+            clock_error_peak_arcsec=max(c[0] for c in clock),
             clock_offset_us=max((c[1] for c in clock), key=abs),
         )
 
