@@ -342,22 +342,15 @@ def load_avoidance(path: str | Path | None = None) -> AvoidanceZones:
     file named by $VIRTUALSTAR_SITE is read, else the defaults apply. Raises SiteError.
     """
     import os
-    import tomllib
 
-    from .site import SITE_ENV_VAR
+    from .site import SITE_ENV_VAR, read_site_file
 
     if path is None:
         path = os.environ.get(SITE_ENV_VAR) or None
     if path is None:
         return AvoidanceZones()
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise SiteError(f"cannot read site file {path}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SiteError(f"{path}: not valid TOML: {exc}") from None
-    table = data.get("safety", {})
+    table = read_site_file(path).get("safety", {})
     known = {"sun_radius_deg", "moon_radius_deg", "horizon_file"}
     unknown = sorted(set(table) - known)
     if unknown:

@@ -113,11 +113,24 @@ def parse_site_option(text: str) -> tuple[float, float, float]:
     return values[0], values[1], values[2]
 
 
-def _read_site_toml(text: str, origin: str) -> Site:
+def _parse_toml(text: str, origin: str) -> dict:
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SiteError(f"{origin}: not valid TOML: {exc}") from None
+
+
+def read_site_file(path: str | os.PathLike[str]) -> dict:
+    """Return the parsed TOML of a site file (its [site] and [safety] tables, ...);
+    SiteError naming the file when it cannot be read or is not TOML."""
+    try:
+        text = Path(path).read_text("utf-8")
+    except OSError as exc:
+        raise SiteError(f"cannot read site file {str(path)!r}: {exc.strerror}") from None
+    return _parse_toml(text, str(path))
+
+
+def _site_from_toml(data: dict, origin: str) -> Site:
     table = data.get("site")
     if not isinstance(table, dict):
         raise SiteError(f"{origin}: expected a [site] table with lat_deg, lon_deg, height_m, ...")
@@ -146,12 +159,8 @@ def load_site(path: str | os.PathLike[str] | None = None) -> Site:
         path = os.environ.get(SITE_ENV_VAR) or None
     if path is None:
         text = resources.files("virtualstar").joinpath("data/site.toml").read_text("utf-8")
-        return _read_site_toml(text, "default site.toml")
-    try:
-        text = Path(path).read_text("utf-8")
-    except OSError as exc:
-        raise SiteError(f"cannot read site file {str(path)!r}: {exc.strerror}") from None
-    return _read_site_toml(text, str(path))
+        return _site_from_toml(_parse_toml(text, "default site.toml"), "default site.toml")
+    return _site_from_toml(read_site_file(path), str(path))
 
 
 def site_from_options(*, site_file: str | os.PathLike[str] | None = None,
