@@ -31,6 +31,7 @@ import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import erfa
 import numpy as np
@@ -74,6 +75,21 @@ class AvoidanceZones:
         if self.moon_radius_deg is not None and not (
                 math.isfinite(self.moon_radius_deg) and 0.0 <= self.moon_radius_deg <= 90.0):
             raise ValueError(f"moon_radius_deg={self.moon_radius_deg}: expected 0..90 degrees")
+
+    def as_dict(self) -> dict[str, Any]:
+        """The zones as JSON (the server's status `safety`); `from_dict` reads it back."""
+        h = self.horizon
+        return {"sun_radius_deg": self.sun_radius_deg, "moon_radius_deg": self.moon_radius_deg,
+                "el_min_deg": self.el_min_deg,
+                "horizon": None if h is None else {"az_deg": list(h.az_deg),
+                                                   "el_deg": list(h.el_deg)}}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> AvoidanceZones:
+        h = doc.get("horizon")
+        return cls(sun_radius_deg=doc["sun_radius_deg"], moon_radius_deg=doc.get("moon_radius_deg"),
+                   horizon=Horizon(tuple(h["az_deg"]), tuple(h["el_deg"])) if h else None,
+                   el_min_deg=doc.get("el_min_deg", 0.0))
 
     @property
     def bodies(self) -> dict[str, float]:

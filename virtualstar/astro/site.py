@@ -75,6 +75,12 @@ class Site:
         """Return the same site with refraction switched off (pressure 0)."""
         return dataclasses.replace(self, pressure_hpa=0.0)
 
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> Site:
+        """A Site from its fields as `dataclasses.asdict` writes them (other keys ignored)."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in doc.items() if k in known})
+
     def with_overrides(self, **values: Any) -> Site:
         """Return a copy with the given fields replaced; None values are ignored."""
         return dataclasses.replace(self, **{k: v for k, v in values.items() if v is not None})

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -56,8 +56,7 @@ def plan_for_server(status: dict[str, Any], n_stars: int, *, at_utc: str | None,
     from pointing_model.cli_sky import plan_stars
     from virtualstar.astro import Site
 
-    site_doc = status["site"]
-    site = Site(**{f.name: site_doc[f.name] for f in fields(Site) if f.name in site_doc})
+    site = Site.from_dict(status["site"])
     at = at_utc or status.get("mount_time_utc")
     stars = plan_stars(n_stars, site, at_utc=at, min_el_deg=min_el_deg,
                        exclude=_server_zones(status, site))
@@ -68,16 +67,12 @@ def _server_zones(status: dict[str, Any], site: Any):
     """Return an exclude(az_deg, el_deg, times) for the server's zones (horizon, Sun, Moon)."""
     import numpy as np
 
-    from virtualstar.astro import AvoidanceZones, Horizon, zone_mask
+    from virtualstar.astro import AvoidanceZones, zone_mask
 
     doc = status.get("safety")
     if not doc:
         return None
-    horizon = doc.get("horizon")
-    zones = AvoidanceZones(sun_radius_deg=doc["sun_radius_deg"],
-                           moon_radius_deg=doc.get("moon_radius_deg"),
-                           horizon=Horizon(tuple(horizon["az_deg"]), tuple(horizon["el_deg"]))
-                           if horizon else None, el_min_deg=doc.get("el_min_deg", 0.0))
+    zones = AvoidanceZones.from_dict(doc)
 
     def exclude(az_deg, el_deg, times) -> np.ndarray:
         t_us = np.full(len(az_deg), int(times.to_unix_us()[0]), np.int64)

@@ -84,5 +84,4 @@ def _plan_site(plan: Plan) -> Site:
     """The site the plan was made for (a plan written by vs plan carries it)."""
     if not plan.site:
         return load_site()
-    fields = set(Site.__dataclass_fields__)
-    return Site(**{k: v for k, v in plan.site.items() if k in fields})
+    return Site.from_dict(plan.site)

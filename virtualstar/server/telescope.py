@@ -572,12 +572,7 @@ class Telescope:
         return out
 
     def _safety_doc(self) -> dict[str, Any]:
-        zones = self.safety.zones()
-        h = zones.horizon
-        return {"sun_radius_deg": zones.sun_radius_deg, "moon_radius_deg": zones.moon_radius_deg,
-                "el_min_deg": zones.el_min_deg,
-                "horizon": None if h is None else {"az_deg": list(h.az_deg),
-                                                   "el_deg": list(h.el_deg)}}
+        return self.safety.zones().as_dict()
 
     def _radec(self, az_deg: float, el_deg: float, t_us: int) -> tuple[float, float]:
         """Return ICRS RA/Dec (deg) of an observed direction at mount time (ERFA atoc13)."""
