@@ -33,6 +33,7 @@ from catalogs import load_tle_file, sample_tle_path
 from virtualstar.astro import UtcTimes, load_site
 from virtualstar.launcher import embedded_vss
 from virtualstar.lockstep import LockstepClock, LockstepEventLoop
+from virtualstar.server.supervisor import operations_of_tasks
 
 START = "2024-05-18T19:40:00Z"
 PACE = 20.0
@@ -208,7 +209,7 @@ def main() -> None:
             if c.operation < newest:
                 orphans += 1
             newest = max(newest, c.operation)
-    live_ops = {n.split("-attempt")[0] for n in names if n.startswith("vss-op-")}
+    live_ops = operations_of_tasks(names)
     after_stop = [c for c in calls if c.seq > calls_at_stop and c.role in MOTION_ROLES]
     az = np.array([r["axis.az.position"] for r in reads])
     el = np.array([r["axis.el.position"] for r in reads])

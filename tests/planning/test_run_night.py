@@ -84,6 +84,14 @@ def stars(tmp_path_factory):
                  "2024-05-18T21:36:00Z")
 
 
+@pytest.fixture
+def stars_file(stars, tmp_path):
+    """The stars plan written where `vs run` reads it."""
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps(stars))
+    return plan
+
+
 async def _sample(vss, clock, every_s: float, until):
     """Read the encoders straight from the emulator every `every_s` mount seconds."""
     reads = []
@@ -227,11 +235,9 @@ def test_a_wrong_plan_is_refused_and_the_server_keeps_serving(plan, expected):
     assert pong == {"pong": True}
 
 
-def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(stars, tmp_path):
-    plan = tmp_path / "plan.json"
-    plan.write_text(json.dumps(stars))
+def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(stars, stars_file, tmp_path):
     out, png = tmp_path / "run.json", tmp_path / "run.png"
-    result = CliRunner().invoke(app, ["run", str(plan), "--emulator", "--speed", "max",
+    result = CliRunner().invoke(app, ["run", str(stars_file), "--emulator", "--speed", "max",
                                       "-o", str(out), "--png", str(png)])
     assert result.exit_code == 0, result.output
     doc = json.loads(out.read_text())
@@ -240,14 +246,12 @@ def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(stars,
     assert png.read_bytes()[:4] == b"\x89PNG"
 
 
-def test_vs_run_records_the_chosen_signals_for_every_block(stars, tmp_path):
+def test_vs_run_records_the_chosen_signals_for_every_block(stars_file, tmp_path):
     from virtualstar.recorder import ParquetStoreReader
 
-    plan = tmp_path / "plan.json"
-    plan.write_text(json.dumps(stars))
     out, store = tmp_path / "run.json", tmp_path / "store"
     signals = ["axis.az.position_deg", "axis.el.position_deg", "axis.az.error_arcsec"]
-    args = ["run", str(plan), "--emulator", "-o", str(out), "--record-rate", "10",
+    args = ["run", str(stars_file), "--emulator", "-o", str(out), "--record-rate", "10",
             "--store", f"parquet:{store}"]
     for name in signals:
         args += ["--record", name]
@@ -269,7 +273,7 @@ def test_vs_run_records_the_chosen_signals_for_every_block(stars, tmp_path):
         assert np.abs(w.columns["axis.az.error_arcsec"]).max() <= r["encoder_peak_arcsec"] + 0.05
 
 
-def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars, tmp_path):
+def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars_file, tmp_path):
     """The server path end to end: `vs server --emulator` in its own process (lockstep paced
     at ×50), `vs run --server` following it, the recorder on the emulator's ASTCom URL."""
     import os
@@ -281,8 +285,6 @@ def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars, tmp_p
 
     from virtualstar.recorder import ParquetStoreReader
 
-    plan = tmp_path / "plan.json"
-    plan.write_text(json.dumps(stars))
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         url = f"ws://127.0.0.1:{s.getsockname()[1]}"
@@ -297,7 +299,7 @@ def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars, tmp_p
         assert mount, (line, proc.stderr.read() if proc.poll() is not None else "")
         out, store = tmp_path / "run.json", tmp_path / "store"
         result = CliRunner().invoke(app, [
-            "run", str(plan), "--server", url, "-o", str(out), "--record",
+            "run", str(stars_file), "--server", url, "-o", str(out), "--record",
             "axis.az.error_arcsec", "--record-rate", "10", "--mount", mount.group(1),
             "--store", f"parquet:{store}"])
     finally:
@@ -321,18 +323,14 @@ def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars, tmp_p
     (["--record", "axis.az.position", "--store", "ftp:somewhere"], "store"),
     (["--store", "parquet:x"], "go with --record"),
 ])
-def test_vs_run_refuses_wrong_recording_options_before_running(stars, tmp_path, extra, expected):
-    plan = tmp_path / "plan.json"
-    plan.write_text(json.dumps(stars))
-    result = CliRunner().invoke(app, ["run", str(plan), "--emulator", *extra])
+def test_vs_run_refuses_wrong_recording_options_before_running(stars_file, extra, expected):
+    result = CliRunner().invoke(app, ["run", str(stars_file), "--emulator", *extra])
     assert result.exit_code == 2, result.output
     assert expected in result.output
 
 
-def test_vs_run_on_a_server_needs_the_mount_url_to_record(stars, tmp_path):
-    plan = tmp_path / "plan.json"
-    plan.write_text(json.dumps(stars))
-    result = CliRunner().invoke(app, ["run", str(plan), "--record", "axis.az.position"])
+def test_vs_run_on_a_server_needs_the_mount_url_to_record(stars_file):
+    result = CliRunner().invoke(app, ["run", str(stars_file), "--record", "axis.az.position"])
     assert result.exit_code == 2 and "--mount URL" in result.output
 
 

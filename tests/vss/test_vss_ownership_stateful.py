@@ -31,6 +31,7 @@ from vss_rig import Rig
 from catalogs import load_tle_file, sample_tle_path
 from virtualstar.astro import UtcTimes, load_site
 from virtualstar.server.local_client import LocalVssClient
+from virtualstar.server.supervisor import operations_of_tasks
 from virtualstar.vss_client import VssRequestError
 
 START = "2024-05-18T19:40:00Z"  # Vega, Arcturus, Deneb up; an ISS pass at 19:51
@@ -180,7 +181,7 @@ class OneOwnerOfTheMount(RuleBasedStateMachine):
     def one_operation_drives_the_mount(self) -> None:
         async def live():
             names = [t.get_name() for t in asyncio.all_tasks() if not t.done()]
-            ops = {n.split("-attempt")[0] for n in names if n.startswith("vss-op-")}
+            ops = operations_of_tasks(names)
             return ops, names.count("vss-feeder")
 
         ops, feeders = self.rig.run(live())

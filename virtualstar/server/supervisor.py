@@ -38,12 +38,19 @@ from .motion import Motion
 from .mount_link import MountLink
 from .operations import Operation, Phase, Resume, current_operation, resume_decision
 
-__all__ = ["Procedure", "Supervisor"]
+__all__ = ["Procedure", "Supervisor", "operations_of_tasks"]
 
 log = logging.getLogger("virtualstar.server")
 
 Procedure = Callable[[Operation], Awaitable[dict[str, Any]]]
 DEFAULT_RESUME_TIMEOUT_S = 60.0
+TASK_PREFIX = "vss-op-"  # an operation's tasks: vss-op-ID (its driver), vss-op-ID-attempt-N
+
+
+def operations_of_tasks(task_names) -> set[str]:
+    """The operations (``vss-op-ID``) that the named tasks belong to: a check that never
+    more than one operation is alive (tests, the concurrency benchmark)."""
+    return {n.split("-attempt")[0] for n in task_names if n.startswith(TASK_PREFIX)}
 
 
 class Supervisor:
@@ -81,7 +88,7 @@ class Supervisor:
                            begun=loop.create_future(), done=loop.create_future())
             self.op = op
             self.operations_started += 1
-            op.task = loop.create_task(self._drive(op, procedure), name=f"vss-op-{op.id}")
+            op.task = loop.create_task(self._drive(op, procedure), name=f"{TASK_PREFIX}{op.id}")
             op.task.add_done_callback(lambda _task: self._close(op))
             self.emit("operation", op.as_dict())
             return op
@@ -120,7 +127,7 @@ class Supervisor:
         try:
             while True:
                 op.attempt = asyncio.get_running_loop().create_task(
-                    procedure(op), name=f"vss-op-{op.id}-attempt-{op.resumes}")
+                    procedure(op), name=f"{TASK_PREFIX}{op.id}-attempt-{op.resumes}")
                 try:
                     await asyncio.wait({op.attempt})
                 except asyncio.CancelledError:
