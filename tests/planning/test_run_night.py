@@ -16,7 +16,7 @@ import pytest
 from astropy.utils import iers
 from sky_truth import iss_truth, sky_sep_arcsec, star_truth
 from typer.testing import CliRunner
-from vss_rig import read_emulator, run_lockstep_scenario
+from vss_rig import read_emulator, run_lockstep_scenario, vs_server_process
 
 from virtualstar.astro import UtcTimes, load_site
 from virtualstar.cli.main import app
@@ -276,35 +276,19 @@ def test_vs_run_records_the_chosen_signals_for_every_block(stars_file, tmp_path)
 def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars_file, tmp_path):
     """The server path end to end: `vs server --emulator` in its own process (lockstep paced
     at ×50), `vs run --server` following it, the recorder on the emulator's ASTCom URL."""
-    import os
     import re
-    import signal
-    import socket
-    import subprocess
-    import sys
 
     from virtualstar.recorder import ParquetStoreReader
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        url = f"ws://127.0.0.1:{s.getsockname()[1]}"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
-         "--emulator", "--speed", "50", "--start", "2024-05-18T21:12:00Z", "--listen", url],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    try:
-        line = proc.stdout.readline()
-        mount = re.search(r"endpoint for other clients: (\S+)\)", line)
-        assert mount, (line, proc.stderr.read() if proc.poll() is not None else "")
-        out, store = tmp_path / "run.json", tmp_path / "store"
+    out, store = tmp_path / "run.json", tmp_path / "store"
+    with vs_server_process("--emulator", "--speed", "50", "--start",
+                           "2024-05-18T21:12:00Z") as server:
+        mount = re.search(r"endpoint for other clients: (\S+)\)", server.line)
+        assert mount, server.line
         result = CliRunner().invoke(app, [
-            "run", str(stars_file), "--server", url, "-o", str(out), "--record",
+            "run", str(stars_file), "--server", server.url, "-o", str(out), "--record",
             "axis.az.error_arcsec", "--record-rate", "10", "--mount", mount.group(1),
             "--store", f"parquet:{store}"])
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        proc.communicate(timeout=30)
     assert result.exit_code == 0, result.output
     doc = json.loads(out.read_text())
     assert doc["state"] == "done" and doc["records"], doc.get("error")

@@ -3,15 +3,11 @@
 from __future__ import annotations
 
 import json
-import os
-import signal
-import socket
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 from typer.testing import CliRunner
+from vss_rig import vs_server_process
 
 from virtualstar.cli.main import app
 
@@ -35,23 +31,10 @@ def test_demo_json_reports_slew_sidereal_and_satellite_phases_and_writes_a_plot(
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_vs_server_with_the_embedded_emulator_serves_clients_until_terminated():
-    port = _free_port()
-    url = f"ws://127.0.0.1:{port}"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
-         "--emulator", "--speed", "10", "--start", "2024-05-18T19:40:00Z", "--listen", url],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    try:
-        line = proc.stdout.readline()
-        assert url in line, (line, proc.stderr.read() if proc.poll() is not None else "")
+    with vs_server_process("--emulator", "--speed", "10", "--start",
+                           "2024-05-18T19:40:00Z") as server:
+        url = server.url
         for _ in range(100):
             res = runner.invoke(app, ["status", "--server", url, "--json"])
             if res.exit_code == 0 and json.loads(res.stdout)["connected"]:
@@ -60,11 +43,8 @@ def test_vs_server_with_the_embedded_emulator_serves_clients_until_terminated():
         st = json.loads(res.stdout)
         assert st["simulated"] and st["speed"] == 10
         assert st["mount_time_utc"].startswith("2024-05-18T19:4")
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=20)
-    assert proc.returncode == 0, err
-    assert "stopped" in out
+    assert server.returncode == 0, server.err
+    assert "stopped" in server.out
 
 
 def test_vs_server_refuses_contradictory_options():

@@ -15,7 +15,14 @@ emulator on the host clock instead, over a WebSocket, as with a real mount.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
 import threading
+from dataclasses import dataclass
 from typing import Any
 
 from astcom_client import Client
@@ -140,3 +147,42 @@ async def read_emulator(vss, names: list[str]) -> tuple[dict[str, Any], int]:
     finally:
         await client.close()
     return values, int(t_us)
+
+
+@dataclass
+class ServerProcess:
+    """A `vs server` in its own process: its URL, the line it printed once listening, and
+    (after the block) its exit code and the rest of its output."""
+
+    url: str
+    line: str
+    proc: subprocess.Popen
+    out: str = ""
+    err: str = ""
+
+    @property
+    def returncode(self) -> int | None:
+        return self.proc.returncode
+
+
+@contextlib.contextmanager
+def vs_server_process(*args: str):
+    """Run `vs server ARGS --listen ws://127.0.0.1:PORT` (a free port) until the block ends,
+    then stop it with SIGTERM as a user's Ctrl-C would."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        url = f"ws://127.0.0.1:{s.getsockname()[1]}"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
+         *args, "--listen", url],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    server = ServerProcess(url, "", proc)
+    try:
+        server.line = proc.stdout.readline()
+        assert url in server.line, (server.line, proc.stderr.read() if proc.poll() is not None
+                                    else "")
+        yield server
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        server.out, server.err = proc.communicate(timeout=30)
