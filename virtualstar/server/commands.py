@@ -62,6 +62,24 @@ class SampleParams(TargetParams):
 
 
 @dataclass(frozen=True)
+class MoveParams:
+    az_rate_deg_s: float = 0.0
+    el_rate_deg_s: float = 0.0
+    allow_sun: bool = False
+
+
+#: ASCOM's default guide rate: half the sidereal rate (arcseconds of sky per second).
+DEFAULT_GUIDE_RATE_ARCSEC_S = 0.5 * 15.041067
+
+
+@dataclass(frozen=True)
+class GuideParams:
+    north_arcsec: float = 0.0
+    east_arcsec: float = 0.0
+    rate_arcsec_s: float = DEFAULT_GUIDE_RATE_ARCSEC_S
+
+
+@dataclass(frozen=True)
 class StopParams:
     reset_faults: bool = False
 
@@ -240,6 +258,15 @@ async def _pointing_sample(t: Telescope, p: SampleParams) -> Any:
     return {"id": done["id"], **done["info"]["sample"]}
 
 
+async def _move(t: Telescope, p: MoveParams) -> Any:
+    op = await t.move(p.az_rate_deg_s, p.el_rate_deg_s, allow_sun=p.allow_sun)
+    return await _result(op, wait_done=False)
+
+
+async def _guide(t: Telescope, p: GuideParams) -> Any:
+    return await t.guide(p.north_arcsec, p.east_arcsec, p.rate_arcsec_s)
+
+
 async def _stop(t: Telescope, p: StopParams) -> Any:
     return await t.stop(reset_faults=p.reset_faults)
 
@@ -302,6 +329,12 @@ COMMANDS: dict[str, Command] = {
                                "measure the star's offset with the guide camera (needs the "
                                "guide_measure role); answers with star, encoder, offset and "
                                "on-axis places."),
+    "move": Command(MoveParams, _move, "Turn the axes at az_rate_deg_s / el_rate_deg_s (a hand "
+                    "pad) until stop, another command, or just before a limit or zone; answers "
+                    "once moving."),
+    "guide": Command(GuideParams, _guide, "A guide pulse: offset the sky target being tracked "
+                     "by north_arcsec / east_arcsec at rate_arcsec_s; answers with when the pulse "
+                     "runs (mount µs) and the total offset."),
     "stop": Command(StopParams, _stop, "Stop the operation, bring the mount to rest; "
                     "reset_faults=true also clears latched faults."),
     "reset_faults": Command(NoParams, _reset, "Stop and clear the mount's latched faults."),
@@ -322,7 +355,7 @@ COMMANDS: dict[str, Command] = {
 
 # Commands that move the mount or change who drives it: they end a running program first.
 ENDS_PROGRAM = frozenset({"slew", "track", "stop", "reset_faults", "park", "pointing_sample",
-                          "set_mode"})
+                          "set_mode", "move"})
 
 
 async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any], *,

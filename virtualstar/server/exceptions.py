@@ -15,6 +15,7 @@
     ├── TargetUnreachable (ValueError)              unreachable      below the horizon, beyond the cable wrap, no pass
     ├── StaleElements (ValueError)                  stale_tle        TLE too old for the mount time, or the satellite decayed
     ├── InExclusionZone (ValueError)                exclusion_zone   the target or the slew's path is too near the Sun (or Moon)
+    ├── NotTracking (RuntimeError)                  not_tracking     a guide pulse needs a sky target being tracked
     ├── NotArrived (RuntimeError)                   not_arrived      the mount is not where the target is (how far: in the message)
     ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
     ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
@@ -34,6 +35,7 @@ __all__ = [
     "MountUnavailable",
     "NotActive",
     "NotArrived",
+    "NotTracking",
     "OperationAborted",
     "StaleElements",
     "TargetUnreachable",
@@ -158,3 +160,9 @@ class Forbidden(PermissionError, VssError):
     """The connection's role may not send this command (an observer moving the mount)."""
 
     code = "forbidden"
+
+
+class NotTracking(RuntimeError, VssError):
+    """A guide pulse arrived while no sky target is being tracked (nothing to offset)."""
+
+    code = "not_tracking"

@@ -13,6 +13,7 @@ Rules of the table below:
   interrupted operation starts again at PREPARING;
 * SLEWING may be entered again from WAITING/JOINING: a join planned too late for
   the host is planned again from where the mount is (a paced mount does not wait);
+* a move at rates (a hand pad) is SLEWING until its run-out: SLEWING → ENDING;
 * DONE is reached only from SETTLING (a hold verified at its target), MEASURING
   or ENDING (a track brought to rest);
 * terminal phases have no way out.
@@ -76,7 +77,7 @@ TRANSITIONS: dict[Phase, frozenset[Phase]] = {
     Phase.PREPARING: frozenset({Phase.PLANNED, Phase.SLEWING, Phase.WAITING}) | _END,
     Phase.PLANNED: frozenset({Phase.SLEWING, Phase.WAITING}) | _END,
     Phase.SLEWING: frozenset({Phase.SLEWING, Phase.WAITING, Phase.JOINING, Phase.SETTLING,
-                              Phase.MEASURING}) | _END,
+                              Phase.MEASURING, Phase.ENDING}) | _END,
     Phase.WAITING: frozenset({Phase.SLEWING, Phase.JOINING}) | _END,
     Phase.JOINING: frozenset({Phase.SLEWING, Phase.SETTLING, Phase.TRACKING}) | _END,
     Phase.SETTLING: frozenset({Phase.TRACKING, Phase.ENDING, Phase.DONE}) | _END,

@@ -40,6 +40,7 @@ from virtualstar.astro import (
     FixedAltAz,
     Satellite,
     UtcTimes,
+    check_places,
     iso_utc,
     observe_mount_times,
     satellite_passes,
@@ -54,6 +55,7 @@ from .operations import Operation, Phase
 from .pass_selection import choose_pass, windows_from_passes
 from .trajectories import (
     SLEW_MARGIN,
+    ConstantRatePath,
     Path,
     Points,
     RampIn,
@@ -66,7 +68,8 @@ from .trajectories import (
 if TYPE_CHECKING:
     from .telescope import Telescope
 
-__all__ = ["follow_sky_target", "hold_fixed", "measure_pointing", "track_satellite_pass"]
+__all__ = ["follow_sky_target", "hold_fixed", "measure_pointing", "move_at_rates",
+           "track_satellite_pass"]
 
 log = logging.getLogger("virtualstar.server")
 
@@ -76,6 +79,9 @@ MAX_JOIN_PLANS = 12  # plans of a join before giving up (each with 1.5× the pre
 PASS_LOOKBACK_S = 1800.0  # predictions start this far back, so a pass in progress is found
 MIN_JOIN_TRACK_S = 10.0  # a finite path is joined only if this much of it is left
 RUN_UP_STEP_US = 2_000_000  # a run-up inside a zone moves the join this much later
+MOVE_LOOKAHEAD_S = 3600.0  # a move at rates is checked against the limits and zones this far
+MOVE_CHECK_STEP_S = 1.0  # ... on this grid of mount time
+LIMIT_MARGIN_DEG = 0.5  # a move at rates comes to rest this far inside an axis limit
 
 
 # ---------------------------------------------------------------------- shared steps
@@ -184,7 +190,8 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
     here = await t.motion.position()
     path = TargetPath(target, cfg.site, limits=t.limits, eop=t.eop, model=t.model,
                       current_az_rad=here.az_rad,
-                      guard=t.safety.guard(op.target, allow_sun=allow_sun))
+                      guard=t.safety.guard(op.target, allow_sun=allow_sun),
+                      offsets=t.guide_offsets(op))
     ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun)
 
     async def on_path() -> dict[str, Any]:
@@ -255,6 +262,77 @@ async def _slew_to_fixed(t: Telescope, op: Operation, here, az_deg: float, el_de
                        to_el_deg=math.degrees(enc_el))
     pos = await goto_safely(t, op, enc_az, enc_el, name, allow_sun=allow_sun, stow=stow)
     return pos, enc_az, enc_el
+
+
+async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_rate_deg_s: float,
+                        *, allow_sun: bool = False) -> dict[str, Any]:
+    """Turn the axes at constant rates from where the mount rests (a hand pad; ASCOM MoveAxis).
+
+    The move starts from rest with a constant-acceleration run-up and ends, with a
+    run-out to rest, before an axis limit or a Sun/Moon/horizon zone (checked an hour
+    ahead); `stop` or any other command ends it sooner. The operation has *begun*
+    once the mount follows the trajectory.
+    """
+    cfg = t.config
+    lim = t.limits
+    await prepare(t, op)
+    here = await t.motion.position()
+    v = np.radians([az_rate_deg_s, el_rate_deg_s])
+    accel = np.radians([lim.az_max_accel_deg_s2, lim.el_max_accel_deg_s2])
+    ramp_s = max(cfg.ramp_s, 2.0 * float(np.max(np.abs(v) / accel)))
+    lead_s = cfg.start_lead_s
+    join_us = here.t_us + int((lead_s + ramp_s) * 1e6)
+    start = np.array([here.az_rad, here.el_rad]) + 0.5 * v * ramp_s
+    end_us, why = _move_end(t, start, v, join_us, ramp_s, allow_sun)
+    if end_us <= join_us:
+        raise TargetUnreachable(f"moving at az {az_rate_deg_s:g}°/s, el {el_rate_deg_s:g}°/s from "
+                                f"az {math.degrees(here.az_rad):.2f}° el "
+                                f"{math.degrees(here.el_rad):.2f}°: {why} at once")
+    path = RampOut(ConstantRatePath(join_us, float(start[0]), float(start[1]), float(v[0]),
+                                    float(v[1]), end_us), ramp_s, 1.0)
+    ramp = RampIn(path, join_us, ramp_s)
+    t.supervisor.phase(op, Phase.SLEWING, az_rate_deg_s=az_rate_deg_s,
+                       el_rate_deg_s=el_rate_deg_s, stops_at_utc=iso_utc(end_us), stops_for=why)
+    feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
+                                             on_points=t.note_points)
+    if feeder is None:
+        raise TargetUnreachable("the host was too slow to start the move; send it again")
+    t.supervisor.begun(op)
+
+    async def moving() -> None:
+        await t.motion.wait_until(path.end_us, op.info)
+
+    await run_beside(moving(), feeder)
+    op.info["feeder"] = feeder.stats.as_dict()
+    t.supervisor.phase(op, Phase.ENDING)
+    await t.motion.halt()
+    return {"ended": why, "moved_until_us": end_us}
+
+
+def _move_end(t: Telescope, start: np.ndarray, v: np.ndarray, join_us: int, ramp_s: float,
+              allow_sun: bool) -> tuple[int, str]:
+    """When a move at rates `v` (from `start` at `join_us`) must begin its run-out, and why."""
+    lim = t.limits
+    stop_s = 0.5 * ramp_s  # the run-out covers half a ramp at the move's rate
+    m = math.radians(LIMIT_MARGIN_DEG)
+    ends = [(MOVE_LOOKAHEAD_S, "an hour of moving elapsed")]
+    for axis, lo, hi, name in ((0, lim.wrap_min_deg, lim.wrap_max_deg, "the cable wrap"),
+                               (1, lim.el_min_deg, lim.el_max_deg, "the elevation limit")):
+        if v[axis] == 0.0:
+            continue
+        edge = math.radians(hi) - m if v[axis] > 0 else math.radians(lo) + m
+        ends.append(((edge - start[axis]) / v[axis] - stop_s, f"stopped before {name} "
+                     f"({math.degrees(edge):.1f}°)"))
+    run_s, why = min(ends)
+    grid_s = np.arange(-ramp_s, max(run_s, 0.0) + stop_s + MOVE_CHECK_STEP_S, MOVE_CHECK_STEP_S)
+    t_us = join_us + np.round(grid_s * 1e6).astype(np.int64)
+    hit = check_places(np.mod(start[0] + v[0] * grid_s, 2 * math.pi), start[1] + v[1] * grid_s,
+                       t_us, t.safety.zones(allow_sun=allow_sun), t.config.site, t.eop)
+    if hit is not None:
+        hit_s = float(grid_s[hit.index]) - MOVE_CHECK_STEP_S - stop_s
+        if hit_s < run_s:
+            run_s, why = hit_s, f"stopped before: {hit.describe('the mount')}"
+    return join_us + int(run_s * 1e6), why
 
 
 async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, *,

@@ -48,14 +48,16 @@ from .exceptions import (
     MountFault,
     MountUnavailable,
     NotActive,
+    NotTracking,
     OperationAborted,
     TargetUnreachable,
     VssError,
 )
 from .feeder import FeederConfig
+from .guiding import GuideOffsets
 from .motion import Motion
 from .mount_link import MountLink
-from .operations import Operation
+from .operations import Operation, Phase
 from .programs import ProgramControl
 from .safety import HOLD_LOOKAHEAD_S, Safety
 from .supervisor import Supervisor
@@ -166,6 +168,7 @@ class Telescope:
         self._mount_state: int | None = None
         self._tasks: set[asyncio.Task] = set()
         self.programs = ProgramControl(self, lambda kind, data: self.emit(kind, data))
+        self._guide: tuple[int, GuideOffsets] | None = None  # (operation id, its offsets)
 
     @property
     def op(self) -> Operation | None:
@@ -464,6 +467,58 @@ class Telescope:
         check = self._target_check(target, name, allow_sun)
         return await self._start("pointing_sample", name, procedure, allow_sun=allow_sun,
                                  check=check)
+
+    def guide_offsets(self, op: Operation) -> GuideOffsets:
+        """The guide offsets of a sky track (kept through its re-acquisitions)."""
+        if self._guide is None or self._guide[0] != op.id:
+            self._guide = (op.id, GuideOffsets())
+        return self._guide[1]
+
+    async def move(self, az_rate_deg_s: float, el_rate_deg_s: float, *,
+                   allow_sun: bool = False) -> Operation:
+        """Turn the axes at constant rates until stopped or a limit/zone is near (hand pad)."""
+        lim = self.limits
+        for name, rate, top in (("az_rate_deg_s", az_rate_deg_s, lim.az_max_rate_deg_s),
+                                ("el_rate_deg_s", el_rate_deg_s, lim.el_max_rate_deg_s)):
+            if abs(rate) > top:
+                raise BadRequest(f"move: {name}={rate:g} is beyond the mount's rate limit "
+                                 f"±{top:g}°/s")
+        if az_rate_deg_s == 0.0 and el_rate_deg_s == 0.0:
+            raise BadRequest("move: both rates are 0; send stop to end a move")
+        self._check_can_move()
+        name = f"move az {az_rate_deg_s:+g}°/s el {el_rate_deg_s:+g}°/s"
+
+        async def procedure(op: Operation) -> dict[str, Any]:
+            return await procedures.move_at_rates(self, op, az_rate_deg_s, el_rate_deg_s,
+                                                  allow_sun=allow_sun)
+
+        return await self._start("move", name, procedure, allow_sun=allow_sun)
+
+    async def guide(self, north_arcsec: float, east_arcsec: float,
+                    rate_arcsec_s: float) -> dict[str, Any]:
+        """Offset the sky target being tracked north/east at `rate_arcsec_s` (a guide pulse)."""
+        if not rate_arcsec_s > 0:
+            raise BadRequest(f"guide: rate_arcsec_s={rate_arcsec_s:g}: expected > 0")
+        if north_arcsec == 0.0 and east_arcsec == 0.0:
+            raise BadRequest("guide: north_arcsec and east_arcsec are both 0")
+        op = self.op
+        if (op is None or op.kind not in ("slew", "track") or op.phase is not Phase.TRACKING
+                or self._guide is None or self._guide[0] != op.id):
+            what = "nothing runs" if op is None else f"operation {op.id} ({op.kind}) is " \
+                f"{op.phase.label}"
+            raise NotTracking(f"guide: no sky target is being tracked ({what}); a guide pulse "
+                              "offsets a running track or slew of a star, planet or RA/Dec")
+        offsets = self._guide[1]
+        now = await self.motion.mount_time_us()
+        if self.op is not op:
+            raise NotTracking(f"guide: operation {op.id} was replaced while the pulse was "
+                              "being scheduled")
+        pulse = offsets.add(north_arcsec, east_arcsec, rate_arcsec_s, now,
+                            self.feeder_config().step_us)
+        north, east = offsets.total_arcsec()
+        return {"id": op.id, "start_us": pulse.start_us, "end_us": pulse.end_us,
+                "start_utc": iso_utc(pulse.start_us, 3), "end_utc": iso_utc(pulse.end_us, 3),
+                "offset_arcsec": {"north": north, "east": east}}
 
     async def track_satellite(self, sat: Satellite, *, max_wait_s: float | None = None,
                               allow_sun: bool = False) -> Operation:

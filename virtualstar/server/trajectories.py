@@ -15,6 +15,7 @@ the cable wrap, radians and rad/s); ``end_us`` is None for an endless path.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Protocol
@@ -36,6 +37,7 @@ from virtualstar.astro import (
 from .exceptions import TargetUnreachable
 
 __all__ = [
+    "ConstantRatePath",
     "Path",
     "Points",
     "RampIn",
@@ -107,8 +109,9 @@ class TargetPath:
     end_us: int | None = None
 
     def __init__(self, target, site: Site, *, limits: MountLimits, eop=None, model=None,
-                 current_az_rad: float | None = None, guard=None) -> None:
+                 current_az_rad: float | None = None, guard=None, offsets=None) -> None:
         self.target = target
+        self.offsets = offsets  # GuideOffsets (guiding.py): pulses along RA/Dec, or None
         self.site = site
         self.limits = limits
         self.eop = eop
@@ -120,6 +123,12 @@ class TargetPath:
     def observe(self, t_us: np.ndarray) -> tuple[np.ndarray, ...]:
         """Return observed (az, el, az rate, el rate) with az continuous with earlier samples."""
         obs = observe_mount_times(self.target, np.asarray(t_us, np.int64), self.site, self.eop)
+        if self.offsets is not None:
+            obs = dataclasses.replace(obs, **dict(zip(
+                ("az_rad", "el_rad", "az_rate_rad_s", "el_rate_rad_s"),
+                self.offsets.apply(t_us, obs.az_rad, obs.el_rad, obs.az_rate_rad_s,
+                                   obs.el_rate_rad_s, math.radians(self.site.lat_deg)),
+                strict=True)))
         anchor = self._last[1] if self._last is not None else self._anchor
         try:
             az = unwrap_azimuth(obs.az_rad, limits=self.limits, current_az_rad=anchor)
@@ -142,6 +151,23 @@ class TargetPath:
         t = np.asarray(t_us, np.int64)
         az, el, vaz, vel = observed_to_encoder(self.model, *self.observe(t))
         return Points(t, az, el, vaz, vel)
+
+
+class ConstantRatePath:
+    """Both axes turning at constant rates from a place at a mount time (ASCOM MoveAxis), until `end_us`."""
+
+    def __init__(self, at_us: int, az_rad: float, el_rad: float, az_rate_rad_s: float,
+                 el_rate_rad_s: float, end_us: int) -> None:
+        self.at_us = int(at_us)
+        self.p = np.array([az_rad, el_rad])
+        self.v = np.array([az_rate_rad_s, el_rate_rad_s])
+        self.end_us = int(end_us)
+
+    def sample(self, t_us: np.ndarray) -> Points:
+        t = np.asarray(t_us, np.int64)
+        dt = (t - self.at_us) * 1e-6
+        return Points(t, self.p[0] + self.v[0] * dt, self.p[1] + self.v[1] * dt,
+                      np.full(t.shape, self.v[0]), np.full(t.shape, self.v[1]))
 
 
 class TablePath:

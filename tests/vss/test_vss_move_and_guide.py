@@ -1,0 +1,129 @@
+"""The hand pad (`move`) and guide pulses (`guide`), in lockstep on the embedded emulator.
+
+Truth is independent of the server: encoder rates from the emulator's own readings
+at known mount times against the rates asked for; a guided track against astropy's
+observed place of the RA/Dec shifted by the pulse (ICRS → AltAz with the site's air).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from sky_truth import observed_frame, sky_sep_arcsec
+from vss_rig import read_emulator, run_lockstep_scenario
+
+from virtualstar.astro import load_site
+from virtualstar.vss_client import VssRequestError
+
+START = "2024-05-18T21:00:00Z"  # night at Poznań: the Sun far below
+AXES = ["axis.az.position", "axis.el.position"]
+RA_DEG, DEC_DEG = 250.0, 36.5  # near M13: high in the east-south-east at START
+
+
+def radec_truth(ra_deg: float, dec_deg: float, t_us, site) -> tuple[np.ndarray, np.ndarray]:
+    import astropy.units as u
+    from astropy.coordinates import SkyCoord
+
+    aa = SkyCoord(ra=ra_deg * u.deg, dec=dec_deg * u.deg, frame="icrs").transform_to(
+        observed_frame(np.asarray(t_us), site))
+    return aa.az.deg, aa.alt.deg
+
+
+async def encoders(vss) -> tuple[float, float, int]:
+    v, t_us = await read_emulator(vss, AXES)
+    return math.degrees(v[AXES[0]]) % 360.0, math.degrees(v[AXES[1]]), t_us
+
+
+def test_move_turns_the_axes_at_the_rates_asked_and_stop_brings_them_to_rest():
+    async def scenario(vss, clock):
+        c = vss.client()
+        await c.request("slew", {"az_deg": 120.0, "el_deg": 40.0})
+        op = await c.request("move", {"az_rate_deg_s": 2.0, "el_rate_deg_s": -0.5})
+        assert op["kind"] == "move" and op["phase"] == "slewing"
+        await clock.sleep(8.0)  # past the run-up
+        a0, e0, t0 = await encoders(vss)
+        await clock.sleep(5.0)
+        a1, e1, t1 = await encoders(vss)
+        status = await c.request("status")
+        await c.request("stop")
+        b0, f0, _ = await encoders(vss)
+        await clock.sleep(3.0)
+        b1, f1, _ = await encoders(vss)
+        return (a1 - a0) / ((t1 - t0) / 1e6), (e1 - e0) / ((t1 - t0) / 1e6), status, \
+            (b1 - b0, f1 - f0)
+
+    az_rate, el_rate, status, drift = run_lockstep_scenario(START, scenario)
+    assert az_rate == pytest.approx(2.0, rel=1e-3)
+    assert el_rate == pytest.approx(-0.5, rel=1e-3)
+    assert status["operation"]["kind"] == "move"
+    assert max(abs(d) for d in drift) * 3600 < 0.5  # arcsec: at rest after stop
+
+
+def test_move_toward_the_elevation_limit_comes_to_rest_before_it():
+    async def scenario(vss, clock):
+        c = vss.client()
+        await c.request("slew", {"az_deg": 200.0, "el_deg": 80.0})
+        op = await c.request("move", {"el_rate_deg_s": 1.0})
+        done = await c.request("wait", {"id": op["id"]})
+        _az, el, _t = await encoders(vss)
+        return done, el
+
+    done, el = run_lockstep_scenario(START, scenario)
+    assert done["phase"] == "done"
+    assert "elevation limit" in done["info"]["ended"]
+    assert 88.0 < el <= 89.5 + 1e-3
+
+
+def test_move_refuses_rates_beyond_the_mount_and_a_zero_move():
+    async def scenario(vss, clock):
+        c = vss.client()
+        errors = []
+        for params in ({"az_rate_deg_s": 50.0}, {}, {"az_rate_deg_s": "fast"}):
+            with pytest.raises(VssRequestError) as exc:
+                await c.request("move", params)
+            errors.append(exc.value)
+        return errors
+
+    too_fast, zero, wrong = run_lockstep_scenario(START, scenario)
+    assert too_fast.code == "bad_request" and "rate limit" in too_fast.message
+    assert zero.code == "bad_request" and "stop" in zero.message
+    assert wrong.code == "bad_request" and "az_rate_deg_s" in wrong.message
+
+
+@pytest.mark.parametrize(("north", "east"), [(20.0, 0.0), (0.0, -20.0), (12.0, 16.0)])
+def test_a_guide_pulse_moves_the_track_by_the_offset_on_the_sky(north, east):
+    site = load_site()
+
+    async def scenario(vss, clock):
+        c = vss.client()
+        await c.request("track", {"ra_deg": RA_DEG, "dec_deg": DEC_DEG})
+        pulse = await c.request("guide", {"north_arcsec": north, "east_arcsec": east})
+        await clock.sleep((pulse["end_us"] - await vss.server.telescope.motion.mount_time_us())
+                          / 1e6 + 3.0)
+        reads = [await encoders(vss) for _ in range(4)]
+        return pulse, reads
+
+    pulse, reads = run_lockstep_scenario(START, scenario)
+    assert pulse["end_us"] - pulse["start_us"] == pytest.approx(
+        math.hypot(north, east) / 7.5205 * 1e6, rel=1e-3)
+    assert pulse["offset_arcsec"]["north"] == pytest.approx(north)
+    assert pulse["offset_arcsec"]["east"] == pytest.approx(east)
+    az, el, t_us = (np.array(x) for x in zip(*reads, strict=True))
+    cos_dec = math.cos(math.radians(DEC_DEG))
+    shifted = radec_truth(RA_DEG + east / 3600 / cos_dec, DEC_DEG + north / 3600, t_us, site)
+    original = radec_truth(RA_DEG, DEC_DEG, t_us, site)
+    assert sky_sep_arcsec(az, el, *shifted).max() < 0.3
+    assert sky_sep_arcsec(az, el, *original) == pytest.approx(math.hypot(north, east), abs=0.3)
+
+
+def test_a_guide_pulse_without_a_track_is_refused_as_not_tracking():
+    async def scenario(vss, clock):
+        c = vss.client()
+        with pytest.raises(VssRequestError) as exc:
+            await c.request("guide", {"north_arcsec": 5.0})
+        return exc.value
+
+    err = run_lockstep_scenario(START, scenario)
+    assert err.code == "not_tracking" and "no sky target" in err.message
