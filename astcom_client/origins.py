@@ -48,7 +48,11 @@ def _is_loopback_origin(origin: str) -> bool:
         parts = urlsplit(normalize_origin(origin))
     except ValueError:
         return False
-    host = parts.hostname or ""
+    return is_loopback_host(parts.hostname or "")
+
+
+def is_loopback_host(host: str) -> bool:
+    """True for localhost and loopback addresses (127.0.0.0/8, ::1): this machine only."""
     if host == "localhost":
         return True
     try:

@@ -33,6 +33,9 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "server": ("virtualstar.cli.server", "server",
         "Serve clients (vs status/slew/track/...) until Ctrl-C; the mount is fed "
         "continuously."),
+    "alpaca": ("virtualstar.cli.alpaca", "alpaca",
+        "Serve an ASCOM Alpaca Telescope (ITelescopeV4) that drives the VirtualStar Server; "
+        "Ctrl-C stops."),
     "status": ("virtualstar.cli.status", "status",
         "Show encoder and observed position, RA/Dec, axis states, mount time and tracking "
         "error."),

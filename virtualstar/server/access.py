@@ -20,13 +20,12 @@ page open in the operator's browser cannot drive the telescope.
 
 from __future__ import annotations
 
-import ipaddress
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from astcom_client.auth import MIN_CLIENT_NONCE_BYTES, Authenticator, Role, new_nonce
-from astcom_client.origins import check_allowed_origins, origin_refusal
+from astcom_client.origins import check_allowed_origins, is_loopback_host, origin_refusal
 
 from .exceptions import BadRequest, Forbidden, Unauthorized
 
@@ -65,13 +64,8 @@ def check_listen(host: str, access: AccessConfig) -> None:
     """Refuse to listen beyond loopback without passwords (anyone on the network could drive)."""
     if access.required:
         return
-    if host == "localhost":
+    if is_loopback_host(host):
         return
-    try:
-        if ipaddress.ip_address(host).is_loopback:
-            return
-    except ValueError:
-        pass
     raise BadRequest(f"listening on {host} without passwords would let anyone on the network "
                      "move the telescope: give --operator-password (and --observer-password), "
                      "or listen on 127.0.0.1")

@@ -437,7 +437,9 @@ class Telescope:
             return await procedures.hold_fixed(self, op, az_deg, el_deg, power_off=power_off,
                                                allow_sun=allow_sun, stow=kind == "park")
 
-        return await self._start(kind, name, procedure, allow_sun=allow_sun, check=check)
+        op = await self._start(kind, name, procedure, allow_sun=allow_sun, check=check)
+        op.info["fixed"] = True  # a held direction, not a sky target: nothing is tracked
+        return op
 
     async def park(self) -> Operation:
         m = self.link.mapping
@@ -600,6 +602,7 @@ class Telescope:
                                "last_fault": self.last_fault or None,
                                "time_sync": self.timesync.status.as_dict(),
                                "safety": self._safety_doc(),
+                               "limits": dataclasses.asdict(self.limits),
                                "tracking_error": {f"{w}s": self.errors.window(w).as_dict()
                                                   for w in (1, 10, 60)}}
         if not self.link.connected:

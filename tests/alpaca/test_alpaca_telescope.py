@@ -1,0 +1,206 @@
+"""The Alpaca telescope driven by alpyca (ASCOM's Python client) against the VSS and emulator.
+
+Truth is independent of the façade: the emulator's encoders (read over ASTCom at known
+mount times) against astropy's observed place of the J2000 coordinates sent, the
+declination moved by a guide pulse against guide rate × duration, azimuth rates of
+MoveAxis against the emulator's own readings.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import numpy as np
+import pytest
+from alpaca.exceptions import (
+    ActionNotImplementedException,
+    InvalidOperationException,
+    InvalidValueException,
+    NotImplementedException,
+    ParkedException,
+)
+from alpaca.telescope import GuideDirections, TelescopeAxes
+from sky_truth import observed_frame, sky_sep_arcsec
+
+AXES = ["axis.az.position", "axis.el.position"]
+ICRS = (250.0, 36.5)  # high in the east at 21:00 UTC
+
+
+def wait_for(predicate, timeout_s: float = 90.0, what: str = "") -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+def j2000_of(ra_deg: float, dec_deg: float) -> tuple[float, float]:
+    import astropy.units as u
+    from astropy.coordinates import FK5, SkyCoord
+
+    f = SkyCoord(ra_deg * u.deg, dec_deg * u.deg, frame="icrs").transform_to(FK5(equinox="J2000"))
+    return f.ra.hour, f.dec.deg
+
+
+def encoders(rig, n: int = 3):
+    reads = [rig.rig.run(rig.rig.mount_read(AXES)) for _ in range(n)]
+    t = np.array([r[1] for r in reads])
+    return (np.degrees([r[0][AXES[0]] for r in reads]) % 360.0,
+            np.degrees([r[0][AXES[1]] for r in reads]), t)
+
+
+def truth(ra_deg, dec_deg, t_us, site):
+    import astropy.units as u
+    from astropy.coordinates import SkyCoord
+
+    aa = SkyCoord(ra_deg * u.deg, dec_deg * u.deg, frame="icrs").transform_to(
+        observed_frame(t_us, site))
+    return aa.az.deg, aa.alt.deg
+
+
+@pytest.fixture
+def scope(night):
+    t = night.telescope()
+    t.Unpark()
+    t.AbortSlew()
+    yield t
+    t.AbortSlew()
+
+
+def test_the_device_describes_itself_and_its_capabilities_honestly(night):
+    from alpaca import management
+
+    assert management.apiversions(night.address) == [1]
+    devices = management.configureddevices(night.address)
+    assert devices[0]["DeviceType"] == "Telescope" and devices[0]["DeviceNumber"] == 0
+    t = night.telescope()
+    assert t.InterfaceVersion == 4
+    assert t.AlignmentMode.value == 0 and t.EquatorialSystem.value == 2
+    assert (t.CanSlewAsync, t.CanSlewAltAzAsync, t.CanPark, t.CanUnpark, t.CanPulseGuide,
+            t.CanSetTracking, t.CanSetGuideRates) == (True,) * 7
+    assert (t.CanSync, t.CanSyncAltAz, t.CanFindHome, t.CanSetPark, t.CanSetPierSide,
+            t.CanSetRightAscensionRate, t.CanSetDeclinationRate) == (False,) * 7
+    assert t.CanMoveAxis(TelescopeAxes.axisPrimary) and not t.CanMoveAxis(TelescopeAxes.axisTertiary)
+    assert t.AxisRates(TelescopeAxes.axisPrimary)[0].Maximum > 0
+    assert "TrackSatellite" in t.SupportedActions
+    with pytest.raises(NotImplementedException):
+        t.SyncToCoordinates(1.0, 2.0)
+    with pytest.raises(NotImplementedException):
+        t.FindHome()
+
+
+def test_site_time_and_sidereal_time_are_the_servers_and_astropys(night):
+    import astropy.units as u
+    from astropy.time import Time
+
+    t = night.telescope()
+    site = night.site
+    assert t.SiteLatitude == pytest.approx(site.lat_deg)
+    assert t.SiteLongitude == pytest.approx(site.lon_deg)
+    utc = t.UTCDate.replace(tzinfo=None)  # dateutil reads the Z as local time: it is UTC
+    lst = t.SiderealTime
+    truth_lst = Time(utc, scale="utc").sidereal_time("apparent", site.lon_deg * u.deg).hour
+    # the two reads are a request apart: allow the mount time that passed between them
+    assert abs((lst - truth_lst + 12) % 24 - 12) * 3600 < 30.0
+
+
+def test_slew_to_j2000_coordinates_lands_on_astropys_place_and_tracks(night, scope):
+    scope.SlewToAltAzAsync(120.0, 45.0)
+    wait_for(lambda: not scope.Slewing, what="the alt-az slew")
+    assert scope.Azimuth == pytest.approx(120.0, abs=1 / 3600)
+    assert scope.Altitude == pytest.approx(45.0, abs=1 / 3600)
+    assert not scope.Tracking
+    with pytest.raises(InvalidOperationException):  # ASCOM: equatorial slews need Tracking
+        scope.SlewToCoordinatesAsync(*j2000_of(*ICRS))
+    scope.Tracking = True
+    wait_for(lambda: scope.Tracking and not scope.Slewing, what="tracking to begin")
+    ra_h, dec = j2000_of(*ICRS)
+    scope.SlewToCoordinatesAsync(ra_h, dec)
+    assert scope.TargetRightAscension == pytest.approx(ra_h)
+    wait_for(lambda: not scope.Slewing, what="the equatorial slew")
+    assert scope.Tracking
+    az, el, t_us = encoders(night)
+    assert sky_sep_arcsec(az, el, *truth(*ICRS, t_us, night.site)).max() < 1.0
+    d_ra = (scope.RightAscension - ra_h) * 15 * 3600 * math.cos(math.radians(dec))
+    assert math.hypot(d_ra, (scope.Declination - dec) * 3600) < 1.0
+
+
+def test_abort_slew_stops_the_mount_and_tracking(night, scope):
+    scope.Tracking = True
+    wait_for(lambda: not scope.Slewing, what="tracking to begin")
+    ra_h, dec = j2000_of(ICRS[0] + 60.0, 20.0)
+    scope.SlewToCoordinatesAsync(ra_h, dec)
+    assert scope.Slewing
+    scope.AbortSlew()
+    assert not scope.Slewing and not scope.Tracking
+    az0, el0, _ = encoders(night, 1)
+    time.sleep(0.2)
+    az1, el1, _ = encoders(night, 1)
+    assert abs(az1[0] - az0[0]) * 3600 < 1.0 and abs(el1[0] - el0[0]) * 3600 < 1.0
+
+
+def test_park_holds_the_park_position_refuses_slews_and_unpark_releases(night, scope):
+    scope.Park()
+    wait_for(lambda: scope.AtPark, what="AtPark")
+    assert not scope.Slewing
+    with pytest.raises(ParkedException):
+        scope.SlewToAltAzAsync(100.0, 40.0)
+    with pytest.raises(ParkedException):
+        scope.Tracking = True
+    scope.Unpark()
+    assert not scope.AtPark
+    scope.SlewToAltAzAsync(100.0, 40.0)
+    wait_for(lambda: not scope.Slewing, what="the slew after unpark")
+    assert scope.Azimuth == pytest.approx(100.0, abs=1 / 3600)
+
+
+def test_move_axis_turns_the_axis_at_the_rate_and_stopping_resumes_tracking(night, scope):
+    scope.Tracking = True
+    wait_for(lambda: not scope.Slewing, what="tracking to begin")
+    scope.MoveAxis(TelescopeAxes.axisPrimary, 1.5)
+    assert scope.Slewing
+    time.sleep(0.3)  # past the run-up (mount time runs ×50 here)
+    az, _el, t_us = encoders(night, 2)
+    while (t_us[1] - t_us[0]) < 2e6:
+        time.sleep(0.05)
+        az2, _e, t2 = encoders(night, 1)
+        az, t_us = np.array([az[0], az2[0]]), np.array([t_us[0], t2[0]])
+    assert (az[1] - az[0]) / ((t_us[1] - t_us[0]) / 1e6) == pytest.approx(1.5, rel=1e-3)
+    with pytest.raises(InvalidValueException):
+        scope.MoveAxis(TelescopeAxes.axisSecondary, 1000.0)
+    scope.MoveAxis(TelescopeAxes.axisPrimary, 0.0)
+    wait_for(lambda: scope.Tracking and not scope.Slewing, what="tracking to resume")
+
+
+def test_pulse_guide_moves_the_track_north_by_rate_times_duration(night, scope):
+    scope.Tracking = True
+    wait_for(lambda: not scope.Slewing, what="tracking to begin")
+    scope.SlewToCoordinatesAsync(*j2000_of(*ICRS))
+    wait_for(lambda: not scope.Slewing, what="the slew")
+    dec0 = scope.Declination
+    rate = scope.GuideRateDeclination
+    scope.PulseGuide(GuideDirections.guideNorth, 2000)
+    assert scope.IsPulseGuiding
+    wait_for(lambda: not scope.IsPulseGuiding, what="the pulse to end")
+    time.sleep(0.1)  # a few mount seconds of settling
+    moved_arcsec = (scope.Declination - dec0) * 3600
+    assert moved_arcsec == pytest.approx(rate * 3600 * 2.0, abs=0.3)
+    scope.AbortSlew()
+    with pytest.raises(InvalidOperationException):  # not tracking: nothing to guide
+        scope.PulseGuide(GuideDirections.guideEast, 500)
+
+
+def test_track_satellite_action_tracks_the_iss_pass(night, scope):
+    from catalogs import sample_tle_path
+
+    text = sample_tle_path("stations").read_text()
+    lines = text.splitlines()
+    i = next(k for k, line in enumerate(lines) if "ISS" in line)
+    tle = "\n".join(lines[i:i + 3])
+    op = json.loads(scope.Action("TrackSatellite", tle))
+    assert op["kind"] == "track_satellite" and "ISS" in op["target"]
+    assert json.loads(scope.Action("OperationStatus", ""))["id"] == op["id"]
+    with pytest.raises(ActionNotImplementedException):
+        scope.Action("MakeCoffee", "")

@@ -1,0 +1,133 @@
+"""The Alpaca device API rules, without I/O: parameters, transaction ids, errors, replies.
+
+* Parameter names are case-insensitive (GET: the query string; PUT: the form body).
+* `ClientID` and `ClientTransactionID` are optional unsigned 32-bit integers; a value that
+  is not one is a bad request (HTTP 400). The reply echoes ClientTransactionID (0 when
+  absent) and carries a ServerTransactionID counting from 1.
+* A parameter that is missing or cannot be read as its type is HTTP 400 with a text body;
+  a value that reads but is out of range is an ASCOM error (HTTP 200, InvalidValue).
+* Device errors travel in `ErrorNumber` / `ErrorMessage` of an HTTP 200 reply.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["ACTION_NOT_IMPLEMENTED", "DRIVER_ERROR", "INVALID_OPERATION", "INVALID_VALUE",
+           "INVALID_WHILE_PARKED", "INVALID_WHILE_SLAVED", "NOT_CONNECTED", "NOT_IMPLEMENTED",
+           "VALUE_NOT_SET", "AlpacaError", "BadParameter", "Params", "TransactionCounter",
+           "reply"]
+
+# ASCOM error numbers (ASCOM.ErrorCodes), as Alpaca carries them
+NOT_IMPLEMENTED = 0x400
+INVALID_VALUE = 0x401
+VALUE_NOT_SET = 0x402
+NOT_CONNECTED = 0x407
+INVALID_WHILE_PARKED = 0x408
+INVALID_WHILE_SLAVED = 0x409
+INVALID_OPERATION = 0x40B
+ACTION_NOT_IMPLEMENTED = 0x40C
+DRIVER_ERROR = 0x500  # 0x500..0xFFF: the driver's own errors
+
+_UINT32_MAX = 2**32 - 1
+
+
+class AlpacaError(Exception):
+    """An ASCOM error for the reply's ErrorNumber / ErrorMessage (HTTP 200)."""
+
+    def __init__(self, number: int, message: str) -> None:
+        super().__init__(message)
+        self.number = number
+        self.message = message
+
+
+class BadParameter(ValueError):
+    """A request the device cannot read (HTTP 400, the message as the text body)."""
+
+
+@dataclass(frozen=True)
+class Params:
+    """A request's parameters with case-insensitive names (the first value of each)."""
+
+    values: dict[str, str]
+
+    @classmethod
+    def from_pairs(cls, pairs: Iterable[tuple[str, str]]) -> Params:
+        values: dict[str, str] = {}
+        for name, value in pairs:
+            values.setdefault(name.lower(), value)
+        return cls(values)
+
+    def text(self, name: str) -> str:
+        value = self.values.get(name.lower())
+        if value is None:
+            raise BadParameter(f"parameter {name} is missing")
+        return value
+
+    def number(self, name: str) -> float:
+        raw = self.text(name)
+        try:
+            value = float(raw)
+        except ValueError:
+            raise BadParameter(f"parameter {name}={raw!r} is not a number") from None
+        if not math.isfinite(value):
+            raise BadParameter(f"parameter {name}={raw!r} is not a finite number")
+        return value
+
+    def integer(self, name: str) -> int:
+        raw = self.text(name)
+        try:
+            return int(raw.strip())
+        except ValueError:
+            raise BadParameter(f"parameter {name}={raw!r} is not an integer") from None
+
+    def boolean(self, name: str) -> bool:
+        raw = self.text(name)
+        word = raw.strip().lower()
+        if word not in ("true", "false"):
+            raise BadParameter(f"parameter {name}={raw!r} is not a boolean: expected True or "
+                               "False")
+        return word == "true"
+
+    def transaction_ids(self) -> tuple[int, int]:
+        """Return (ClientID, ClientTransactionID); 0 where absent; BadParameter if malformed."""
+        return self._uint32("ClientID"), self._uint32("ClientTransactionID")
+
+    def _uint32(self, name: str) -> int:
+        raw = self.values.get(name.lower())
+        if raw is None or raw == "":
+            return 0
+        try:
+            value = int(raw.strip())
+        except ValueError:
+            raise BadParameter(f"{name}={raw!r} is not an unsigned 32-bit integer") from None
+        if not 0 <= value <= _UINT32_MAX:
+            raise BadParameter(f"{name}={raw!r} is outside 0..{_UINT32_MAX}")
+        return value
+
+
+class TransactionCounter:
+    """ServerTransactionID: 1, 2, 3, ... (wrapping within uint32, never 0)."""
+
+    def __init__(self) -> None:
+        self._ids = itertools.count(1)
+
+    def next(self) -> int:
+        return (next(self._ids) - 1) % _UINT32_MAX + 1
+
+
+def reply(client_tid: int, server_tid: int, *, value: Any = None, has_value: bool = False,
+          error: AlpacaError | None = None) -> dict[str, Any]:
+    """The JSON object of a device or management reply."""
+    doc: dict[str, Any] = {"ClientTransactionID": client_tid, "ServerTransactionID": server_tid,
+                           "ErrorNumber": 0, "ErrorMessage": ""}
+    if error is not None:
+        doc["ErrorNumber"] = error.number
+        doc["ErrorMessage"] = error.message
+    elif has_value:
+        doc["Value"] = value
+    return doc
