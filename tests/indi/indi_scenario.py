@@ -1,0 +1,118 @@
+"""Run inside a private network namespace: vs server + indiserver vs-indi + the INDI CLI tools.
+
+Usage: indi_scenario.py RA_JNOW_H DEC_JNOW_DEG; prints one JSON object of what it saw.
+(indiserver listens on every interface, so it only ever runs inside `unshare -n`.)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+BIN = Path(sys.executable).parent
+HOST = ["-h", "127.0.0.1", "-p", "7624"]
+D = "VirtualStar"
+
+
+def get(prop: str) -> str:
+    out = subprocess.run(["indi_getprop", *HOST, "-1", "-t", "10", f"{D}.{prop}"],
+                         capture_output=True, text=True, timeout=30)
+    return out.stdout.strip()
+
+
+def put(assignment: str) -> None:
+    subprocess.run(["indi_setprop", *HOST, "-t", "10", f"{D}.{assignment}"], check=True,
+                   timeout=30)
+
+
+def wait_state(prop: str, states: tuple[str, ...], timeout_s: float = 120.0) -> str:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        state = get(f"{prop}._STATE")
+        if state in states or time.monotonic() > deadline:
+            return state
+        time.sleep(0.1)
+
+
+def status() -> dict:
+    out = subprocess.run([str(BIN / "vs"), "status", "--json"], capture_output=True, text=True,
+                         timeout=60)
+    return json.loads(out.stdout)
+
+
+def phase() -> str:
+    op = status()["operation"]
+    return op["phase"] if op else "none"
+
+
+def main() -> None:
+    ra_h, dec = sys.argv[1], sys.argv[2]
+    env = dict(os.environ, VS_SERVER="ws://127.0.0.1:8740", PATH=f"{BIN}:{os.environ['PATH']}")
+    os.environ.update(env)
+    vss = subprocess.Popen([str(BIN / "vs"), "server", "--emulator", "--speed", "20", "--start",
+                            "2024-05-18T21:00:00Z"], stdout=subprocess.PIPE, text=True, env=env)
+    vss.stdout.readline()  # "VirtualStar Server on ws://...": listening
+    indi = subprocess.Popen(["indiserver", "-p", "7624", str(BIN / "vs-indi")], env=env,
+                            stderr=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    seen: dict = {}
+    try:
+        deadline = time.monotonic() + 60
+        while not get("CONNECTION.CONNECT") and time.monotonic() < deadline:
+            time.sleep(0.2)
+        seen["connect_before"] = get("CONNECTION.CONNECT")
+        put("CONNECTION.CONNECT=On")
+        seen["connection_state"] = wait_state("CONNECTION", ("Ok", "Alert"), 30)
+        time.sleep(1.5)  # one status poll
+        seen["lat"] = float(get("GEOGRAPHIC_COORD.LAT"))
+        seen["utc"] = get("TIME_UTC.UTC")
+        # an impossible declination: Alert, and the driver keeps answering
+        put("EQUATORIAL_EOD_COORD.RA;DEC=1;100")
+        # (indi_setprop returns once sent: the driver's answer is awaited, never assumed)
+        seen["bad_state"] = wait_state("EQUATORIAL_EOD_COORD", ("Alert",), 30)
+        # slew and track a JNow place: Busy at once, Ok only when the VSS says it landed
+        put(f"EQUATORIAL_EOD_COORD.RA;DEC={ra_h};{dec}")
+        states = [wait_state("EQUATORIAL_EOD_COORD", ("Busy", "Ok"), 30)]
+        op_phases = [phase()]
+        while states[-1] == "Busy":
+            time.sleep(0.1)
+            op_phases.append(phase())
+            states.append(get("EQUATORIAL_EOD_COORD._STATE"))
+        seen["slew_states"] = states
+        seen["slew_phases"] = op_phases
+        st = status()
+        seen["after_slew"] = {"t_us": st["mount_time_us"], "observed": st["observed"],
+                              "phase": st["operation"]["phase"]}
+        time.sleep(1.5)
+        seen["eod"] = [float(get("EQUATORIAL_EOD_COORD.RA")), float(get("EQUATORIAL_EOD_COORD.DEC"))]
+        seen["track_state"] = get("TELESCOPE_TRACK_STATE.TRACK_ON")
+        # a guide pulse north: Busy, then Ok
+        put("TELESCOPE_TIMED_GUIDE_NS.TIMED_GUIDE_N;TIMED_GUIDE_S=2000;0")
+        seen["guide_state"] = wait_state("TELESCOPE_TIMED_GUIDE_NS", ("Busy", "Alert"), 30)
+        seen["guide_end_state"] = wait_state("TELESCOPE_TIMED_GUIDE_NS", ("Ok", "Alert"), 60)
+        # abort a long slew: Alert on the coordinates, the mount at rest
+        put("HORIZONTAL_COORD.AZ;ALT=300;30")
+        time.sleep(0.3)
+        wait_state("HORIZONTAL_COORD", ("Busy",), 30)
+        put("TELESCOPE_ABORT_MOTION.ABORT=On")
+        seen["abort_state"] = wait_state("HORIZONTAL_COORD", ("Alert", "Ok"), 30)
+        seen["after_abort"] = phase()
+        # park
+        put("TELESCOPE_PARK.PARK;UNPARK=On;Off")
+        seen["park_busy"] = wait_state("TELESCOPE_PARK", ("Busy", "Alert"), 30)
+        seen["park_end"] = wait_state("TELESCOPE_PARK", ("Ok", "Alert"), 120)
+        seen["parked"] = get("TELESCOPE_PARK.PARK")
+        seen["vss_alive"] = vss.poll() is None and indi.poll() is None
+    finally:
+        indi.terminate()
+        vss.terminate()
+        indi.wait(30)
+        vss.wait(30)
+    print(json.dumps(seen))
+
+
+if __name__ == "__main__":
+    main()
