@@ -121,3 +121,21 @@ def test_vs_help_and_status_import_none_of_the_heavy_libraries(argv):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          cwd=ROOT, timeout=120)
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("package", ["virtualstar/alpaca", "virtualstar/indi"])
+def test_the_facades_reach_the_mount_only_through_a_vss_client(package):
+    """Alpaca and INDI translate to VSS commands: no emulator, no ASTCom client, no server
+    internals (the in-process client is handed to them by the launcher or the CLI)."""
+    forbidden = ("mount_emulator", "virtualstar.server", "virtualstar.launcher",
+                 "astcom_client.client", "astcom_client.endpoint")
+    for path in modules(package):
+        for name in ours(imported(path)):
+            assert not any(name == f or name.startswith(f + ".") for f in forbidden), \
+                f"{path.relative_to(ROOT)} imports {name}"
+
+
+@pytest.mark.parametrize("module", ["virtualstar/alpaca/protocol.py", "virtualstar/indi/protocol.py"])
+def test_the_facade_protocols_do_no_io(module):
+    names = imported(ROOT / module)
+    assert not names & {"asyncio", "socket", "aiohttp", "websockets", "sys"}, names

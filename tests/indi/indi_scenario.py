@@ -1,11 +1,12 @@
 """Run inside a private network namespace: vs server + indiserver vs-indi + the INDI CLI tools.
 
-Usage: indi_scenario.py RA_JNOW_H DEC_JNOW_DEG; prints one JSON object of what it saw.
+Usage: indi_scenario.py RA_JNOW_H DEC_JNOW_DEG TLE_FILE; prints one JSON object of what it saw.
 (indiserver listens on every interface, so it only ever runs inside `unshare -n`.)
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import subprocess
@@ -47,6 +48,58 @@ def status() -> dict:
 def phase() -> str:
     op = status()["operation"]
     return op["phase"] if op else "none"
+
+
+async def python_client() -> dict:
+    """The hand pad and a satellite through a Python INDI client (indipyclient)."""
+    from indipyclient import IPyClient
+
+    client = IPyClient(indihost="127.0.0.1", indiport=7624)
+    running = asyncio.create_task(client.asyncrun())
+    out: dict = {}
+
+    async def until(check, timeout_s: float = 60.0) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            try:
+                if check():
+                    return True
+            except KeyError:
+                pass
+            await asyncio.sleep(0.05)
+        return False
+
+    def vector(name):
+        return client[D][name]
+
+    try:
+        await until(lambda: "SAT_TRACKING_STAT" in client[D])
+        await client.send_newVector(D, "TELESCOPE_MOTION_WE", members={"MOTION_EAST": "On"})
+        out["motion_busy"] = await until(lambda: vector("TELESCOPE_MOTION_WE").state == "Busy")
+        await asyncio.sleep(1.0)  # past the run-up (~20 mount seconds at x20)
+        a, b = status(), None
+        await asyncio.sleep(0.5)
+        b = status()
+        out["motion_az_rate_deg_s"] = ((b["encoder"]["az_deg"] - a["encoder"]["az_deg"])
+                                       / ((b["mount_time_us"] - a["mount_time_us"]) / 1e6))
+        await client.send_newVector(D, "TELESCOPE_MOTION_WE", members={"MOTION_EAST": "Off"})
+        out["motion_idle"] = await until(lambda: vector("TELESCOPE_MOTION_WE").state == "Idle")
+        tle = Path(sys.argv[3]).read_text()
+        await client.send_newVector(D, "SAT_TLE_TEXT", members={"TLE": tle})
+        await client.send_newVector(D, "SAT_TRACKING_STAT", members={"SAT_TRACK": "On",
+                                                                     "SAT_HALT": "Off"})
+        out["sat_busy"] = await until(lambda: vector("SAT_TRACKING_STAT").state == "Busy")
+        await until(lambda: vector("SAT_PASS_WINDOW")["SAT_PASS_WIN_START"] != "")
+        out["sat_window"] = [vector("SAT_PASS_WINDOW")["SAT_PASS_WIN_START"],
+                             vector("SAT_PASS_WINDOW")["SAT_PASS_WIN_END"]]
+        out["sat_operation"] = status()["operation"]["kind"]
+        await client.send_newVector(D, "TELESCOPE_ABORT_MOTION", members={"ABORT": "On"})
+        out["sat_after_abort"] = await until(
+            lambda: vector("SAT_TRACKING_STAT").state == "Alert", 30)
+    finally:
+        client.shutdown()
+        await asyncio.wait_for(running, 30)
+    return out
 
 
 def main() -> None:
@@ -100,10 +153,13 @@ def main() -> None:
         put("TELESCOPE_ABORT_MOTION.ABORT=On")
         seen["abort_state"] = wait_state("HORIZONTAL_COORD", ("Alert", "Ok"), 30)
         seen["after_abort"] = phase()
-        # park
+        seen.update(asyncio.run(python_client()))
+        # park; indi_eval waits for the state Ok (1)
         put("TELESCOPE_PARK.PARK;UNPARK=On;Off")
         seen["park_busy"] = wait_state("TELESCOPE_PARK", ("Busy", "Alert"), 30)
-        seen["park_end"] = wait_state("TELESCOPE_PARK", ("Ok", "Alert"), 120)
+        subprocess.run(["indi_eval", *HOST, "-w", "-t", "120",
+                        f'"{D}.TELESCOPE_PARK._STATE"==1'], timeout=150)
+        seen["park_end"] = get("TELESCOPE_PARK._STATE")
         seen["parked"] = get("TELESCOPE_PARK.PARK")
         seen["vss_alive"] = vss.poll() is None and indi.poll() is None
     finally:

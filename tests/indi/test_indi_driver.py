@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from catalogs import sample_tle_path
 from virtualstar.astro import UtcTimes, load_site
 
 ICRS = (250.0, 36.5)
@@ -34,7 +35,7 @@ def _jnow(t_us: int) -> tuple[float, float]:
 
 
 @pytest.fixture(scope="module")
-def seen():
+def seen(tmp_path_factory):
     for tool in ("indiserver", "indi_getprop", "indi_setprop", "unshare", "ip"):
         if shutil.which(tool) is None:
             pytest.skip(f"{tool} is not installed (setup/40-indi.sh installs indi-bin; "
@@ -46,8 +47,12 @@ def seen():
     t_us = int(UtcTimes.from_iso([START]).to_unix_us()[0])
     ra_h, dec = _jnow(t_us + 30_000_000)  # the place moves by < 0.01" in this half minute
     script = Path(__file__).with_name("indi_scenario.py")
+    tle = tmp_path_factory.mktemp("indi") / "iss.tle"
+    lines = sample_tle_path("stations").read_text().splitlines()
+    i = next(k for k, line in enumerate(lines) if "ISS" in line)
+    tle.write_text("\n".join(lines[i:i + 3]) + "\n")
     out = subprocess.run(["unshare", "-n", "sh", "-c", 'ip link set lo up && exec "$0" "$@"',
-                          sys.executable, str(script), repr(float(ra_h)), repr(float(dec))],
+                          sys.executable, str(script), repr(float(ra_h)), repr(float(dec)), str(tle)],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     doc = json.loads(out.stdout.strip().splitlines()[-1])
@@ -97,3 +102,12 @@ def test_guide_pulse_abort_and_park_states(seen):
     assert seen["guide_state"] == "Busy" and seen["guide_end_state"] == "Ok"
     assert seen["abort_state"] == "Alert" and seen["after_abort"] == "aborted"
     assert seen["park_busy"] == "Busy" and seen["park_end"] == "Ok" and seen["parked"] == "On"
+
+
+def test_a_python_indi_client_moves_the_hand_pad_and_tracks_a_satellite(seen):
+    assert seen["motion_busy"] and seen["motion_idle"]
+    assert seen["motion_az_rate_deg_s"] == pytest.approx(1.0, rel=0.01)  # east: azimuth grows
+    assert seen["sat_busy"] and seen["sat_operation"] == "track_satellite"
+    start, end = seen["sat_window"]
+    assert start.startswith("2024-05-1") and end > start
+    assert seen["sat_after_abort"]
