@@ -167,7 +167,9 @@ class AlpacaTelescope:
         The VSS answers motion commands only when they have landed; acceptance is the
         `operation` event of a newer operation than any seen before.
         """
-        before = self.latest_op_id
+        current = (await self.call("status")).get("operation") or {}
+        # an event of the operation running now must not pass for the new one's acceptance
+        before = max(self.latest_op_id, int(current.get("id") or 0))
         task = asyncio.get_running_loop().create_task(self.call(cmd, params, None),
                                                       name=f"alpaca-{cmd}")
         self._running.add(task)
