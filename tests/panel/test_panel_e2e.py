@@ -172,7 +172,7 @@ def test_wrong_password_is_reported_in_the_board_log(e2e):
 def test_every_tab_saves_its_state_and_loads_it_back(e2e):
     result, _ = e2e
     states = result["states"]
-    assert sorted(states) == sorted(t.capitalize() for t in TABS)
+    assert sorted(states) == sorted([*(t.capitalize() for t in TABS), "Telescope"])
     for tab, doc in states.items():
         assert doc["panel"] == "virtualstar-rsp" and doc["tab"] == tab and doc["version"] == 1
     assert "password" not in json.dumps(states["Board"]["state"])
