@@ -4,15 +4,14 @@
 // "ASK <action>" and waits for a line on stdin once the test has done it.
 //
 // env: PANEL_URL, ASTCOM_URL, ASTCOM_PASSWORD, VSS_URL, VSS_PASSWORD, ARTIFACTS, RESULT.
-import { mkdirSync, writeFileSync } from 'node:fs';
+import { mkdirSync } from 'node:fs';
 import { join } from 'node:path';
 import { createInterface } from 'node:readline';
-import { launch, openAndConnect, streamSignals } from './browser.mjs';
+import { openAndConnect, runPageScript, streamSignals } from './browser.mjs';
 
 const env = process.env;
 const ARTIFACTS = env.ARTIFACTS || 'artifacts/panel';
 mkdirSync(ARTIFACTS, { recursive: true });
-const result = { steps: [] };
 const lines = createInterface({ input: process.stdin })[Symbol.asyncIterator]();
 async function ask(action) {
   console.log(`ASK ${action}`);
@@ -44,12 +43,7 @@ const look = (page) => page.evaluate(() => {
 });
 const until = (page, fn, arg, timeout = 60_000) => page.waitForFunction(fn, arg, { timeout, polling: 200 });
 
-const browser = await launch();
-const page = await browser.context.newPage();
-page.on('pageerror', (err) => {
-  result.pageErrors = [...(result.pageErrors || []), err.message];
-});
-try {
+await runPageScript(env.RESULT || join(ARTIFACTS, 'reconnect-result.json'), join(ARTIFACTS, 'reconnect-failure.png'), async (page, result) => {
   await openAndConnect(page, env.PANEL_URL, env.ASTCOM_URL, env.ASTCOM_PASSWORD);
   await streamSignals(page, ['axis.az.position_deg'], 100);
   await page.click('button[data-tab=Telescope]');
@@ -87,13 +81,4 @@ try {
   await until(page, (t0) => window.panelTelescope.status === 'connected' && window.panelTelescope.updatedMs > t0, before);
   result.vssBack = await look(page);
   result.steps.push('vss back');
-  result.ok = true;
-} catch (err) {
-  result.ok = false;
-  result.error = String(err.stack || err);
-  await page.screenshot({ path: join(ARTIFACTS, 'reconnect-failure.png') }).catch(() => {});
-} finally {
-  writeFileSync(env.RESULT || join(ARTIFACTS, 'reconnect-result.json'), JSON.stringify(result, null, 2));
-  await browser.close();
-}
-process.exit(result.ok ? 0 : 1);
+});

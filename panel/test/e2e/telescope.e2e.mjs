@@ -5,15 +5,14 @@
 // env: PANEL_URL, ASTCOM_URL, ASTCOM_PASSWORD, VSS_URL, VSS_PASSWORD, ARTIFACTS, RESULT,
 // SCENARIO: 'track-stop' (wrong password, track Vega, read the board, header STOP) or
 // 'park' (park from the board, read the board at rest).
-import { mkdirSync, writeFileSync } from 'node:fs';
+import { mkdirSync } from 'node:fs';
 import { join } from 'node:path';
-import { launch, openAndConnect } from './browser.mjs';
+import { openAndConnect, runPageScript } from './browser.mjs';
 
 const env = process.env;
 const ARTIFACTS = env.ARTIFACTS || 'artifacts/panel';
 mkdirSync(ARTIFACTS, { recursive: true });
-const result = { steps: [], scenario: env.SCENARIO };
-const step = (name) => {
+const step = (result, name) => {
   result.steps.push(name);
   console.log(`telescope e2e: ${name}`);
 };
@@ -31,12 +30,7 @@ async function connectVss(page, password) {
   await page.click('button.vss-connect');
 }
 
-const browser = await launch();
-const page = await browser.context.newPage();
-page.on('pageerror', (err) => {
-  result.pageErrors = [...(result.pageErrors || []), err.message];
-});
-try {
+await runPageScript(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), join(ARTIFACTS, `telescope-failure-${env.SCENARIO}.png`), async (page, result) => {
   await openAndConnect(page, env.PANEL_URL, env.ASTCOM_URL, env.ASTCOM_PASSWORD);
   await page.click('button[data-tab=Telescope]');
   await page.waitForFunction((u) => document.querySelector('input[name=vss-url]').value === u, env.VSS_URL);
@@ -45,12 +39,12 @@ try {
     await connectVss(page, 'not-the-password');
     await page.waitForFunction(() => /wrong password/.test(document.querySelector('[data-testid=log]')?.textContent ?? ''), null, { timeout: 15_000 });
     result.wrongPasswordState = await page.textContent('[data-testid=vss-state]');
-    step('wrong password refused');
+    step(result, 'wrong password refused');
   }
   await connectVss(page, env.VSS_PASSWORD);
   await page.waitForFunction(() => window.panelTelescope.status === 'connected' && window.panelTelescope.state, null, { timeout: 15_000 });
   result.role = await page.evaluate(() => window.panelTelescope.grantedRole);
-  step('connected to the VSS');
+  step(result, 'connected to the VSS');
 
   if (env.SCENARIO === 'track-stop') {
     await page.selectOption('select[name=target-kind]', 'star');
@@ -67,7 +61,7 @@ try {
     result.tracking = await readBoard(page);
     result.trackingOperation = await page.evaluate(() => JSON.parse(JSON.stringify(window.panelTelescope.state.operation)));
     await page.screenshot({ path: join(ARTIFACTS, 'telescope.png') });
-    step('tracking Vega shown');
+    step(result, 'tracking Vega shown');
 
     await page.click('[data-testid=stop-all]');
     await page.waitForFunction(() => /VSS: stop done/.test(document.querySelector('[data-testid=stop-outcome]')?.textContent ?? ''), null, { timeout: 30_000 });
@@ -75,7 +69,7 @@ try {
     await waitField(page, 'phase', '^(aborted|done)$');
     result.afterStop = await readBoard(page);
     result.log = await page.textContent('[data-testid=log]');
-    step('header STOP');
+    step(result, 'header STOP');
   } else if (env.SCENARIO === 'park') {
     await page.click('button.vss-park');
     await waitField(page, 'kind', '^park');
@@ -84,15 +78,6 @@ try {
     await page.waitForTimeout(1200);
     result.parked = await readBoard(page);
     await page.screenshot({ path: join(ARTIFACTS, 'telescope-parked.png') });
-    step('parked');
+    step(result, 'parked');
   }
-  result.ok = true;
-} catch (err) {
-  result.ok = false;
-  result.error = String(err.stack || err);
-  await page.screenshot({ path: join(ARTIFACTS, `telescope-failure-${env.SCENARIO}.png`) }).catch(() => {});
-} finally {
-  writeFileSync(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), JSON.stringify(result, null, 2));
-  await browser.close();
-}
-process.exit(result.ok ? 0 : 1);
+});
