@@ -87,3 +87,30 @@ export function toCsv(columns) {
   }
   return `${rows.join('\n')}\n`;
 }
+
+const NICE = [1, 2, 2.5, 5];
+
+/**
+ * Return tick values between `min` and `max` at a round step (1, 2, 2.5 or 5 × 10^k), the
+ * largest step that still gives at least `minTicks` ticks, so that a short plot of a nearly
+ * flat signal still reads off several values.
+ */
+export function niceTicks(min, max, minTicks = 4) {
+  if (!Number.isFinite(min) || !Number.isFinite(max)) return [];
+  if (!(max > min)) return [min];
+  const span = max - min;
+  let k = Math.floor(Math.log10(span));
+  for (let guard = 0; guard < 40; guard++, k--) {
+    for (let j = NICE.length - 1; j >= 0; j--) {
+      const step = NICE[j] * 10 ** k;
+      const first = Math.ceil(min / step - 1e-9);
+      const last = Math.floor(max / step + 1e-9);
+      if (last - first + 1 >= minTicks) {
+        const ticks = [];
+        for (let i = first; i <= last; i++) ticks.push(Number((i * step).toPrecision(15)));
+        return ticks;
+      }
+    }
+  }
+  return [min, max];
+}

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -98,6 +99,7 @@ async def _run(emulator_url: str, panel_url: str, result_path) -> tuple[dict, di
         collector.cancel()
         await stream.stop()
         result["param_read_back"] = (await client.read([PARAM_NAME]))[PARAM_NAME]
+        result["units"] = {e.name: e.unit for e in await client.list("axis.az.")}
         result["traj_counts"] = await client.read(["traj.accepted", "traj.late", "traj.underruns"])
     return result, got
 
@@ -141,6 +143,41 @@ def test_parameter_written_in_the_page_reads_back_with_the_python_client(e2e):
     result, _ = e2e
     assert result["param_read_back"] == float(PARAM_VALUE)
     assert result["paramShown"].strip() == PARAM_VALUE
+
+
+def _decimals(label: str) -> int:
+    return len(label.split(".")[1]) if "." in label and "e" not in label else 0
+
+
+def test_every_y_axis_has_several_ticks_labelled_alike_and_the_unit_from_list(e2e):
+    result, _ = e2e
+    units = result["units"]  # LIST read by the Python client
+    assert units["axis.az.error"] == "rad" and units["axis.az.position_deg"] == "deg"
+    # one plot per series in stream order: axis.az.error, axis.az.position_deg, then the compute
+    assert sorted(result["stackedAxes"]) == ["0:rad", "1:deg", "2:no unit"]
+    # all in one plot: one y axis per unit
+    assert sorted(result["allInOneAxes"]) == ["0:deg", "0:no unit", "0:rad"]
+    for labels in [*result["stackedAxes"].values(), *result["allInOneAxes"].values()]:
+        assert len(labels) >= 4 and len(set(labels)) == len(labels), labels
+        assert len({_decimals(x) for x in labels}) == 1, labels
+        assert all(len(x) <= 10 for x in labels), labels  # no "-0.008274955"
+
+
+def test_csv_export_holds_every_sample_of_the_visible_window_with_units(e2e):
+    result, _ = e2e
+    lines = Path(result["csvPath"]).read_text().splitlines()
+    assert lines[0] == ("t_us [µs mount time],t [s],axis.az.error [rad],"
+                        "axis.az.position_deg [deg],az_err_arcsec")
+    rows = np.array([[float(x) if x else np.nan for x in line.split(",")] for line in lines[1:]])
+    t_us = rows[:, 0]
+    # 1 kHz, not decimated, nothing missing; the mount clock's discipline moves a tick by 1 µs
+    assert np.all(np.abs(np.diff(t_us) - 1000) <= 1)
+    span_s = (t_us[-1] - t_us[0]) / 1e6
+    assert 1.0 < span_s <= result["csvWindowS"] + 1e-3
+    assert np.allclose(rows[:, 1], (t_us - t_us[0]) / 1e6 + rows[0, 1], atol=1e-6)
+    computed = ~np.isnan(rows[:, 4])
+    assert computed.sum() > 500
+    assert np.allclose(rows[computed, 4], rows[computed, 2] * 3600 * 180 / np.pi, rtol=1e-12, atol=1e-12)
 
 
 def test_formula_trajectory_is_followed_by_the_mount_reference(e2e):

@@ -91,6 +91,27 @@ try {
     before, { timeout: 10_000 });
   result.plot = await page.evaluate(() => ({ ...window.panelProbe.probe, samples: window.panelProbe.session.stream.samples, lost: window.panelProbe.session.stream.lost }));
   step('plot');
+  // Axes: the units and tick labels of one plot per signal, then of all in one plot.
+  const redrawn = async () => {
+    const n = await page.evaluate(() => window.panelProbe.probe.plotUpdates);
+    await page.waitForFunction((b) => window.panelProbe.probe.plotUpdates > b + 2, n, { timeout: 10_000 });
+  };
+  await redrawn();
+  result.stackedAxes = await page.evaluate(() => ({ ...window.panelProbe.probe.yAxes }));
+  await page.uncheck('input[name=stacked]');
+  await redrawn();
+  result.allInOneAxes = await page.evaluate(() => ({ ...window.panelProbe.probe.yAxes }));
+  await page.screenshot({ path: join(ARTIFACTS, 'plot-all-in-one.png') });
+  await page.check('input[name=stacked]');
+  // Export the visible window as CSV: every sample, with units in the header.
+  await page.click('button.pause');
+  const [csvFile] = await Promise.all([page.waitForEvent('download'), page.click('button.export-csv')]);
+  const csvPath = join(ARTIFACTS, 'plot-export.csv');
+  await csvFile.saveAs(csvPath);
+  result.csvPath = csvPath;
+  result.csvWindowS = Number(await page.inputValue('input[name=window]'));
+  await page.click('button.pause');
+  step('plot axes and CSV');
 
   // Input: run a trajectory from formulas; meanwhile change a parameter online.
   await tab(page, 'Input');

@@ -4,7 +4,7 @@
 import assert from 'node:assert/strict';
 import { createHmac, randomBytes } from 'node:crypto';
 import { test } from 'node:test';
-import { decimalsForStep, dms, fixed, hms, readable, tickLabels, toCsv } from '../../src/format.js';
+import { decimalsForStep, dms, fixed, hms, niceTicks, readable, tickLabels, toCsv } from '../../src/format.js';
 import { keepTrying, RECONNECT_DELAYS_MS, reconnectDelayMs } from '../../src/reconnect.js';
 import { authRequest, fromHex, toHex } from '../../src/vss/auth.js';
 
@@ -113,4 +113,18 @@ test('csv export has a header with units and every sample in full precision', ()
   assert.equal(lines[0], 't [s],axis.az.error [rad],"a,""b"""');
   assert.deepEqual(lines.slice(1), ['0,1.5e-9,', '0.001,,2', '0.002,0.1,3'.replace('0.1', String(-0.1 + 0.2))]);
   assert.equal(Number(lines[3].split(',')[1]), -0.1 + 0.2); // reads back the same double
+});
+
+test('nice ticks give at least the asked count at a round step, inside the range', () => {
+  for (const [min, max] of [[0, 1], [-0.0083, 0.0079], [76.784, 76.786], [1e-9, 3e-9], [-5, 1e5], [41.2024, 41.2025]]) {
+    const ticks = niceTicks(min, max, 4);
+    assert.ok(ticks.length >= 4, `${min}..${max}: ${ticks}`);
+    assert.ok(ticks.every((v) => v >= min - 1e-12 * Math.abs(min) && v <= max + 1e-12 * Math.abs(max)), `${ticks}`);
+    const step = ticks[1] - ticks[0];
+    const mantissa = Number((step / 10 ** Math.floor(Math.log10(step))).toPrecision(6));
+    assert.ok([1, 2, 2.5, 5].includes(mantissa), `step ${step}`);
+    assert.equal(new Set(tickLabels(ticks)).size, ticks.length, `labels of ${ticks}: ${tickLabels(ticks)}`);
+  }
+  assert.deepEqual(niceTicks(0, 1, 4), [0, 0.25, 0.5, 0.75, 1]);
+  assert.deepEqual(niceTicks(3, 3), [3]);
 });
