@@ -120,6 +120,10 @@ try {
   await page.fill('input[name=traj-duration]', env.TRAJ_DURATION_S);
   await page.fill('input[name=traj-step]', env.TRAJ_STEP_S);
   await page.fill('input[name=traj-lead]', '0.5');
+  await page.fill('input[name=traj-ramp]', env.TRAJ_RAMP_S);
+  await page.click('button.preview-trajectory');
+  await page.waitForSelector('[data-testid=traj-preview] canvas');
+  result.previewStatus = await page.textContent('.traj-status');
   await page.click('button.run-trajectory');
   await page.waitForFunction(() => window.panelTrajectory.lastRun !== null);
   step('trajectory started');
@@ -138,6 +142,8 @@ try {
   await tab(page, 'Input');
   await page.waitForFunction(() => window.panelTrajectory.lastRun?.done && !window.panelTrajectory.running, null, { timeout: 20_000 });
   result.trajectory = await page.evaluate(() => JSON.parse(JSON.stringify({ ...window.panelTrajectory.lastRun, status: window.panelTrajectory.status })));
+  result.progress = await page.textContent('.traj-progress');
+  result.logAfterTrajectory = await page.textContent('[data-testid=log]');
   await shot(page, 'Input');
   step('trajectory pushed');
   // The plot while the mount follows the formulas (1.5 s into the run).
