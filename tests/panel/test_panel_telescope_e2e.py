@@ -16,7 +16,7 @@ import subprocess
 
 import pytest
 from panel_helpers import ARTIFACTS, CHROMIUM, PANEL_DIR, ensure_panel_built, node
-from vss_rig import vs_server_process
+from vss_rig import STARS_PROGRAM, vs_server_process
 
 from astcom_client import Client
 from virtualstar.panel import PanelConfig, PanelServer
@@ -91,6 +91,37 @@ def park(rig, track_stop, tmp_path_factory):
     return result
 
 
+async def _start_program(url: str, tmp_path) -> dict:
+    """Plan the stars from two minutes of mount time on, and run the plan (no wait)."""
+    from virtualstar.astro import load_site
+    from virtualstar.planning import PlanRequest, load_program, plan_program
+
+    (tmp_path / "program.toml").write_text(STARS_PROGRAM)
+    async with await VssClient.connect(url, password=OPERATOR_PASSWORD) as vss:
+        now_us = (await vss.request("status"))["mount_time_us"]
+        start_us = (now_us // 60_000_000 + 2) * 60_000_000
+        plan = plan_program(PlanRequest(load_program(tmp_path / "program.toml"), start_us,
+                                        start_us + 9 * 60_000_000, load_site()))
+        assert plan.blocks, plan.left_out
+        await vss.request("run_plan", {"plan": plan.as_dict()})
+        return plan.as_dict()
+
+
+async def _program(url: str) -> dict:
+    async with await VssClient.connect(url, password=OPERATOR_PASSWORD) as vss:
+        return await vss.request("program")
+
+
+@pytest.fixture(scope="module")
+def program(rig, park, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("program")
+    plan = asyncio.run(_start_program(rig["vss"], tmp))
+    result = run_scenario(rig, "program", tmp)
+    result["plan"] = plan
+    result["truth_program"] = asyncio.run(_program(rig["vss"]))
+    return result
+
+
 def deg(text: str) -> float:
     return float(text)
 
@@ -154,7 +185,19 @@ def test_park_from_the_board_leaves_the_mount_off_where_the_board_says(park):
     assert park["truth_vss"]["operation"]["kind"] == "park"
 
 
-def test_a_screenshot_of_the_telescope_board_is_kept(track_stop, park):
-    for name in ("telescope", "telescope-parked"):
+def test_a_screenshot_of_the_telescope_board_is_kept(track_stop, park, program):
+    for name in ("telescope", "telescope-parked", "telescope-program"):
         png = ARTIFACTS / f"{name}.png"
         assert png.is_file() and png.stat().st_size > 10_000, png
+
+
+def test_a_running_program_shows_its_block_and_the_header_stop_ends_it(program):
+    shown = program["program"]
+    assert shown["state"] == "running"
+    truth = program["truth_program"]
+    assert truth["state"] == "stopped" and "stop" in truth["error"]["message"]
+    assert program["programAfterStop"] == "stopped"
+    # the block the board showed is one the server ran (and the stop interrupted or followed)
+    ran = {r["target"] for r in truth["records"]}
+    assert shown["current"].split(" (")[0] in ran
+    assert shown["current"].split(" (")[0] in {b["target"] for b in program["plan"]["blocks"]}

@@ -4,7 +4,8 @@
 //
 // env: PANEL_URL, ASTCOM_URL, ASTCOM_PASSWORD, VSS_URL, VSS_PASSWORD, ARTIFACTS, RESULT,
 // SCENARIO: 'track-stop' (wrong password, track Vega, read the board, header STOP) or
-// 'park' (park from the board, read the board at rest).
+// 'park' (park from the board, read the board at rest) or 'program' (a running plan shown,
+// then ended by the header's STOP).
 import { mkdirSync } from 'node:fs';
 import { join } from 'node:path';
 import { openAndConnect, runPageScript } from './browser.mjs';
@@ -70,6 +71,16 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), join
     result.afterStop = await readBoard(page);
     result.log = await page.textContent('[data-testid=log]');
     step(result, 'header STOP');
+  } else if (env.SCENARIO === 'program') {
+    // a plan sent by another client (as `vs run` does) shows on the board while it runs
+    await waitField(page, 'program-state', '^running$');
+    await waitField(page, 'program-current', '^(?!—)', 120_000);
+    result.program = { state: await field(page, 'program-state'), current: await field(page, 'program-current') };
+    await page.screenshot({ path: join(ARTIFACTS, 'telescope-program.png') });
+    await page.click('[data-testid=stop-all]');
+    await waitField(page, 'program-state', '^stopped$');
+    result.programAfterStop = await field(page, 'program-state');
+    step(result, 'program shown and stopped');
   } else if (env.SCENARIO === 'park') {
     await page.click('button.vss-park');
     await waitField(page, 'kind', '^park');
