@@ -23,7 +23,7 @@ export const session = reactive({
   entries: [],
   log: [],
   stream: { names: [], rateHz: 1000, active: false, samples: 0, lost: 0, packets: 0, actualRateHz: 0 },
-  computes: [], // {name, expr, error}
+  computes: [], // {name, expr, unit, error}
 });
 
 export const series = new SeriesStore();
@@ -180,7 +180,7 @@ function recompile() {
 /** Replace the compute list (from the Compute tab or a loaded file). */
 export function setComputes(list) {
   for (const c of session.computes) series.drop(c.name);
-  session.computes = list.map((c) => ({ name: c.name, expr: c.expr, error: '' }));
+  session.computes = list.map((c) => ({ name: c.name, expr: c.expr, unit: c.unit || '', error: '' }));
   recompile();
 }
 
@@ -263,6 +263,13 @@ export function findFunction(words, docHint = null) {
     if (hinted || hits.length) return (hinted || hits[0]).name;
   }
   return '';
+}
+
+/** Return the unit of a streamed signal (from LIST) or of a compute (as typed); '' if none. */
+export function unitOf(name) {
+  const c = session.computes.find((x) => x.name === name);
+  if (c) return c.unit || '';
+  return session.entries.find((e) => e.name === name)?.unit || '';
 }
 
 /** The mount's stop function (the header's STOP calls it): `*.stop`, else `*.halt`. */

@@ -171,9 +171,10 @@ def test_every_y_axis_has_several_ticks_labelled_alike_and_the_unit_from_list(e2
     units = result["units"]  # LIST read by the Python client
     assert units["axis.az.error"] == "rad" and units["axis.az.position_deg"] == "deg"
     # one plot per series in stream order: axis.az.error, axis.az.position_deg, then the compute
-    assert sorted(result["stackedAxes"]) == ["0:rad", "1:deg", "2:no unit"]
+    # (the compute's unit is the one typed on the Compute tab)
+    assert sorted(result["stackedAxes"]) == ["0:rad", "1:deg", "2:arcsec"]
     # all in one plot: one y axis per unit
-    assert sorted(result["allInOneAxes"]) == ["0:deg", "0:no unit", "0:rad"]
+    assert sorted(result["allInOneAxes"]) == ["0:arcsec", "0:deg", "0:rad"]
     for labels in [*result["stackedAxes"].values(), *result["allInOneAxes"].values()]:
         assert len(labels) >= 4 and len(set(labels)) == len(labels), labels
         assert len({_decimals(x) for x in labels}) == 1, labels
@@ -184,7 +185,7 @@ def test_csv_export_holds_every_sample_of_the_visible_window_with_units(e2e):
     result, _ = e2e
     lines = Path(result["csvPath"]).read_text().splitlines()
     assert lines[0] == ("t_us [µs mount time],t [s],axis.az.error [rad],"
-                        "axis.az.position_deg [deg],az_err_arcsec")
+                        "axis.az.position_deg [deg],az_err_arcsec [arcsec]")
     rows = np.array([[float(x) if x else np.nan for x in line.split(",")] for line in lines[1:]])
     t_us = rows[:, 0]
     # 1 kHz, not decimated, nothing missing; the mount clock's discipline moves a tick by 1 µs
@@ -257,6 +258,7 @@ def test_every_tab_saves_its_state_and_loads_it_back(e2e):
     axes = {a["arg"]: a for a in states["Input"]["state"]["trajectory"]["axes"]}
     assert axes["az_rad"]["expr"] == AZ_FORMULA and axes["el_rad"]["p0_signal"] == "axis.el.position"
     assert states["Compute"]["state"]["expressions"][0]["name"] == "az_err_arcsec"
+    assert states["Compute"]["state"]["expressions"][0]["unit"] == "arcsec"
 
 
 def test_an_injected_fault_turns_its_diagnostics_card_and_board_row_red(e2e):

@@ -56,6 +56,7 @@ try {
   await tab(page, 'Compute');
   await page.fill('input[name=compute-name-0]', 'az_err_arcsec');
   await page.fill('input[name=compute-expr-0]', 'axis.az.error * 3600 * 180 / pi');
+  await page.fill('input[name=compute-unit-0]', 'arcsec');
   await page.click('button.apply-computes');
   await page.waitForTimeout(400);
   result.computeCheck = await page.evaluate(() => {

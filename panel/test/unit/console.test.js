@@ -5,6 +5,7 @@ import assert from 'node:assert/strict';
 import { createHmac, randomBytes } from 'node:crypto';
 import { test } from 'node:test';
 import { decimalsForStep, dms, fixed, hms, niceTicks, readable, tickLabels, toCsv } from '../../src/format.js';
+import { formatValue } from '../../src/grouping.js';
 import { keepTrying, RECONNECT_DELAYS_MS, reconnectDelayMs } from '../../src/reconnect.js';
 import { authRequest, fromHex, toHex } from '../../src/vss/auth.js';
 
@@ -127,4 +128,14 @@ test('nice ticks give at least the asked count at a round step, inside the range
   }
   assert.deepEqual(niceTicks(0, 1, 4), [0, 0.25, 0.5, 0.75, 1]);
   assert.deepEqual(niceTicks(3, 3), [3]);
+});
+
+test('table values show the digits their type carries, on one line', () => {
+  assert.equal(formatValue(-0.008274955123456, 'f32'), '-0.008274955');
+  assert.equal(formatValue(-0.008274955123456, 'f64'), '-0.008274955123');
+  assert.equal(formatValue(29.75, 'f64'), '29.75');
+  assert.equal(formatValue(1.5e-7, 'f64'), '1.5e-7');
+  assert.equal(formatValue(-0, 'f64'), '0');
+  assert.equal(formatValue(12, 'i32'), '12');
+  assert.equal(formatValue(null), '—');
 });
