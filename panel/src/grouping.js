@@ -31,13 +31,22 @@ export function shortName(name) {
   return dot < 0 ? name : name.slice(dot + 1);
 }
 
-/** Format a value read from the endpoint for a table cell. */
-export function formatValue(v) {
+// Significant digits a float type carries: an f32 holds about 7, an f64 about 16 — shown to
+// 10, finer than any angle, rate or time the mount measures (1e-10 rad = 0.00002″).
+const SIGNIFICANT = { f32: 7, f64: 10 };
+
+/** Return whether formatValue gives a number (one line) rather than text that may wrap. */
+export const isScalarNumber = (v) => typeof v === 'number' || typeof v === 'bigint' || typeof v === 'boolean';
+
+/** Format a value read from the endpoint for a table cell, to the precision of its `type`. */
+export function formatValue(v, type = 'f64') {
   if (v === null || v === undefined) return '—';
   if (typeof v === 'number') {
     if (Number.isInteger(v)) return String(v);
+    const digits = SIGNIFICANT[type] ?? SIGNIFICANT.f64;
     const a = Math.abs(v);
-    return a !== 0 && (a < 1e-3 || a >= 1e6) ? v.toExponential(6) : v.toPrecision(8).replace(/\.?0+$/, '');
+    if (a < 1e-4 || a >= 1e9) return v.toExponential(digits - 1).replace(/\.?0+e/, 'e');
+    return String(Number(v.toPrecision(digits)));
   }
   if (typeof v === 'boolean' || typeof v === 'string' || typeof v === 'bigint') return String(v);
   if (v instanceof Uint8Array) return `bytes(${v.length})`;

@@ -130,6 +130,27 @@ export class SeriesStore {
     return [x, ...ys.map(withGaps)];
   }
 
+  /**
+   * Return every sample (not decimated) with fromS <= t <= toS: {tUs, t, columns} in time
+   * order, `tUs` the mount time in µs, `t` seconds since the stream's first sample.
+   */
+  rows(names, fromS, toS) {
+    const cap = this.capacity;
+    const first = (this.head - this.count + cap) % cap;
+    const keep = [];
+    for (let i = 0; i < this.count; i++) {
+      const k = (first + i) % cap;
+      if (this.t[k] >= fromS && this.t[k] <= toS) keep.push(k);
+    }
+    const t = Float64Array.from(keep, (k) => this.t[k]);
+    const tUs = Float64Array.from(t, (v) => this.t0Us + Math.round(v * 1e6));
+    const columns = names.map((nm) => {
+      const r = this.series.get(nm);
+      return Float64Array.from(keep, (k) => (r ? r[k] : Number.NaN));
+    });
+    return { tUs, t, columns };
+  }
+
   /** Return the newest value of a series (NaN when empty). */
   latest(name) {
     const r = this.series.get(name);

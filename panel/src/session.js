@@ -3,25 +3,31 @@
 // Two ASTCom connections, as the protocol suggests (§6 "Private and stream channels"):
 // `control` carries LIST/READ/WRITE/INVOKE/STATS, `data` carries only the stream, so a
 // burst of samples never delays a reply and a slow reply never stalls the plot.
+//
+// A lost connection is retried until the user disconnects (a wrong password ends the
+// retries): the last values stay on screen marked stale, and the stream that ran is
+// started again once the endpoint is back.
 import { markRaw, reactive } from 'vue';
-import { Client } from './astcom/index.js';
+import { AuthenticationFailed, Client } from './astcom/index.js';
 import { compileExpression } from './expressions.js';
+import { keepTrying } from './reconnect.js';
 import { SeriesStore } from './series.js';
 
 export const session = reactive({
   url: 'ws://127.0.0.1:8765',
   role: 'operator',
-  status: 'disconnected', // disconnected | connecting | connected
+  status: 'disconnected', // disconnected | connecting | connected | reconnecting
+  stale: false, // values on screen are from before the connection was lost
   hello: null,
   grantedRole: null,
   entries: [],
   log: [],
   stream: { names: [], rateHz: 1000, active: false, samples: 0, lost: 0, packets: 0, actualRateHz: 0 },
-  computes: [], // {name, expr, error}
+  computes: [], // {name, expr, unit, error}
 });
 
 export const series = new SeriesStore();
-const links = { control: null, data: null, stream: null, compiled: [] };
+const links = { control: null, data: null, stream: null, compiled: [], password: '', retry: null, streamWanted: null };
 
 /** Debug counters the end-to-end tests and the benchmark read from the page. */
 export const probe = { plotUpdates: 0, plotPoints: 0, lastPlotSeries: [] };
@@ -36,23 +42,35 @@ function connectOne(url, password, role, clientName) {
   return Client.connect(url, { password, role, clientName });
 }
 
+async function openLinks(url, password) {
+  const control = await connectOne(url, password, session.role, 'panel');
+  let data;
+  try {
+    data = await connectOne(url, password, 'observer', 'panel-stream');
+  } catch (err) {
+    await control.close();
+    throw err;
+  }
+  links.control = markRaw(control);
+  links.data = markRaw(data);
+  control.onClose((err) => lost(control, err));
+  data.onClose((err) => lost(data, err));
+  session.hello = { server: control.hello.server, loopRateHz: control.hello.loop_rate_hz, limits: control.hello.limits };
+  session.grantedRole = control.role;
+  session.entries = await control.list();
+  session.status = 'connected';
+  session.stale = false;
+}
+
 /** Open both channels and list the endpoint; errors land in the log and are rethrown. */
 export async function connect(url, password) {
   await disconnect();
   session.url = url;
+  links.password = password;
   session.status = 'connecting';
   try {
-    const control = await connectOne(url, password, session.role, 'panel');
-    const data = await connectOne(url, password, 'observer', 'panel-stream');
-    links.control = markRaw(control);
-    links.data = markRaw(data);
-    control.onClose((err) => lost(err));
-    data.onClose((err) => lost(err));
-    session.hello = { server: control.hello.server, loopRateHz: control.hello.loop_rate_hz, limits: control.hello.limits };
-    session.grantedRole = control.role;
-    session.entries = await control.list();
-    session.status = 'connected';
-    logEvent(`connected to ${control.hello.server} at ${url} as ${control.role}`, 'info');
+    await openLinks(url, password);
+    logEvent(`connected to ${session.hello.server} at ${url} as ${session.grantedRole}`, 'info');
   } catch (err) {
     await disconnect();
     logEvent(`connect ${url}: ${err.message}`);
@@ -60,20 +78,60 @@ export async function connect(url, password) {
   }
 }
 
-function lost(err) {
-  if (session.status !== 'connected') return;
-  logEvent(`connection lost: ${err.message}`);
-  disconnect();
-}
-
-export async function disconnect() {
+async function closeLinks() {
   const { control, data } = links;
   links.control = null;
   links.data = null;
   links.stream = null;
   session.stream.active = false;
-  session.status = 'disconnected';
   await Promise.all([control?.close(), data?.close()]);
+}
+
+function lost(which, err) {
+  if (session.status !== 'connected' || (which !== links.control && which !== links.data)) return;
+  logEvent(`connection lost: ${err.message}; reconnecting`);
+  const wanted = session.stream.names.length && links.stream ? { names: [...session.stream.names], rateHz: session.stream.rateHz } : links.streamWanted;
+  links.streamWanted = wanted;
+  session.status = 'reconnecting';
+  session.stale = true;
+  closeLinks();
+  links.retry = keepTrying(() => reopen(), { giveUp: (e) => e instanceof AuthenticationFailed });
+  links.retry.done.then((ok) => {
+    if (ok) return;
+    if (session.status === 'reconnecting') {
+      session.status = 'disconnected';
+      logEvent('reconnection given up: the password is no longer accepted');
+    }
+  });
+}
+
+async function reopen() {
+  try {
+    await openLinks(session.url, links.password);
+  } catch (err) {
+    await closeLinks();
+    session.status = 'reconnecting';
+    throw err;
+  }
+  logEvent(`reconnected to ${session.hello.server} at ${session.url}`, 'info');
+  const wanted = links.streamWanted;
+  links.streamWanted = null;
+  if (wanted) {
+    try {
+      await startStream(wanted.names, wanted.rateHz);
+    } catch {
+      // logged by startStream
+    }
+  }
+}
+
+export async function disconnect() {
+  links.retry?.cancel();
+  links.retry = null;
+  links.streamWanted = null;
+  session.status = 'disconnected';
+  session.stale = false;
+  await closeLinks();
 }
 
 export function requireControl() {
@@ -92,7 +150,12 @@ export async function guarded(what, fn) {
 }
 
 export const read = (names) => guarded(`read ${names.length > 3 ? `${names.length} values` : names.join(', ')}`, (c) => c.read(names));
-export const write = (values) => guarded(`write ${Object.keys(values).join(', ')}`, (c) => c.write(values));
+export async function write(values) {
+  const what = Object.entries(values).map(([k, v]) => `${k} = ${typeof v === 'number' ? v : JSON.stringify(v)}`).join(', ');
+  const result = await guarded(`write ${Object.keys(values).join(', ')}`, (c) => c.write(values));
+  logEvent(`wrote ${what}`, 'info');
+  return result;
+}
 export const invoke = (name, args = []) => guarded(`call ${name}`, (c) => c.invoke(name, args, 60_000));
 export const stats = () => guarded('stats', (c) => c.stats());
 export const ping = () => guarded('ping', (c) => c.ping());
@@ -117,7 +180,7 @@ function recompile() {
 /** Replace the compute list (from the Compute tab or a loaded file). */
 export function setComputes(list) {
   for (const c of session.computes) series.drop(c.name);
-  session.computes = list.map((c) => ({ name: c.name, expr: c.expr, error: '' }));
+  session.computes = list.map((c) => ({ name: c.name, expr: c.expr, unit: c.unit || '', error: '' }));
   recompile();
 }
 
@@ -187,3 +250,27 @@ export async function stopStream() {
 export const signals = () => session.entries.filter((e) => e.kind === 'signal');
 export const parameters = () => session.entries.filter((e) => e.kind === 'parameter');
 export const functions = () => session.entries.filter((e) => e.kind === 'function');
+
+/**
+ * Return the name of a function without arguments called one of `words` (a name or its last
+ * dotted part, in that order of preference), the one whose doc matches `docHint` first; ''.
+ */
+export function findFunction(words, docHint = null) {
+  const fns = functions().filter((e) => e.type.startsWith('()'));
+  for (const w of words) {
+    const hits = fns.filter((e) => e.name === w || e.name.endsWith(`.${w}`));
+    const hinted = docHint ? hits.find((e) => docHint.test(e.doc)) : null;
+    if (hinted || hits.length) return (hinted || hits[0]).name;
+  }
+  return '';
+}
+
+/** Return the unit of a streamed signal (from LIST) or of a compute (as typed); '' if none. */
+export function unitOf(name) {
+  const c = session.computes.find((x) => x.name === name);
+  if (c) return c.unit || '';
+  return session.entries.find((e) => e.name === name)?.unit || '';
+}
+
+/** The mount's stop function (the header's STOP calls it): `*.stop`, else `*.halt`. */
+export const stopFunction = () => findFunction(['stop', 'halt']);

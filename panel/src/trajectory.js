@@ -37,14 +37,45 @@ export function trajectoryAxes(pushEntry, signalEntries) {
   });
 }
 
+/** Return the ramp's weight at x = t / ramp: 0 → 1 with zero slope and curvature at both ends. */
+export function rampWeight(x) {
+  if (x <= 0) return 0;
+  if (x >= 1) return 1;
+  return x * x * x * (10 + x * (6 * x - 15)); // 6x⁵ − 15x⁴ + 10x³
+}
+
+/**
+ * Blend sampled positions `raw` (at i·stepS) into a trajectory that leaves `start` and arrives
+ * at the last value at rest: over the first `rampS` seconds from `start` to the formula, over
+ * the last `rampS` from the formula to its final value. Velocity and acceleration are zero
+ * at both ends, so the mount sees no step (a formula like sin(t) starts at full speed).
+ */
+export function rampPositions(raw, stepS, rampS, start = raw[0]) {
+  const n = raw.length;
+  const totalS = (n - 1) * stepS;
+  const end = raw[n - 1];
+  return raw.map((v, i) => {
+    const t = i * stepS;
+    const inRamp = start + rampWeight(t / rampS) * (v - start);
+    return end + rampWeight((totalS - t) / rampS) * (inRamp - end);
+  });
+}
+
 /**
  * Sample the formulas at t = 0, step, 2·step, … ≤ duration (seconds from the first point).
- * axes: [{arg, expr, degrees, p0}] (p0 in the formula's units). Returns {tUs: BigInt64Array,
- * values: [Float64Array] (wire units), n}. Throws with the axis name on a bad formula.
+ * axes: [{arg, expr, degrees, p0, start?, isRate?}] (p0 and start in the formula's units).
+ * rampS > 0 starts and ends every position argument with a ramp (rampPositions) from
+ * `start` (default: the formula at t = 0); rate arguments are left as written.
+ * Returns {tUs: BigInt64Array, values: [Float64Array] (wire units), formula: [Float64Array]
+ * (formula units, ramps included), n}. Throws with the axis name on a bad formula.
  */
-export function sampleTrajectory(axes, { durationS, stepS, t0Us }) {
+export function sampleTrajectory(axes, { durationS, stepS, t0Us, rampS = 0 }) {
   if (!(durationS > 0)) throw new Error(`duration must be > 0 s, got ${durationS}`);
   if (!(stepS > 0)) throw new Error(`sample step must be > 0 s, got ${stepS}`);
+  if (!(rampS >= 0)) throw new Error(`ramp must be >= 0 s, got ${rampS}`);
+  if (2 * rampS > durationS + 1e-9) {
+    throw new Error(`duration ${durationS} s is shorter than its two ramps (start and end, ${rampS} s each)`);
+  }
   const n = Math.floor(durationS / stepS + 1e-9) + 1;
   const tUs = new BigInt64Array(n);
   for (let i = 0; i < n; i++) tUs[i] = BigInt(t0Us + Math.round(i * stepS * 1e6));
@@ -55,16 +86,17 @@ export function sampleTrajectory(axes, { durationS, stepS, t0Us }) {
     } catch (err) {
       throw new Error(`formula of ${ax.arg}: ${err.message}`);
     }
-    const out = new Float64Array(n);
-    const scale = ax.degrees ? DEG : 1;
+    let raw = new Float64Array(n);
     for (let i = 0; i < n; i++) {
       const v = expr.evaluateWith({ t: i * stepS, p0: ax.p0 });
       if (!Number.isFinite(v)) throw new Error(`formula of ${ax.arg} is not finite at t = ${i * stepS} s`);
-      out[i] = v * scale;
+      raw[i] = v;
     }
-    return out;
+    if (rampS > 0 && !ax.isRate) raw = rampPositions(raw, stepS, rampS, ax.start ?? raw[0]);
+    return raw;
   });
-  return { tUs, values, n };
+  const scaled = values.map((raw, j) => (axes[j].degrees ? raw.map((v) => v * DEG) : raw));
+  return { tUs, values: scaled, formula: values, n };
 }
 
 /**

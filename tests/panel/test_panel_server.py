@@ -26,8 +26,9 @@ def _get(url: str) -> tuple[int, bytes, str]:
         return r.status, r.read(), r.headers.get("Content-Type", "")
 
 
-def test_server_serves_the_built_page_its_assets_and_the_endpoint_config():
-    with PanelServer(PanelConfig(port=0, endpoint="ws://127.0.0.1:9999")) as server:
+def test_server_serves_the_built_page_its_assets_and_the_endpoint_and_vss_config():
+    with PanelServer(PanelConfig(port=0, endpoint="ws://127.0.0.1:9999",
+                                 vss="ws://127.0.0.1:9998")) as server:
         server.start()
         status, body, ctype = _get(server.url)
         assert status == 200 and "text/html" in ctype
@@ -36,7 +37,7 @@ def test_server_serves_the_built_page_its_assets_and_the_endpoint_config():
         status, js, ctype = _get(server.url + script)
         assert status == 200 and "javascript" in ctype and len(js) > 10_000
         status, cfg, _ = _get(server.url + "config.json")
-        assert json.loads(cfg) == {"endpoint": "ws://127.0.0.1:9999"}
+        assert json.loads(cfg) == {"endpoint": "ws://127.0.0.1:9999", "vss": "ws://127.0.0.1:9998"}
 
 
 def test_server_refuses_directory_listings_and_unknown_paths():
@@ -65,13 +66,15 @@ def test_taken_port_is_refused_with_cannot_listen():
         assert f"127.0.0.1:{port}" in str(info.value) and "--port" in str(info.value)
 
 
-def test_cli_rejects_a_non_websocket_endpoint_and_a_taken_port():
+def test_cli_rejects_a_non_websocket_endpoint_or_vss_and_a_taken_port():
     app = typer.Typer()
     app.command("panel")(panel)
     app.command("other")(lambda: None)  # two commands: typer keeps the subcommand name
     runner = CliRunner()
     bad = runner.invoke(app, ["panel", "--endpoint", "tcp://127.0.0.1:8765"])
     assert bad.exit_code == 2 and "ws://HOST:PORT" in bad.output
+    bad_vss = runner.invoke(app, ["panel", "--vss", "http://127.0.0.1:8740"])
+    assert bad_vss.exit_code == 2 and "--vss" in bad_vss.output and "VirtualStar Server" in bad_vss.output
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()

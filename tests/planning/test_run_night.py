@@ -16,7 +16,7 @@ import pytest
 from astropy.utils import iers
 from sky_truth import iss_truth, sky_sep_arcsec, star_truth
 from typer.testing import CliRunner
-from vss_rig import read_emulator, run_lockstep_scenario, vs_server_process
+from vss_rig import STARS_PROGRAM, read_emulator, run_lockstep_scenario, vs_server_process
 
 from virtualstar.astro import UtcTimes, load_site
 from virtualstar.cli.main import app
@@ -44,20 +44,6 @@ priority = 5
 [[target]]
 star = "Deneb"
 """
-STARS_ONLY = """
-[defaults]
-duration_s = 120
-min_el_deg = 20
-sun_max_el_deg = -6
-[[target]]
-star = "Arcturus"
-priority = 3
-[[target]]
-star = "Deneb"
-priority = 2
-[[target]]
-star = "Vega"
-"""
 
 
 def _us(iso: str) -> int:
@@ -80,7 +66,7 @@ def night(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def stars(tmp_path_factory):
-    return _plan(tmp_path_factory.mktemp("stars"), STARS_ONLY, "2024-05-18T21:22:00Z",
+    return _plan(tmp_path_factory.mktemp("stars"), STARS_PROGRAM, "2024-05-18T21:22:00Z",
                  "2024-05-18T21:36:00Z")
 
 

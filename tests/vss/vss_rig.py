@@ -32,6 +32,22 @@ from virtualstar.lockstep import LockstepClock, LockstepEventLoop
 from virtualstar.server import build_server
 
 PACE = 50.0  # mount seconds per wall second at most, while tests talk to the rig
+# An observing program of three bright stars, 2 minutes each (vs plan's TOML), up at night in
+# May from the default site: the planning and panel tests plan it for their own windows.
+STARS_PROGRAM = """
+[defaults]
+duration_s = 120
+min_el_deg = 20
+sun_max_el_deg = -6
+[[target]]
+star = "Arcturus"
+priority = 3
+[[target]]
+star = "Deneb"
+priority = 2
+[[target]]
+star = "Vega"
+"""
 
 
 class Rig:

@@ -5,10 +5,11 @@ from virtualstar.panel.server import (
     DEFAULT_ENDPOINT,
     DEFAULT_HOST,
     DEFAULT_PORT,
+    DEFAULT_VSS,
     STATIC_DIR,
     PanelConfig,
     PanelServer,
 )
 
-__all__ = ["DEFAULT_ENDPOINT", "DEFAULT_HOST", "DEFAULT_PORT", "STATIC_DIR", "BundleMissing",
+__all__ = ["DEFAULT_ENDPOINT", "DEFAULT_HOST", "DEFAULT_PORT", "DEFAULT_VSS", "STATIC_DIR", "BundleMissing",
            "CannotListen", "PanelConfig", "PanelError", "PanelServer"]

@@ -1,7 +1,8 @@
 """Serve the built Robot Supervisor Panel (static files) and its small config over HTTP.
 
-The browser then speaks ASTCom to the endpoint directly; this server only hands out
-the bundle and `config.json` (the default endpoint URL shown on the Board tab).
+The browser then speaks ASTCom to the endpoint and JSON to the VirtualStar Server directly;
+this server only hands out the bundle and `config.json` (the URLs the Board and Telescope
+tabs propose).
 """
 
 from __future__ import annotations
@@ -16,22 +17,24 @@ from pathlib import Path
 
 from virtualstar.panel.exceptions import BundleMissing, CannotListen
 
-__all__ = ["DEFAULT_ENDPOINT", "DEFAULT_HOST", "DEFAULT_PORT", "STATIC_DIR", "PanelConfig",
-           "PanelServer"]
+__all__ = ["DEFAULT_ENDPOINT", "DEFAULT_HOST", "DEFAULT_PORT", "DEFAULT_VSS", "STATIC_DIR",
+           "PanelConfig", "PanelServer"]
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
 DEFAULT_ENDPOINT = "ws://127.0.0.1:8765"
+DEFAULT_VSS = "ws://127.0.0.1:8740"  # vs server's default --listen (virtualstar.server.DEFAULT_PORT)
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 
 
 @dataclass(frozen=True)
 class PanelConfig:
-    """Where to listen, which endpoint the Board proposes, where the bundle is."""
+    """Where to listen, which endpoint and VSS the page proposes, where the bundle is."""
 
     host: str = DEFAULT_HOST
     port: int = DEFAULT_PORT
     endpoint: str = DEFAULT_ENDPOINT
+    vss: str = DEFAULT_VSS
     static_dir: Path = field(default=STATIC_DIR)
 
 
@@ -75,7 +78,7 @@ class PanelServer:
         if not (config.static_dir / "index.html").is_file():
             raise BundleMissing(str(config.static_dir))
         handler = type("PanelHandler", (_Handler,), {
-            "config_body": json.dumps({"endpoint": config.endpoint}).encode()})
+            "config_body": json.dumps({"endpoint": config.endpoint, "vss": config.vss}).encode()})
         try:
             self._httpd = ThreadingHTTPServer((config.host, config.port),
                                               partial(handler, directory=str(config.static_dir)))

@@ -51,3 +51,30 @@ export async function streamSignals(page, names, rateHz) {
   await page.click('button.start-stream');
   await page.waitForFunction(() => window.panelProbe.session.stream.samples > 0, null, { timeout: 10_000 });
 }
+
+/**
+ * Run `body(page, result)` in a fresh chromium page; write `result` (with ok, error and the
+ * page's uncaught errors) as JSON to `resultPath`, keep a screenshot on failure, and exit
+ * with 0 only when the body finished.
+ */
+export async function runPageScript(resultPath, failureShot, body) {
+  const { writeFileSync } = await import('node:fs');
+  const result = { steps: [] };
+  const browser = await launch();
+  const page = await browser.context.newPage();
+  page.on('pageerror', (err) => {
+    result.pageErrors = [...(result.pageErrors || []), err.message];
+  });
+  try {
+    await body(page, result);
+    result.ok = true;
+  } catch (err) {
+    result.ok = false;
+    result.error = String(err.stack || err);
+    await page.screenshot({ path: failureShot }).catch(() => {});
+  } finally {
+    writeFileSync(resultPath, JSON.stringify(result, null, 2));
+    await browser.close();
+  }
+  process.exit(result.ok ? 0 : 1);
+}

@@ -56,6 +56,7 @@ try {
   await tab(page, 'Compute');
   await page.fill('input[name=compute-name-0]', 'az_err_arcsec');
   await page.fill('input[name=compute-expr-0]', 'axis.az.error * 3600 * 180 / pi');
+  await page.fill('input[name=compute-unit-0]', 'arcsec');
   await page.click('button.apply-computes');
   await page.waitForTimeout(400);
   result.computeCheck = await page.evaluate(() => {
@@ -91,6 +92,27 @@ try {
     before, { timeout: 10_000 });
   result.plot = await page.evaluate(() => ({ ...window.panelProbe.probe, samples: window.panelProbe.session.stream.samples, lost: window.panelProbe.session.stream.lost }));
   step('plot');
+  // Axes: the units and tick labels of one plot per signal, then of all in one plot.
+  const redrawn = async () => {
+    const n = await page.evaluate(() => window.panelProbe.probe.plotUpdates);
+    await page.waitForFunction((b) => window.panelProbe.probe.plotUpdates > b + 2, n, { timeout: 10_000 });
+  };
+  await redrawn();
+  result.stackedAxes = await page.evaluate(() => ({ ...window.panelProbe.probe.yAxes }));
+  await page.uncheck('input[name=stacked]');
+  await redrawn();
+  result.allInOneAxes = await page.evaluate(() => ({ ...window.panelProbe.probe.yAxes }));
+  await page.screenshot({ path: join(ARTIFACTS, 'plot-all-in-one.png') });
+  await page.check('input[name=stacked]');
+  // Export the visible window as CSV: every sample, with units in the header.
+  await page.click('button.pause');
+  const [csvFile] = await Promise.all([page.waitForEvent('download'), page.click('button.export-csv')]);
+  const csvPath = join(ARTIFACTS, 'plot-export.csv');
+  await csvFile.saveAs(csvPath);
+  result.csvPath = csvPath;
+  result.csvWindowS = Number(await page.inputValue('input[name=window]'));
+  await page.click('button.pause');
+  step('plot axes and CSV');
 
   // Input: run a trajectory from formulas; meanwhile change a parameter online.
   await tab(page, 'Input');
@@ -99,6 +121,10 @@ try {
   await page.fill('input[name=traj-duration]', env.TRAJ_DURATION_S);
   await page.fill('input[name=traj-step]', env.TRAJ_STEP_S);
   await page.fill('input[name=traj-lead]', '0.5');
+  await page.fill('input[name=traj-ramp]', env.TRAJ_RAMP_S);
+  await page.click('button.preview-trajectory');
+  await page.waitForSelector('[data-testid=traj-preview] canvas');
+  result.previewStatus = await page.textContent('.traj-status');
   await page.click('button.run-trajectory');
   await page.waitForFunction(() => window.panelTrajectory.lastRun !== null);
   step('trajectory started');
@@ -117,6 +143,8 @@ try {
   await tab(page, 'Input');
   await page.waitForFunction(() => window.panelTrajectory.lastRun?.done && !window.panelTrajectory.running, null, { timeout: 20_000 });
   result.trajectory = await page.evaluate(() => JSON.parse(JSON.stringify({ ...window.panelTrajectory.lastRun, status: window.panelTrajectory.status })));
+  result.progress = await page.textContent('.traj-progress');
+  result.logAfterTrajectory = await page.textContent('[data-testid=log]');
   await shot(page, 'Input');
   step('trajectory pushed');
   // The plot while the mount follows the formulas (1.5 s into the run).
@@ -136,7 +164,7 @@ try {
 
   // Every tab saves its state to a JSON file and loads it back.
   result.states = {};
-  for (const name of ['Board', 'Diagnostics', 'Signals', 'Plot', 'Compute', 'Parameters', 'Input']) {
+  for (const name of ['Board', 'Telescope', 'Diagnostics', 'Signals', 'Plot', 'Compute', 'Parameters', 'Input']) {
     await tab(page, name);
     const [file] = await Promise.all([page.waitForEvent('download'), page.click(`#tab-${name} button.save-state`)]);
     const path = join(ARTIFACTS, `state-${name.toLowerCase()}.json`);

@@ -5,7 +5,7 @@ import { test } from 'node:test';
 import { compileExpression } from '../../src/expressions.js';
 import { groupByPrefix } from '../../src/grouping.js';
 import { SeriesStore } from '../../src/series.js';
-import { DEG, defaultTrajectoryFunctions, feedTrajectory, sampleTrajectory, trajectoryAxes } from '../../src/trajectory.js';
+import { DEG, defaultTrajectoryFunctions, feedTrajectory, rampWeight, sampleTrajectory, trajectoryAxes } from '../../src/trajectory.js';
 
 function fill(store, n, rateHz, f, start = 0) {
   const tUs = Float64Array.from({ length: n }, (_, i) => 1e15 + (start + i) * 1e6 / rateHz);
@@ -128,4 +128,26 @@ test('entries group by their dotted prefix', () => {
   const groups = groupByPrefix([{ name: 'b.x' }, { name: 'a.y.z' }, { name: 'top' }, { name: 'a.y.w' }]);
   assert.deepEqual(groups.map((g) => [g.group, g.entries.map((e) => e.name)]),
     [['', ['top']], ['a.y', ['a.y.z', 'a.y.w']], ['b', ['b.x']]]);
+});
+
+test('a ramped trajectory leaves its start and reaches its end at rest, and follows the formula between', () => {
+  const stepS = 0.001;
+  const f = (t) => 5 + 0.3 * Math.sin(2 * Math.PI * 0.5 * t); // full speed at t = 0
+  const p = sampleTrajectory([{ arg: 'az', expr: 'p0 + 0.3 * sin(2 * pi * 0.5 * t)', degrees: false, p0: 5, start: 4.9 }],
+    { durationS: 3, stepS, t0Us: 0, rampS: 1 });
+  const v = p.values[0];
+  assert.equal(v[0], 4.9); // from where the axis is, not from the formula's first value
+  assert.ok(Math.abs(v[p.n - 1] - f(3)) < 1e-12);
+  const speed = (i) => (v[i + 1] - v[i]) / stepS;
+  // the formula alone starts at 0.94 per second; ramped, the first step moves at a millionth of that
+  assert.ok(Math.abs(speed(0)) < 1e-4 && Math.abs(speed(p.n - 2)) < 1e-4, `${speed(0)} ${speed(p.n - 2)}`);
+  // no sample-to-sample speed jump anywhere: the largest change of speed per step is small
+  let worst = 0;
+  for (let i = 1; i < p.n - 1; i++) worst = Math.max(worst, Math.abs(speed(i) - speed(i - 1)));
+  assert.ok(worst < 0.01, `speed jumps by ${worst} per step`);
+  for (let i = 1000; i <= 2000; i++) assert.ok(Math.abs(v[i] - f(i * stepS)) < 1e-12); // between the ramps
+  assert.equal(p.formula[0][0], v[0]); // formula units: not in degrees, so the same values
+  assert.deepEqual([0, 0.5, 1].map(rampWeight), [0, 0.5, 1]);
+  assert.throws(() => sampleTrajectory([{ arg: 'az', expr: 't', p0: 0 }], { durationS: 1, stepS: 0.1, t0Us: 0, rampS: 0.6 }),
+    /shorter than its two ramps/);
 });
