@@ -66,3 +66,17 @@ def test_vs_alpaca_without_a_server_says_what_to_start():
                               "--no-discovery", "--listen", f"127.0.0.1:{free_port()}"])
     assert res.exit_code == 2 and "vs server" in res.output
     assert time.monotonic() - t0 < 120
+
+
+def test_vs_alpaca_needs_the_operator_password_of_a_server_with_passwords():
+    from vss_rig import vs_server_process
+
+    with vs_server_process("--emulator", "--speed", "20", "--start", "2024-05-18T21:00:00Z",
+                           "--operator-password", "op-secret",
+                           "--observer-password", "obs-secret") as srv:
+        base = ["alpaca", "--server", srv.url, "--no-discovery",
+                "--listen", f"127.0.0.1:{free_port()}"]
+        missing = runner.invoke(app, base)
+        observer = runner.invoke(app, ["--password", "obs-secret", *base])
+    assert missing.exit_code == 1 and "password" in missing.output
+    assert observer.exit_code == 1 and "operator" in observer.output

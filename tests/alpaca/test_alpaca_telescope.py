@@ -204,3 +204,10 @@ def test_track_satellite_action_tracks_the_iss_pass(night, scope):
     assert json.loads(scope.Action("OperationStatus", ""))["id"] == op["id"]
     with pytest.raises(ActionNotImplementedException):
         scope.Action("MakeCoffee", "")
+
+
+def test_a_place_below_the_horizon_limit_is_refused_with_the_servers_reason(night, scope):
+    with pytest.raises(InvalidValueException) as exc:
+        scope.SlewToAltAzAsync(200.0, 2.0)
+    assert "elevation" in str(exc.value) and "5" in str(exc.value)
+    assert not scope.Slewing
