@@ -65,8 +65,10 @@ def scope(night):
     t = night.telescope()
     t.Unpark()
     t.AbortSlew()
+    t.Tracking = False
     yield t
     t.AbortSlew()
+    t.Tracking = False
 
 
 def test_the_device_describes_itself_and_its_capabilities_honestly(night):
@@ -81,7 +83,8 @@ def test_the_device_describes_itself_and_its_capabilities_honestly(night):
     assert (t.CanSlewAsync, t.CanSlewAltAzAsync, t.CanPark, t.CanUnpark, t.CanPulseGuide,
             t.CanSetTracking, t.CanSetGuideRates) == (True,) * 7
     assert (t.CanSync, t.CanSyncAltAz, t.CanFindHome, t.CanSetPark, t.CanSetPierSide,
-            t.CanSetRightAscensionRate, t.CanSetDeclinationRate) == (False,) * 7
+            t.CanSetRightAscensionRate, t.CanSetDeclinationRate, t.CanSlew,
+            t.CanSlewAltAz) == (False,) * 9
     assert t.CanMoveAxis(TelescopeAxes.axisPrimary) and not t.CanMoveAxis(TelescopeAxes.axisTertiary)
     assert t.AxisRates(TelescopeAxes.axisPrimary)[0].Maximum > 0
     assert "TrackSatellite" in t.SupportedActions
@@ -115,7 +118,7 @@ def test_slew_to_j2000_coordinates_lands_on_astropys_place_and_tracks(night, sco
     with pytest.raises(InvalidOperationException):  # ASCOM: equatorial slews need Tracking
         scope.SlewToCoordinatesAsync(*j2000_of(*ICRS))
     scope.Tracking = True
-    wait_for(lambda: scope.Tracking and not scope.Slewing, what="tracking to begin")
+    assert scope.Tracking and not scope.Slewing  # holding the sky still: not a slew
     ra_h, dec = j2000_of(*ICRS)
     scope.SlewToCoordinatesAsync(ra_h, dec)
     assert scope.TargetRightAscension == pytest.approx(ra_h)
@@ -127,18 +130,39 @@ def test_slew_to_j2000_coordinates_lands_on_astropys_place_and_tracks(night, sco
     assert math.hypot(d_ra, (scope.Declination - dec) * 3600) < 1.0
 
 
-def test_abort_slew_stops_the_mount_and_tracking(night, scope):
+def az_el_rates(night, wall_s: float = 0.1) -> tuple[float, float]:
+    """Axis rates (deg/s) from two emulator readings `wall_s` apart (mount time ×50)."""
+    a0, e0, t0 = encoders(night, 1)
+    time.sleep(wall_s)
+    a1, e1, t1 = encoders(night, 1)
+    dt = (t1[0] - t0[0]) / 1e6
+    return ((a1[0] - a0[0] + 180) % 360 - 180) / dt, (e1[0] - e0[0]) / dt
+
+
+def test_abort_slew_stops_the_slew_and_tracking_goes_on_where_it_stopped(night, scope):
     scope.Tracking = True
-    wait_for(lambda: not scope.Slewing, what="tracking to begin")
+    assert not scope.Slewing  # holding the sky still is not a slew
     ra_h, dec = j2000_of(ICRS[0] + 60.0, 20.0)
     scope.SlewToCoordinatesAsync(ra_h, dec)
     assert scope.Slewing
     scope.AbortSlew()
-    assert not scope.Slewing and not scope.Tracking
-    az0, el0, _ = encoders(night, 1)
-    time.sleep(0.2)
-    az1, el1, _ = encoders(night, 1)
-    assert abs(az1[0] - az0[0]) * 3600 < 1.0 and abs(el1[0] - el0[0]) * 3600 < 1.0
+    assert not scope.Slewing and scope.Tracking  # ASCOM: tracking as before the slew
+    time.sleep(0.3)  # ~15 mount seconds: the track of where it stopped has joined
+    here = (scope.RightAscension, scope.Declination)
+    time.sleep(0.3)
+    now = (scope.RightAscension, scope.Declination)
+    assert abs(now[0] - here[0]) * 15 * 3600 < 1 and abs(now[1] - here[1]) * 3600 < 1
+    assert abs(now[0] - ra_h) * 15 > 1.0  # it stopped on the way, not at the target
+
+
+def test_abort_slew_with_nothing_slewing_changes_nothing(night, scope):
+    scope.Tracking = True
+    scope.AbortSlew()
+    assert scope.Tracking and not scope.Slewing
+    scope.Tracking = False
+    scope.AbortSlew()
+    assert not scope.Tracking
+    assert max(abs(r) for r in az_el_rates(night)) * 3600 < 1.0
 
 
 def test_park_holds_the_park_position_refuses_slews_and_unpark_releases(night, scope):
@@ -156,29 +180,62 @@ def test_park_holds_the_park_position_refuses_slews_and_unpark_releases(night, s
     assert scope.Azimuth == pytest.approx(100.0, abs=1 / 3600)
 
 
-def test_move_axis_turns_the_axis_at_the_rate_and_stopping_resumes_tracking(night, scope):
+def test_move_axis_turns_each_axis_at_its_rate_and_stopping_both_resumes_tracking(night, scope):
     scope.Tracking = True
-    wait_for(lambda: not scope.Slewing, what="tracking to begin")
     scope.MoveAxis(TelescopeAxes.axisPrimary, 1.5)
     assert scope.Slewing
+    scope.MoveAxis(TelescopeAxes.axisSecondary, -0.5)
     time.sleep(0.3)  # past the run-up (mount time runs ×50 here)
-    az, _el, t_us = encoders(night, 2)
-    while (t_us[1] - t_us[0]) < 2e6:
-        time.sleep(0.05)
-        az2, _e, t2 = encoders(night, 1)
-        az, t_us = np.array([az[0], az2[0]]), np.array([t_us[0], t2[0]])
-    assert (az[1] - az[0]) / ((t_us[1] - t_us[0]) / 1e6) == pytest.approx(1.5, rel=1e-3)
+    az_rate, el_rate = az_el_rates(night)
+    assert az_rate == pytest.approx(1.5, rel=1e-3) and el_rate == pytest.approx(-0.5, rel=1e-3)
+    scope.MoveAxis(TelescopeAxes.axisPrimary, 0.0)
+    time.sleep(0.3)
+    az_rate, el_rate = az_el_rates(night)
+    assert abs(az_rate) < 1e-4 and el_rate == pytest.approx(-0.5, rel=1e-3)
     with pytest.raises(InvalidValueException):
         scope.MoveAxis(TelescopeAxes.axisSecondary, 1000.0)
-    scope.MoveAxis(TelescopeAxes.axisPrimary, 0.0)
-    wait_for(lambda: scope.Tracking and not scope.Slewing, what="tracking to resume")
+    scope.MoveAxis(TelescopeAxes.axisSecondary, 0.0)
+    assert scope.Tracking and not scope.Slewing
+
+
+def test_move_axis_zero_with_no_move_running_leaves_a_slew_alone(night, scope):
+    scope.MoveAxis(TelescopeAxes.axisPrimary, 1.0)
+    scope.SlewToAltAzAsync(150.0, 50.0)  # the slew replaces the hand pad's move
+    scope.MoveAxis(TelescopeAxes.axisSecondary, 0.0)  # nothing moves at rates: no-op
+    wait_for(lambda: not scope.Slewing, what="the slew")
+    assert scope.Azimuth == pytest.approx(150.0, abs=1 / 3600)
+    assert max(abs(r) for r in az_el_rates(night)) * 3600 < 1.0
+
+
+def test_pulse_guide_right_after_tracking_is_turned_on_is_accepted(night, scope):
+    scope.Tracking = True
+    scope.PulseGuide(GuideDirections.guideWest, 1000)  # as ConformU does: at once
+    assert scope.IsPulseGuiding
+    wait_for(lambda: not scope.IsPulseGuiding, what="the pulse to end")
+
+
+def test_connect_disconnect_and_device_state_platform_7(night):
+    t = night.telescope(connect=False)
+    t.Connect()
+    assert not t.Connecting and t.Connected
+    state = {item["Name"]: item["Value"] for item in t.DeviceState}
+    assert {"Altitude", "Azimuth", "RightAscension", "Declination", "SiderealTime", "Slewing",
+            "Tracking", "AtPark", "IsPulseGuiding", "UTCDate", "TimeStamp"} <= set(state)
+    assert state["Altitude"] == pytest.approx(t.Altitude, abs=0.01)
+    t.Disconnect()
+    assert not t.Connected
+    from alpaca.exceptions import NotConnectedException
+
+    with pytest.raises(NotConnectedException):
+        _ = t.Altitude
+    t.Connected = True
 
 
 def test_pulse_guide_moves_the_track_north_by_rate_times_duration(night, scope):
     scope.Tracking = True
-    wait_for(lambda: not scope.Slewing, what="tracking to begin")
     scope.SlewToCoordinatesAsync(*j2000_of(*ICRS))
     wait_for(lambda: not scope.Slewing, what="the slew")
+    time.sleep(0.2)  # a few mount seconds: the track has settled
     dec0 = scope.Declination
     rate = scope.GuideRateDeclination
     scope.PulseGuide(GuideDirections.guideNorth, 2000)
@@ -187,7 +244,7 @@ def test_pulse_guide_moves_the_track_north_by_rate_times_duration(night, scope):
     time.sleep(0.1)  # a few mount seconds of settling
     moved_arcsec = (scope.Declination - dec0) * 3600
     assert moved_arcsec == pytest.approx(rate * 3600 * 2.0, abs=0.3)
-    scope.AbortSlew()
+    scope.Tracking = False
     with pytest.raises(InvalidOperationException):  # not tracking: nothing to guide
         scope.PulseGuide(GuideDirections.guideEast, 500)
 

@@ -127,3 +127,60 @@ def test_a_guide_pulse_without_a_track_is_refused_as_not_tracking():
 
     err = run_lockstep_scenario(START, scenario)
     assert err.code == "not_tracking" and "no sky target" in err.message
+
+
+def test_guide_refuses_a_rate_or_a_step_that_is_a_slew_not_a_guide_pulse():
+    async def scenario(vss, clock):
+        c = vss.client()
+        await c.request("track", {"ra_deg": RA_DEG, "dec_deg": DEC_DEG})
+        errors = []
+        for params in ({"north_arcsec": 36000.0, "rate_arcsec_s": 1e6},
+                       {"north_arcsec": 10.0, "rate_arcsec_s": 1e6},
+                       {"north_arcsec": 3600.0}):
+            with pytest.raises(VssRequestError) as exc:
+                await c.request("guide", params)
+            errors.append(exc.value)
+        return errors
+
+    for err in run_lockstep_scenario(START, scenario):
+        assert err.code == "bad_request" and ("rate_arcsec_s" in err.message
+                                              or "slew instead" in err.message)
+
+
+def test_a_pulse_given_while_the_track_is_still_slewing_is_part_of_the_place_it_joins():
+    site = load_site()
+
+    async def scenario(vss, clock):
+        c = vss.client()
+        op = await c.request("track", {"ra_deg": RA_DEG, "dec_deg": DEC_DEG,
+                                       "answer_on_accept": True})
+        assert op["phase"] in ("starting", "preparing")
+        await c.request("guide", {"north_arcsec": 30.0})
+        while (await c.request("status"))["operation"]["phase"] != "tracking":
+            await clock.sleep(1.0)
+        await clock.sleep(5.0)
+        return [await encoders(vss) for _ in range(3)]
+
+    az, el, t_us = (np.array(x) for x in zip(*run_lockstep_scenario(START, scenario), strict=True))
+    shifted = radec_truth(RA_DEG, DEC_DEG + 30 / 3600, t_us, site)
+    assert sky_sep_arcsec(az, el, *shifted).max() < 0.3
+
+
+def test_finished_pulses_fold_into_one_offset_without_moving_the_path():
+    from virtualstar.server.guiding import FOLD_AFTER_US, GuideOffsets
+
+    rng = np.random.default_rng(3)
+    offsets, reference = GuideOffsets(), GuideOffsets()
+    t0 = 1_700_000_000_000_000
+    for k in range(500):
+        n, e = rng.normal(0, 2, 2)
+        for g in (offsets, reference):
+            g.add(float(n), float(e), 7.52, t0 + k * 2_000_000, 50_000)
+    later = np.array([t0 + 500 * 2_000_000 + FOLD_AFTER_US * 2], np.int64)
+    zeros = np.zeros(1)
+    offsets.apply(later, zeros + 1.0, zeros + 0.7, zeros, zeros, 0.9)  # samples: folds
+    assert len(offsets.pulses) < 20 < len(reference.pulses)
+    folded = offsets.sky_offsets(later)
+    full = reference.sky_offsets(later)
+    assert np.allclose(folded, full, rtol=0, atol=1e-15)
+    assert offsets.total_arcsec() == pytest.approx(reference.total_arcsec(), abs=1e-9)

@@ -1,8 +1,10 @@
 """The Alpaca device API rules, without I/O: parameters, transaction ids, errors, replies.
 
-* Parameter names are case-insensitive (GET: the query string; PUT: the form body).
+* Parameter names are case-insensitive in a GET's query string and exact in a PUT's form
+  body (as ConformU checks: a PUT parameter in the wrong case is missing, HTTP 400; a
+  mis-cased ClientTransactionID in a PUT is ignored).
 * `ClientID` and `ClientTransactionID` are optional unsigned 32-bit integers; a value that
-  is not one is a bad request (HTTP 400). The reply echoes ClientTransactionID (0 when
+  is not one (an empty one included) is a bad request (HTTP 400). The reply echoes ClientTransactionID (0 when
   absent) and carries a ServerTransactionID counting from 1.
 * A parameter that is missing or cannot be read as its type is HTTP 400 with a text body;
   a value that reads but is out of range is an ASCOM error (HTTP 200, InvalidValue).
@@ -51,21 +53,27 @@ class BadParameter(ValueError):
 
 @dataclass(frozen=True)
 class Params:
-    """A request's parameters with case-insensitive names (the first value of each)."""
+    """A request's parameters (the first value of each name): names compared without case
+    (a GET's query string) or exactly (a PUT's form body, `exact`)."""
 
     values: dict[str, str]
+    exact: bool = False
 
     @classmethod
-    def from_pairs(cls, pairs: Iterable[tuple[str, str]]) -> Params:
+    def from_pairs(cls, pairs: Iterable[tuple[str, str]], *, exact: bool = False) -> Params:
         values: dict[str, str] = {}
         for name, value in pairs:
-            values.setdefault(name.lower(), value)
-        return cls(values)
+            values.setdefault(name if exact else name.lower(), value)
+        return cls(values, exact)
+
+    def get(self, name: str) -> str | None:
+        return self.values.get(name if self.exact else name.lower())
 
     def text(self, name: str) -> str:
-        value = self.values.get(name.lower())
+        value = self.get(name)
         if value is None:
-            raise BadParameter(f"parameter {name} is missing")
+            hint = " (PUT parameter names are case-sensitive)" if self.exact else ""
+            raise BadParameter(f"parameter {name} is missing{hint}")
         return value
 
     def number(self, name: str) -> float:
@@ -98,11 +106,13 @@ class Params:
         return self._uint32("ClientID"), self._uint32("ClientTransactionID")
 
     def _uint32(self, name: str) -> int:
-        raw = self.values.get(name.lower())
-        if raw is None or raw == "":
+        raw = self.get(name)
+        if raw is None:
             return 0
         try:
-            value = int(raw.strip())
+            if raw != raw.strip():
+                raise ValueError(raw)
+            value = int(raw)
         except ValueError:
             raise BadParameter(f"{name}={raw!r} is not an unsigned 32-bit integer") from None
         if not 0 <= value <= _UINT32_MAX:

@@ -48,7 +48,7 @@ def build_app(device: AlpacaTelescope, *, allowed_origins: tuple[str, ...] | Non
     async def params_of(request: web.Request) -> Params:
         if request.method == "PUT":
             form = await request.post()
-            return Params.from_pairs((k, str(v)) for k, v in form.items())
+            return Params.from_pairs(((k, str(v)) for k, v in form.items()), exact=True)
         return Params.from_pairs(request.query.items())
 
     @web.middleware
@@ -164,7 +164,6 @@ async def serve_alpaca(vss, *, host: str = "127.0.0.1", port: int = DEFAULT_PORT
         log.warning("Alpaca façade listening on %s: every client on that network may move the "
                     "telescope", host)
     device = AlpacaTelescope(vss, options)
-    device.start()
     app = build_app(device, allowed_origins=check_allowed_origins(allowed_origins),
                     location=location)
     runner = web.AppRunner(app, access_log=None)

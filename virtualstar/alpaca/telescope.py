@@ -15,11 +15,9 @@ place; SiderealTime the local apparent sidereal time from ERFA at mount time.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import json
 import logging
-import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
@@ -46,8 +44,8 @@ __all__ = ["AlpacaTelescope", "TelescopeOptions"]
 log = logging.getLogger("virtualstar.alpaca")
 
 SIDEREAL_DEG_S = 15.041067 / 3600.0  # the sidereal rate on the sky (degrees per second)
-ACCEPT_TIMEOUT_S = 60.0  # wall seconds an *Async member waits for the VSS to accept
-MOVING_PHASES = frozenset({"starting", "preparing", "slewing", "joining", "settling"})
+MOVING_PHASES = frozenset({"starting", "preparing", "slewing", "joining", "settling",
+                           "interrupted", "ending", "waiting"})
 ENDED_PHASES = frozenset({"done", "failed", "aborted"})
 ACTIONS = ("TrackSatellite", "OperationStatus")
 
@@ -99,43 +97,25 @@ def not_implemented(method: str, name: str, why: str) -> None:
 
 
 class AlpacaTelescope:
-    """Telescope device 0: ITelescopeV4 members over a VSS client (`request`, `events`)."""
+    """Telescope device 0: ITelescopeV4 members over a VSS client (anything with `request`)."""
 
     def __init__(self, vss, options: TelescopeOptions | None = None) -> None:
         self.vss = vss
         self.options = options or TelescopeOptions()
         self.connected = False
-        self.target: tuple[float, float] | None = None  # TargetRightAscension (h), Declination
+        self.target: tuple[float | None, float | None] | None = None  # TargetRA (h), TargetDec
         self.slew_settle_s = 0
         self.guide_rate_ra_deg_s = 0.5 * SIDEREAL_DEG_S
         self.guide_rate_dec_deg_s = 0.5 * SIDEREAL_DEG_S
-        self.move_rates = [0.0, 0.0]  # MoveAxis rates (deg/s) of the primary and secondary axes
-        self.track_after_move = False
-        self.pulse_end_us = 0
+        self.track_after_move = False  # Tracking was on when the hand pad started
+        self.pulse: tuple[int, int] = (0, 0)  # (operation id, end µs) of the latest guide pulse
         self.unparked_op: int | None = None  # the park operation Unpark released
-        self.latest_op_id = 0
-        self._op_seen = asyncio.Event()
-        self._pump: asyncio.Task | None = None
-        self._running: set[asyncio.Task] = set()
+        self.quiet_ops: set[int] = set()  # tracks started to hold the sky still: not slews
         self._eop: EarthOrientation | None = None
 
     # ------------------------------------------------------------------ plumbing
-    def start(self) -> None:
-        """Follow the VSS's operation events (to know when an operation was accepted)."""
-        async def pump() -> None:
-            async for kind, data in self.vss.events():
-                if kind == "operation" and isinstance(data.get("id"), int):
-                    self.latest_op_id = max(self.latest_op_id, data["id"])
-                    self._op_seen.set()
-
-        self._pump = asyncio.get_running_loop().create_task(pump(), name="alpaca-events")
-
     async def close(self) -> None:
-        tasks = [t for t in (self._pump, *self._running) if t is not None]
-        for task in tasks:
-            task.cancel()
-        if tasks:
-            await asyncio.wait(tasks)
+        """Nothing runs in the background: every request is answered in its own call."""
 
     async def handle(self, method: str, name: str, params: Params) -> Any:
         """Run one member; raise AlpacaError for the reply, KeyError for an unknown member."""
@@ -161,36 +141,17 @@ class AlpacaTelescope:
             raise AlpacaError(NOT_CONNECTED, f"the VirtualStar Server does not answer: {exc}") \
                 from None
 
-    async def begin(self, cmd: str, params: dict[str, Any]) -> None:
-        """Send an operation and return once the VSS accepted it (or raise its refusal).
+    async def begin(self, cmd: str, params: dict[str, Any], *, quiet: bool = False) -> dict:
+        """Start an operation; return it once the VSS accepted it (or raise its refusal)."""
+        op = await self.call(cmd, {**params, "answer_on_accept": True})
+        if quiet:
+            self.quiet_ops.add(int(op["id"]))
+        return op
 
-        The VSS answers motion commands only when they have landed; acceptance is the
-        `operation` event of a newer operation than any seen before.
-        """
-        current = (await self.call("status")).get("operation") or {}
-        # an event of the operation running now must not pass for the new one's acceptance
-        before = max(self.latest_op_id, int(current.get("id") or 0))
-        task = asyncio.get_running_loop().create_task(self.call(cmd, params, None),
-                                                      name=f"alpaca-{cmd}")
-        self._running.add(task)
-        task.add_done_callback(self._finished)
-        deadline = time.monotonic() + ACCEPT_TIMEOUT_S
-        while not task.done() and self.latest_op_id <= before:
-            self._op_seen.clear()
-            seen = asyncio.ensure_future(self._op_seen.wait())
-            await asyncio.wait({task, seen}, timeout=max(0.0, deadline - time.monotonic()),
-                               return_when=asyncio.FIRST_COMPLETED)
-            seen.cancel()
-            if time.monotonic() > deadline:
-                raise AlpacaError(DRIVER_ERROR, f"the VirtualStar Server did not accept {cmd} "
-                                  f"within {ACCEPT_TIMEOUT_S:g} s")
-        if task.done() and not task.cancelled() and task.exception() is not None:
-            raise task.exception()  # type: ignore[misc]
-
-    def _finished(self, task: asyncio.Task) -> None:
-        self._running.discard(task)
-        if not task.cancelled() and task.exception() is not None:
-            log.info("%s ended: %s", task.get_name(), task.exception())
+    async def track_here(self, st: dict[str, Any]) -> None:
+        """Track the sky where the telescope points (Tracking on; after an abort or a move)."""
+        await self.begin("track", {"ra_deg": st["radec"]["ra_deg"],
+                                   "dec_deg": st["radec"]["dec_deg"]}, quiet=True)
 
     async def status(self) -> dict[str, Any]:
         st = await self.call("status")
@@ -217,15 +178,35 @@ class AlpacaTelescope:
 
     def is_slewing(self, st: dict[str, Any]) -> bool:
         op = self._op(st)
-        if op is None:
-            return False
+        if op is None or op["phase"] in ENDED_PHASES and op["kind"] != "move":
+            return self._settling(op, st)
         if op["kind"] == "move":
             return op["phase"] not in ENDED_PHASES
+        if op["id"] in self.quiet_ops:
+            return False
+        if op["kind"] == "track_satellite" and op["phase"] in ("waiting", "pass planned"):
+            return False  # holding for a pass that has not risen: not moving
         if op["phase"] in MOVING_PHASES:
             return True
-        landed = op["info"].get("landed_us")
+        return self._settling(op, st)
+
+    def _settling(self, op: dict[str, Any] | None, st: dict[str, Any]) -> bool:
+        landed = None if op is None else op["info"].get("landed_us")
         return bool(self.slew_settle_s and landed
                     and st["mount_time_us"] < landed + self.slew_settle_s * 1_000_000)
+
+    def move_rates(self, st: dict[str, Any]) -> list[float]:
+        """The hand pad's axis rates (deg/s): those of the running VSS move, else zero."""
+        op = self._op(st)
+        if op is None or op["kind"] != "move" or op["phase"] in ENDED_PHASES:
+            return [0.0, 0.0]
+        return [float(op["info"].get("az_rate_deg_s", 0.0)),
+                float(op["info"].get("el_rate_deg_s", 0.0))]
+
+    def is_pulse_guiding(self, st: dict[str, Any]) -> bool:
+        op = self._op(st)
+        op_id, end_us = self.pulse
+        return op is not None and op["id"] == op_id and st["mount_time_us"] < end_us
 
     def at_park(self, st: dict[str, Any]) -> bool:
         op = self._op(st)
@@ -321,15 +302,13 @@ for _cmd in ("commandblind", "commandbool", "commandstring"):
 @member("PUT", "action")
 async def _action(dev: AlpacaTelescope, p: Params) -> Any:
     name = p.text("Action")
-    params = p.values.get("parameters", "")
+    params = p.get("Parameters") or ""
     if name.lower() == "tracksatellite":
         if not params.strip():
             raise AlpacaError(INVALID_VALUE, "TrackSatellite: Parameters must hold the TLE "
                               "(name line and the two element lines)")
         await dev.refuse_if_parked("TrackSatellite")
-        await dev.begin("track", {"tle": params})
-        op = dev._op(await dev.status())
-        return json.dumps(op)
+        return json.dumps(await dev.begin("track", {"tle": params}))
     if name.lower() == "operationstatus":
         return json.dumps(dev._op(await dev.status()))
     raise AlpacaError(ACTION_NOT_IMPLEMENTED, f"action {name!r} is not supported; supported: "
@@ -342,7 +321,7 @@ async def _device_state(dev: AlpacaTelescope, p: Params) -> Any:
     ra, dec = dev.j2000(st)
     values = {"Altitude": st["observed"]["el_deg"], "AtHome": False, "AtPark": dev.at_park(st),
               "Azimuth": st["observed"]["az_deg"] % 360.0, "Declination": dec,
-              "IsPulseGuiding": st["mount_time_us"] < dev.pulse_end_us,
+              "IsPulseGuiding": dev.is_pulse_guiding(st),
               "RightAscension": ra / 15.0,
               "SiderealTime": local_sidereal_time_hours(st["mount_time_us"],
                                                         st["site"]["lon_deg"], dev.eop),
@@ -363,7 +342,7 @@ for _name_, _value in {
         "athome": False, "canfindhome": False, "canpark": True, "canpulseguide": True,
         "cansetdeclinationrate": False, "cansetguiderates": True, "cansetpark": False,
         "cansetpierside": False, "cansetrightascensionrate": False, "cansettracking": True,
-        "canslew": True, "canslewasync": True, "canslewaltaz": True, "canslewaltazasync": True,
+        "canslew": False, "canslewasync": True, "canslewaltaz": False, "canslewaltazasync": True,
         "cansync": False, "cansyncaltaz": False, "canunpark": True,
         "trackingrates": [0],  # driveSidereal only
         "rightascensionrate": 0.0, "declinationrate": 0.0}.items():
@@ -379,6 +358,10 @@ not_implemented("GET", "destinationsideofpier", "an alt-az mount has no pier sid
 not_implemented("PUT", "findhome", "the direct-drive axes have absolute encoders: no homing "
                 "(CanFindHome is false)")
 not_implemented("PUT", "setpark", "the park position is the mount mapping's (CanSetPark is false)")
+for _slew in ("slewtocoordinates", "slewtotarget", "slewtoaltaz"):
+    not_implemented("PUT", _slew, "synchronous slews are not offered through Alpaca (the ASCOM "
+                    "slew FAQ: CanSlew and CanSlewAltAz are false); use the *Async member and "
+                    "poll Slewing")
 for _sync in ("synctocoordinates", "synctoaltaz", "synctotarget"):
     not_implemented("PUT", _sync, "VirtualStar corrects pointing with a fitted pointing model "
                     "(vs pointing-run, pointing-model fit), not with syncs (CanSync is false)")
@@ -505,7 +488,7 @@ async def _set_tracking(dev: AlpacaTelescope, p: Params) -> Any:
         return
     if dev.at_park(st):
         raise AlpacaError(INVALID_WHILE_PARKED, "Tracking: the telescope is parked; Unpark first")
-    await dev.begin("track", {"ra_deg": st["radec"]["ra_deg"], "dec_deg": st["radec"]["dec_deg"]})
+    await dev.track_here(st)
 
 
 @member("GET", "trackingrate")
@@ -523,7 +506,7 @@ async def _set_tracking_rate(dev: AlpacaTelescope, p: Params) -> Any:
 
 @member("GET", "ispulseguiding")
 async def _is_guiding(dev: AlpacaTelescope, p: Params) -> Any:
-    return (await dev.status())["mount_time_us"] < dev.pulse_end_us
+    return dev.is_pulse_guiding(await dev.status())
 
 
 def _stored(name: str, param: str, attribute: str, check: Callable[[float], bool],
@@ -575,31 +558,19 @@ async def _set_target_dec(dev: AlpacaTelescope, p: Params) -> Any:
     dev.target = (dev.target[0] if dev.target else None, dec)  # type: ignore[assignment]
 
 
-async def _slew_radec(dev: AlpacaTelescope, ra_h: float, dec_deg: float, *, wait: bool) -> None:
-    st = await dev.refuse_if_parked("slew")
+async def _slew_radec(dev: AlpacaTelescope, ra_h: float, dec_deg: float) -> None:
+    st = await dev.refuse_if_parked("SlewToCoordinatesAsync")
     if not dev.is_tracking(st):
-        raise AlpacaError(INVALID_OPERATION, "SlewToCoordinates: Tracking is off; set Tracking "
-                          "true first (an equatorial target is tracked once reached)")
+        raise AlpacaError(INVALID_OPERATION, "SlewToCoordinatesAsync: Tracking is off; set "
+                          "Tracking true first (an equatorial target is tracked once reached)")
     ra, dec = j2000_to_icrs(ra_h * 15.0, dec_deg)
     dev.target = (ra_h, dec_deg)
-    if wait:
-        await dev.call("slew", {"ra_deg": ra, "dec_deg": dec}, None)
-    else:
-        await dev.begin("slew", {"ra_deg": ra, "dec_deg": dec})
-
-
-async def _radec_args(dev: AlpacaTelescope, p: Params) -> tuple[float, float]:
-    return _ra_hours(p, "RightAscension"), _dec_deg(p, "Declination")
+    await dev.begin("slew", {"ra_deg": ra, "dec_deg": dec})
 
 
 @member("PUT", "slewtocoordinatesasync")
 async def _slew_coords_async(dev: AlpacaTelescope, p: Params) -> Any:
-    await _slew_radec(dev, *await _radec_args(dev, p), wait=False)
-
-
-@member("PUT", "slewtocoordinates")
-async def _slew_coords(dev: AlpacaTelescope, p: Params) -> Any:
-    await _slew_radec(dev, *await _radec_args(dev, p), wait=True)
+    await _slew_radec(dev, _ra_hours(p, "RightAscension"), _dec_deg(p, "Declination"))
 
 
 def _target_or_refuse(dev: AlpacaTelescope) -> tuple[float, float]:
@@ -610,45 +581,35 @@ def _target_or_refuse(dev: AlpacaTelescope) -> tuple[float, float]:
 
 @member("PUT", "slewtotargetasync")
 async def _slew_target_async(dev: AlpacaTelescope, p: Params) -> Any:
-    await _slew_radec(dev, *_target_or_refuse(dev), wait=False)
+    await _slew_radec(dev, *_target_or_refuse(dev))
 
 
-@member("PUT", "slewtotarget")
-async def _slew_target(dev: AlpacaTelescope, p: Params) -> Any:
-    await _slew_radec(dev, *_target_or_refuse(dev), wait=True)
-
-
-async def _slew_altaz(dev: AlpacaTelescope, p: Params, *, wait: bool) -> None:
+@member("PUT", "slewtoaltazasync")
+async def _slew_altaz_async(dev: AlpacaTelescope, p: Params) -> Any:
     az, alt = p.number("Azimuth"), p.number("Altitude")
     if not 0.0 <= az < 360.0:
         raise AlpacaError(INVALID_VALUE, f"Azimuth={az:g}: expected 0 <= Azimuth < 360 degrees")
     if not -90.0 <= alt <= 90.0:
         raise AlpacaError(INVALID_VALUE, f"Altitude={alt:g}: expected -90..90 degrees")
-    st = await dev.refuse_if_parked("SlewToAltAz")
+    st = await dev.refuse_if_parked("SlewToAltAzAsync")
     if dev.is_tracking(st):
-        raise AlpacaError(INVALID_OPERATION, "SlewToAltAz: Tracking is on; set Tracking false "
-                          "first (an alt-az place is held, not tracked)")
-    if wait:
-        await dev.call("slew", {"az_deg": az, "el_deg": alt}, None)
-    else:
-        await dev.begin("slew", {"az_deg": az, "el_deg": alt})
-
-
-@member("PUT", "slewtoaltazasync")
-async def _slew_altaz_async(dev: AlpacaTelescope, p: Params) -> Any:
-    await _slew_altaz(dev, p, wait=False)
-
-
-@member("PUT", "slewtoaltaz")
-async def _slew_altaz_sync(dev: AlpacaTelescope, p: Params) -> Any:
-    await _slew_altaz(dev, p, wait=True)
+        raise AlpacaError(INVALID_OPERATION, "SlewToAltAzAsync: Tracking is on; set Tracking "
+                          "false first (an alt-az place is held, not tracked)")
+    await dev.begin("slew", {"az_deg": az, "el_deg": alt})
 
 
 @member("PUT", "abortslew")
 async def _abort(dev: AlpacaTelescope, p: Params) -> Any:
-    await dev.refuse_if_parked("AbortSlew")
-    dev.move_rates = [0.0, 0.0]
+    """Stop a slew or a hand-pad move; tracking returns to what it was before (ASCOM)."""
+    st = await dev.refuse_if_parked("AbortSlew")
+    if not dev.is_slewing(st):
+        return  # nothing moves: nothing to abort (tracking goes on)
+    op = dev._op(st) or {}
+    resume = (dev.track_after_move if op.get("kind") == "move"
+              else dev.is_tracking(st))  # an equatorial slew needed Tracking on
     await dev.call("stop")
+    if resume:
+        await dev.track_here(await dev.status())
 
 
 @member("PUT", "park")
@@ -656,7 +617,6 @@ async def _park(dev: AlpacaTelescope, p: Params) -> Any:
     st = await dev.status()
     if dev.at_park(st):
         return
-    dev.move_rates = [0.0, 0.0]
     await dev.call("park", {"wait": False})
     dev.unparked_op = None
 
@@ -680,21 +640,20 @@ async def _move_axis(dev: AlpacaTelescope, p: Params) -> Any:
     top = st["limits"]["az_max_rate_deg_s" if axis == 0 else "el_max_rate_deg_s"]
     if abs(rate) > top:
         raise AlpacaError(INVALID_VALUE, f"Rate={rate:g}: beyond AxisRates ±{top:g} deg/s")
-    if dev.move_rates == [0.0, 0.0]:
-        dev.track_after_move = dev.is_tracking(st)
-    rates = list(dev.move_rates)
+    before = dev.move_rates(st)
+    rates = list(before)
     rates[axis] = rate
-    dev.move_rates = rates
+    if rates == before:
+        return  # e.g. MoveAxis(axis, 0) with nothing moving
+    if before == [0.0, 0.0]:
+        dev.track_after_move = dev.is_tracking(st)
     if rates != [0.0, 0.0]:
-        await dev.begin("move", {"az_rate_deg_s": rates[0], "el_rate_deg_s": rates[1]})
+        # answered once the axes move: a refusal (a limit, a zone) comes back here
+        await dev.call("move", {"az_rate_deg_s": rates[0], "el_rate_deg_s": rates[1]}, None)
         return
+    await dev.call("stop")
     if dev.track_after_move:  # tracking resumes where the hand pad left the telescope
-        await dev.call("stop")
-        st = await dev.status()
-        await dev.begin("track", {"ra_deg": st["radec"]["ra_deg"],
-                                  "dec_deg": st["radec"]["dec_deg"]})
-    else:
-        await dev.call("stop")
+        await dev.track_here(await dev.status())
 
 
 _GUIDE = {0: (1.0, 0.0), 1: (-1.0, 0.0), 2: (0.0, 1.0), 3: (0.0, -1.0)}  # north, east signs
@@ -721,8 +680,11 @@ async def _pulse_guide(dev: AlpacaTelescope, p: Params) -> Any:
     pulse = await dev.call("guide", {"north_arcsec": north * size_arcsec,
                                      "east_arcsec": east * size_arcsec,
                                      "rate_arcsec_s": rate_deg_s * 3600.0})
-    dev.pulse_end_us = max(dev.pulse_end_us, int(pulse["end_us"]))
+    op_id, end_us = dev.pulse
+    if op_id != pulse["id"]:
+        end_us = 0
+    dev.pulse = (int(pulse["id"]), max(end_us, int(pulse["end_us"])))
 
 
 with contextlib.suppress(NameError):
-    del _cmd, _name_, _value, _sync
+    del _cmd, _name_, _value, _sync, _slew

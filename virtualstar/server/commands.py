@@ -40,11 +40,12 @@ class TargetParams:
     az_deg: float | None = None
     el_deg: float | None = None
     allow_sun: bool = False  # operators only: ignore the Sun/Moon zones for this operation
+    answer_on_accept: bool = False  # answer once the checks passed and the operation began
 
     @property
     def target_fields(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(TargetParams)
-                if f.name != "allow_sun"}
+                if f.name not in ("allow_sun", "answer_on_accept")}
 
 
 @dataclass(frozen=True)
@@ -170,7 +171,9 @@ def _plain_match(value: Any, allowed: tuple) -> bool:
     return any(kind in allowed and isinstance(value, kind) for kind in (int, str, dict, list))
 
 
-async def _result(op: Operation, *, wait_done: bool) -> dict[str, Any]:
+async def _result(op: Operation, *, wait_done: bool, accepted: bool = False) -> dict[str, Any]:
+    if accepted:  # the checks passed under the supervisor's lock: the operation is under way
+        return op.as_dict()
     fut = op.done if wait_done else op.begun
     await asyncio.shield(fut)
     if op.phase in (Phase.FAILED, Phase.ABORTED):
@@ -192,9 +195,10 @@ async def _slew(t: Telescope, p: TargetParams) -> Any:
     target, name, fixed = parse_target(p.target_fields)
     if fixed is not None:
         op = await t.slew_altaz(*fixed, allow_sun=p.allow_sun)
+        return await _result(op, wait_done=False, accepted=p.answer_on_accept)
     else:
         op = await t.follow_target(target, name, kind="slew", allow_sun=p.allow_sun)
-    return await _result(op, wait_done=False)
+    return await _result(op, wait_done=False, accepted=p.answer_on_accept)
 
 
 async def _track(t: Telescope, p: TrackParams) -> Any:
@@ -205,7 +209,7 @@ async def _track(t: Telescope, p: TrackParams) -> Any:
             raise BadRequest("track: give either a TLE or a sky target, not both")
         sat = _satellite(p.tle, p.sat)
         op = await t.track_satellite(sat, max_wait_s=p.max_wait_s, allow_sun=p.allow_sun)
-        return await _result(op, wait_done=p.wait)
+        return await _result(op, wait_done=p.wait, accepted=p.answer_on_accept)
     if p.sat is not None:
         raise BadRequest("track: 'sat' selects a satellite inside 'tle'; no TLE was given")
     target, name, fixed = parse_target(p.target_fields)
@@ -213,7 +217,7 @@ async def _track(t: Telescope, p: TrackParams) -> Any:
         raise BadRequest("track: a fixed az/el does not move; use slew for it")
     op = await t.follow_target(target, name, kind="track", duration_s=p.duration_s,
                                allow_sun=p.allow_sun)
-    return await _result(op, wait_done=p.wait)
+    return await _result(op, wait_done=p.wait, accepted=p.answer_on_accept)
 
 
 def _satellite(tle: str, name: str | None):

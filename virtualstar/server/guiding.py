@@ -21,7 +21,11 @@ import numpy as np
 
 from virtualstar.astro.constants import ARCSEC_PER_RAD
 
-__all__ = ["GuideOffsets", "GuidePulse"]
+__all__ = ["GuideOffsets", "GuidePulse", "MAX_GUIDE_RATE_ARCSEC_S", "MAX_GUIDE_STEP_ARCSEC"]
+
+MAX_GUIDE_RATE_ARCSEC_S = 150.0  # ten times the sidereal rate: a guide rate, not a slew
+MAX_GUIDE_STEP_ARCSEC = 600.0  # one pulse moves at most ten arcminutes
+FOLD_AFTER_US = 60_000_000  # pulses ended this long before the newest sample become a constant
 
 
 @dataclass(frozen=True)
@@ -40,6 +44,8 @@ class GuideOffsets:
 
     pulses: list[GuidePulse] = field(default_factory=list)
     sampled_until_us: int | None = None  # the newest time the path has sampled
+    base_north_rad: float = 0.0  # the offset of pulses long ended (folded: a night of pulses
+    base_east_rad: float = 0.0  # costs one sum, not thousands)
 
     def add(self, north_arcsec: float, east_arcsec: float, rate_arcsec_s: float,
             not_before_us: int, step_us: int) -> GuidePulse:
@@ -60,15 +66,26 @@ class GuideOffsets:
 
     def total_arcsec(self) -> tuple[float, float]:
         """The offset once every pulse has run: (north, east) arcseconds."""
-        n = sum(p.north_rad_s * (p.end_us - p.start_us) * 1e-6 for p in self.pulses)
-        e = sum(p.east_rad_s * (p.end_us - p.start_us) * 1e-6 for p in self.pulses)
+        n = self.base_north_rad + sum(p.north_rad_s * (p.end_us - p.start_us) * 1e-6
+                                      for p in self.pulses)
+        e = self.base_east_rad + sum(p.east_rad_s * (p.end_us - p.start_us) * 1e-6
+                                     for p in self.pulses)
         return n * ARCSEC_PER_RAD, e * ARCSEC_PER_RAD
+
+    def _fold(self) -> None:
+        if self.sampled_until_us is None:
+            return
+        before = self.sampled_until_us - FOLD_AFTER_US
+        for p in [p for p in self.pulses if p.end_us < before]:
+            self.base_north_rad += p.north_rad_s * (p.end_us - p.start_us) * 1e-6
+            self.base_east_rad += p.east_rad_s * (p.end_us - p.start_us) * 1e-6
+            self.pulses.remove(p)
 
     def sky_offsets(self, t_us: np.ndarray) -> tuple[np.ndarray, ...]:
         """Return (north, east, north rate, east rate) at mount times: radians, rad/s."""
         t = np.asarray(t_us, np.int64)
-        north = np.zeros(t.shape)
-        east = np.zeros(t.shape)
+        north = np.full(t.shape, self.base_north_rad)
+        east = np.full(t.shape, self.base_east_rad)
         north_rate = np.zeros(t.shape)
         east_rate = np.zeros(t.shape)
         for p in self.pulses:
@@ -86,7 +103,8 @@ class GuideOffsets:
         t = np.asarray(t_us, np.int64)
         if self.sampled_until_us is None or t[-1] > self.sampled_until_us:
             self.sampled_until_us = int(t[-1])
-        if not self.pulses or t[-1] < self.pulses[0].start_us:
+            self._fold()
+        if not self.pulses and self.base_north_rad == 0.0 and self.base_east_rad == 0.0:
             return az_rad, el_rad, az_rate, el_rate
         north, east, north_rate, east_rate = self.sky_offsets(t)
         ha, dec = erfa.ae2hd(np.mod(az_rad, 2 * math.pi), el_rad, lat_rad)

@@ -80,7 +80,7 @@ PASS_LOOKBACK_S = 1800.0  # predictions start this far back, so a pass in progre
 MIN_JOIN_TRACK_S = 10.0  # a finite path is joined only if this much of it is left
 RUN_UP_STEP_US = 2_000_000  # a run-up inside a zone moves the join this much later
 MOVE_LOOKAHEAD_S = 3600.0  # a move at rates is checked against the limits and zones this far
-MOVE_CHECK_STEP_S = 1.0  # ... on this grid of mount time
+MOVE_CHECK_STEP_DEG = 0.1  # ... on a grid of mount time that moves at most this far a step
 LIMIT_MARGIN_DEG = 0.5  # a move at rates comes to rest this far inside an axis limit
 
 
@@ -324,12 +324,13 @@ def _move_end(t: Telescope, start: np.ndarray, v: np.ndarray, join_us: int, ramp
         ends.append(((edge - start[axis]) / v[axis] - stop_s, f"stopped before {name} "
                      f"({math.degrees(edge):.1f}°)"))
     run_s, why = min(ends)
-    grid_s = np.arange(-ramp_s, max(run_s, 0.0) + stop_s + MOVE_CHECK_STEP_S, MOVE_CHECK_STEP_S)
+    step_s = min(1.0, MOVE_CHECK_STEP_DEG / math.degrees(float(np.max(np.abs(v)))))
+    grid_s = np.arange(-ramp_s, max(run_s, 0.0) + stop_s + step_s, step_s)
     t_us = join_us + np.round(grid_s * 1e6).astype(np.int64)
     hit = check_places(np.mod(start[0] + v[0] * grid_s, 2 * math.pi), start[1] + v[1] * grid_s,
                        t_us, t.safety.zones(allow_sun=allow_sun), t.config.site, t.eop)
     if hit is not None:
-        hit_s = float(grid_s[hit.index]) - MOVE_CHECK_STEP_S - stop_s
+        hit_s = float(grid_s[hit.index]) - step_s - stop_s
         if hit_s < run_s:
             run_s, why = hit_s, f"stopped before: {hit.describe('the mount')}"
     return join_us + int(run_s * 1e6), why

@@ -54,7 +54,7 @@ from .exceptions import (
     VssError,
 )
 from .feeder import FeederConfig
-from .guiding import GuideOffsets
+from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, GuideOffsets
 from .motion import Motion
 from .mount_link import MountLink
 from .operations import Operation, Phase
@@ -498,19 +498,28 @@ class Telescope:
 
     async def guide(self, north_arcsec: float, east_arcsec: float,
                     rate_arcsec_s: float) -> dict[str, Any]:
-        """Offset the sky target being tracked north/east at `rate_arcsec_s` (a guide pulse)."""
-        if not rate_arcsec_s > 0:
-            raise BadRequest(f"guide: rate_arcsec_s={rate_arcsec_s:g}: expected > 0")
-        if north_arcsec == 0.0 and east_arcsec == 0.0:
+        """Offset the sky target being tracked north/east at `rate_arcsec_s` (a guide pulse).
+
+        A slew or track of a sky target accepts pulses from its start: given before the
+        mount has joined the target, they are part of the place it joins.
+        """
+        if not 0 < rate_arcsec_s <= MAX_GUIDE_RATE_ARCSEC_S:
+            raise BadRequest(f"guide: rate_arcsec_s={rate_arcsec_s:g}: expected > 0 and at most "
+                             f"{MAX_GUIDE_RATE_ARCSEC_S:g} (ten times sidereal)")
+        size = math.hypot(north_arcsec, east_arcsec)
+        if size == 0.0:
             raise BadRequest("guide: north_arcsec and east_arcsec are both 0")
+        if size > MAX_GUIDE_STEP_ARCSEC:
+            raise BadRequest(f"guide: a pulse of {size:g}\u2033 is beyond the "
+                             f"{MAX_GUIDE_STEP_ARCSEC:g}\u2033 a guide pulse may move; slew instead")
         op = self.op
-        if (op is None or op.kind not in ("slew", "track") or op.phase is not Phase.TRACKING
-                or self._guide is None or self._guide[0] != op.id):
+        if (op is None or op.kind not in ("slew", "track") or op.info.get("fixed")
+                or op.phase in (Phase.DONE, Phase.FAILED, Phase.ABORTED, Phase.ENDING)):
             what = "nothing runs" if op is None else f"operation {op.id} ({op.kind}) is " \
                 f"{op.phase.label}"
             raise NotTracking(f"guide: no sky target is being tracked ({what}); a guide pulse "
                               "offsets a running track or slew of a star, planet or RA/Dec")
-        offsets = self._guide[1]
+        offsets = self.guide_offsets(op)
         now = await self.motion.mount_time_us()
         if self.op is not op:
             raise NotTracking(f"guide: operation {op.id} was replaced while the pulse was "
