@@ -72,26 +72,52 @@ async def python_client() -> dict:
     def vector(name):
         return client[D][name]
 
+    async def rate_after(axis: str, since_us: int) -> float:
+        """An axis rate (deg/s) measured over 5 mount seconds, 15 mount seconds after since_us
+        (past the stop, the lead and the run-up however fast the host runs)."""
+        a = status()
+        while a["mount_time_us"] < since_us + 15_000_000:
+            await asyncio.sleep(0.1)
+            a = status()
+        b = status()
+        while b["mount_time_us"] < a["mount_time_us"] + 5_000_000:
+            await asyncio.sleep(0.1)
+            b = status()
+        return ((b["encoder"][axis] - a["encoder"][axis])
+                / ((b["mount_time_us"] - a["mount_time_us"]) / 1e6))
+
     try:
         await until(lambda: "SAT_TRACKING_STAT" in client[D])
+        since = status()["mount_time_us"]
         await client.send_newVector(D, "TELESCOPE_MOTION_WE", members={"MOTION_EAST": "On"})
         out["motion_busy"] = await until(lambda: vector("TELESCOPE_MOTION_WE").state == "Busy")
-        await asyncio.sleep(1.0)  # past the run-up (~20 mount seconds at x20)
-        a, b = status(), None
-        await asyncio.sleep(0.5)
-        b = status()
-        out["motion_az_rate_deg_s"] = ((b["encoder"]["az_deg"] - a["encoder"]["az_deg"])
-                                       / ((b["mount_time_us"] - a["mount_time_us"]) / 1e6))
+        out["motion_az_rate_deg_s"] = await rate_after("az_deg", since)
+        since = status()["mount_time_us"]
+        await client.send_newVector(D, "TELESCOPE_MOTION_NS", members={"MOTION_SOUTH": "On"})
+        out["motion_el_rate_deg_s"] = await rate_after("el_deg", since)
         await client.send_newVector(D, "TELESCOPE_MOTION_WE", members={"MOTION_EAST": "Off"})
-        out["motion_idle"] = await until(lambda: vector("TELESCOPE_MOTION_WE").state == "Idle")
+        await client.send_newVector(D, "TELESCOPE_MOTION_NS", members={"MOTION_SOUTH": "Off"})
+        out["motion_idle"] = await until(lambda: vector("TELESCOPE_MOTION_WE").state == "Idle"
+                                         and vector("TELESCOPE_MOTION_NS").state == "Idle")
         tle = Path(sys.argv[3]).read_text()
         await client.send_newVector(D, "SAT_TLE_TEXT", members={"TLE": tle})
+        # a window (as KStars writes it) in which the satellite has no pass: refused
+        await client.send_newVector(D, "SAT_PASS_WINDOW", members={
+            "SAT_PASS_WINDOW_START": "2024-05-18T21:02:00", "SAT_PASS_WINDOW_END":
+            "2024-05-18T21:03:00"})
+        await client.send_newVector(D, "SAT_TRACKING_STAT", members={"SAT_TRACK": "On",
+                                                                     "SAT_HALT": "Off"})
+        out["sat_window_refused"] = await until(
+            lambda: vector("SAT_TRACKING_STAT").state == "Alert", 30)
+        # no window: the server chooses the pass and says which
+        await client.send_newVector(D, "SAT_PASS_WINDOW", members={
+            "SAT_PASS_WINDOW_START": "", "SAT_PASS_WINDOW_END": ""})
         await client.send_newVector(D, "SAT_TRACKING_STAT", members={"SAT_TRACK": "On",
                                                                      "SAT_HALT": "Off"})
         out["sat_busy"] = await until(lambda: vector("SAT_TRACKING_STAT").state == "Busy")
-        await until(lambda: vector("SAT_PASS_WINDOW")["SAT_PASS_WIN_START"] != "")
-        out["sat_window"] = [vector("SAT_PASS_WINDOW")["SAT_PASS_WIN_START"],
-                             vector("SAT_PASS_WINDOW")["SAT_PASS_WIN_END"]]
+        await until(lambda: vector("SAT_PASS_WINDOW")["SAT_PASS_WINDOW_START"] != "")
+        out["sat_window"] = [vector("SAT_PASS_WINDOW")["SAT_PASS_WINDOW_START"],
+                             vector("SAT_PASS_WINDOW")["SAT_PASS_WINDOW_END"]]
         out["sat_operation"] = status()["operation"]["kind"]
         await client.send_newVector(D, "TELESCOPE_ABORT_MOTION", members={"ABORT": "On"})
         out["sat_after_abort"] = await until(
@@ -122,6 +148,19 @@ def main() -> None:
         time.sleep(1.5)  # one status poll
         seen["lat"] = float(get("GEOGRAPHIC_COORD.LAT"))
         seen["utc"] = get("TIME_UTC.UTC")
+        listing = subprocess.run(["indi_getprop", *HOST, "-1", "-t", "10", f"{D}.ON_COORD_SET.*"],
+                                 capture_output=True, text=True, timeout=30).stdout
+        seen["coord_set_members"] = sorted(line.split(".")[2].split("=")[0]
+                                           for line in listing.split())
+        # no switch On in a OneOfMany vector: refused (libindi's rule), the driver lives on
+        put("ON_COORD_SET.TRACK=Off")
+        seen["one_of_many_state"] = wait_state("ON_COORD_SET", ("Alert",), 30)
+        seen["coord_set_track"] = get("ON_COORD_SET.TRACK")
+        # the client's location: the server's is Ok, another is Alert
+        put(f"GEOGRAPHIC_COORD.LAT;LONG={seen['lat']};{float(get('GEOGRAPHIC_COORD.LONG'))}")
+        seen["geo_same"] = wait_state("GEOGRAPHIC_COORD", ("Ok", "Alert"), 30)
+        put("GEOGRAPHIC_COORD.LAT;LONG=-33.9;18.4")
+        seen["geo_other"] = wait_state("GEOGRAPHIC_COORD", ("Alert",), 30)
         # an impossible declination: Alert, and the driver keeps answering
         put("EQUATORIAL_EOD_COORD.RA;DEC=1;100")
         # (indi_setprop returns once sent: the driver's answer is awaited, never assumed)
@@ -146,6 +185,26 @@ def main() -> None:
         put("TELESCOPE_TIMED_GUIDE_NS.TIMED_GUIDE_N;TIMED_GUIDE_S=2000;0")
         seen["guide_state"] = wait_state("TELESCOPE_TIMED_GUIDE_NS", ("Busy", "Alert"), 30)
         seen["guide_end_state"] = wait_state("TELESCOPE_TIMED_GUIDE_NS", ("Ok", "Alert"), 60)
+        # a second goto while the first is Busy: the first's end is not reported as Alert
+        put("HORIZONTAL_COORD.AZ;ALT=200;40")
+        wait_state("HORIZONTAL_COORD", ("Busy",), 30)
+        put("HORIZONTAL_COORD.AZ;ALT=210;45")
+        states = [get("HORIZONTAL_COORD._STATE")]
+        deadline = time.monotonic() + 120
+        while states[-1] != "Ok" and time.monotonic() < deadline:
+            time.sleep(0.05)
+            states.append(get("HORIZONTAL_COORD._STATE"))
+        seen["second_goto_states"] = states
+        time.sleep(1.5)  # a status poll after the landing
+        seen["second_goto_az"] = float(get("HORIZONTAL_COORD.AZ"))
+        # ON_COORD_SET SLEW: go there and stay (tracking off afterwards)
+        put("ON_COORD_SET.SLEW=On")
+        put(f"EQUATORIAL_EOD_COORD.RA;DEC={ra_h};{dec}")
+        wait_state("EQUATORIAL_EOD_COORD", ("Busy",), 30)
+        seen["slew_mode_end"] = wait_state("EQUATORIAL_EOD_COORD", ("Ok", "Alert"), 120)
+        time.sleep(1.5)  # a status poll
+        seen["slew_mode_tracking"] = get("TELESCOPE_TRACK_STATE.TRACK_ON")
+        put("ON_COORD_SET.TRACK=On")
         # abort a long slew: Alert on the coordinates, the mount at rest
         put("HORIZONTAL_COORD.AZ;ALT=300;30")
         time.sleep(0.3)
@@ -161,6 +220,15 @@ def main() -> None:
                         f'"{D}.TELESCOPE_PARK._STATE"==1'], timeout=150)
         seen["park_end"] = get("TELESCOPE_PARK._STATE")
         seen["parked"] = get("TELESCOPE_PARK.PARK")
+        put("HORIZONTAL_COORD.AZ;ALT=100;40")
+        seen["goto_while_parked"] = wait_state("HORIZONTAL_COORD", ("Alert",), 30)
+        put("TELESCOPE_PARK.PARK;UNPARK=Off;On")
+        wait_state("TELESCOPE_PARK", ("Ok",), 30)
+        time.sleep(2.5)  # two status polls: UNPARK sticks
+        seen["unparked"] = get("TELESCOPE_PARK.UNPARK")
+        put("HORIZONTAL_COORD.AZ;ALT=100;40")
+        wait_state("HORIZONTAL_COORD", ("Busy",), 30)
+        seen["goto_after_unpark"] = wait_state("HORIZONTAL_COORD", ("Ok", "Alert"), 120)
         seen["vss_alive"] = vss.poll() is None and indi.poll() is None
     finally:
         indi.terminate()

@@ -66,9 +66,25 @@ def test_connection_site_and_time_come_from_the_server(seen):
     assert seen["utc"].startswith("2024-05-18T21:")
 
 
-def test_a_bad_coordinate_is_alert_and_the_driver_keeps_answering(seen):
+def test_bad_requests_are_alert_and_the_driver_keeps_answering(seen):
     assert seen["bad_state"] == "Alert"
+    assert seen["one_of_many_state"] == "Alert" and seen["coord_set_track"] == "On"
     assert seen["vss_alive"]
+
+
+def test_coordinates_set_offers_track_and_slew_but_no_sync(seen):
+    assert seen["coord_set_members"] == ["SLEW", "TRACK"]
+    assert seen["slew_mode_end"] == "Ok" and seen["slew_mode_tracking"] == "Off"
+
+
+def test_the_clients_location_is_accepted_only_when_it_is_the_servers(seen):
+    assert seen["geo_same"] == "Ok" and seen["geo_other"] == "Alert"
+
+
+def test_a_second_goto_supersedes_the_first_without_an_alert(seen):
+    states = seen["second_goto_states"]
+    assert "Alert" not in states and states[-1] == "Ok"
+    assert seen["second_goto_az"] == pytest.approx(210.0, abs=0.01)
 
 
 def test_the_coordinates_stay_busy_until_the_server_says_the_mount_arrived(seen):
@@ -102,11 +118,15 @@ def test_guide_pulse_abort_and_park_states(seen):
     assert seen["guide_state"] == "Busy" and seen["guide_end_state"] == "Ok"
     assert seen["abort_state"] == "Alert" and seen["after_abort"] == "aborted"
     assert seen["park_busy"] == "Busy" and seen["park_end"] == "Ok" and seen["parked"] == "On"
+    assert seen["goto_while_parked"] == "Alert"
+    assert seen["unparked"] == "On" and seen["goto_after_unpark"] == "Ok"
 
 
 def test_a_python_indi_client_moves_the_hand_pad_and_tracks_a_satellite(seen):
     assert seen["motion_busy"] and seen["motion_idle"]
     assert seen["motion_az_rate_deg_s"] == pytest.approx(1.0, rel=0.01)  # east: azimuth grows
+    assert seen["motion_el_rate_deg_s"] == pytest.approx(-1.0, rel=0.01)  # south: down
+    assert seen["sat_window_refused"]
     assert seen["sat_busy"] and seen["sat_operation"] == "track_satellite"
     start, end = seen["sat_window"]
     assert start.startswith("2024-05-1") and end > start

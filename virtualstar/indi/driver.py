@@ -21,6 +21,7 @@ import logging
 import math
 import os
 import sys
+import xml.etree.ElementTree as ET
 from typing import Any
 
 from virtualstar.astro.equatorial import icrs_to_jnow, jnow_to_icrs
@@ -32,7 +33,7 @@ from virtualstar.vss_client import (
     default_server_url,
 )
 
-from .protocol import ALERT, BUSY, IDLE, OK, Element, Reader, Request, Vector, message_xml
+from .protocol import ALERT, BUSY, IDLE, OK, Element, Reader, Request, Vector
 
 __all__ = ["IndiTelescope", "main"]
 
@@ -42,8 +43,11 @@ DEVICE = "VirtualStar"
 POLL_S = 1.0
 MOTION_RATE_DEG_S = 1.0  # TELESCOPE_MOTION_* hand-pad rate
 GUIDE_RATE_ARCSEC_S = 0.5 * 15.041067
-MOVING = frozenset({"starting", "preparing", "slewing", "joining", "settling", "waiting",
-                    "pass planned"})
+MOVING = frozenset({"starting", "preparing", "slewing", "joining", "settling", "interrupted",
+                    "ending"})
+MOTION_KINDS = frozenset({"slew", "track", "park", "move", "pointing_sample"})
+SITE_TOLERANCE_DEG = 0.01  # a client's location within this of the VSS's site is the same
+TIME_TOLERANCE_S = 60.0  # a client's UTC within this of the mount clock is the same
 ENDED = frozenset({"done", "failed", "aborted"})
 MAIN, MOTION, SITE, SAT = "Main Control", "Motion Control", "Site Management", "Satellite"
 
@@ -70,7 +74,7 @@ def properties() -> list[Vector]:
                [_n("RA", "RA (hh:mm:ss)", "%010.6m", 0, 24), _n("DEC", "DEC (dd:mm:ss)",
                                                                   "%010.6m", -90, 90)]),
         Vector(d, "ON_COORD_SET", "Switch", "On Set", MAIN,
-               [_s("TRACK", "Track", True), _s("SLEW", "Slew"), _s("SYNC", "Sync")]),
+               [_s("TRACK", "Track", True), _s("SLEW", "Slew")]),  # no SYNC: models, not syncs
         Vector(d, "HORIZONTAL_COORD", "Number", "Horizontal Coordinates", MAIN,
                [_n("AZ", "AZ D:M:S", "%010.6m", 0, 360), _n("ALT", "Alt D:M:S", "%010.6m",
                                                               -90, 90)]),
@@ -93,9 +97,9 @@ def properties() -> list[Vector]:
         Vector(d, "GEOGRAPHIC_COORD", "Number", "Location", SITE,
                [_n("LAT", "Lat (dd:mm:ss)", "%010.6m", -90, 90),
                 _n("LONG", "Lon (dd:mm:ss)", "%010.6m", 0, 360),
-                _n("ELEV", "Elevation (m)", "%g", -200, 10000)], perm="ro"),
+                _n("ELEV", "Elevation (m)", "%g", -200, 10000)]),
         Vector(d, "TIME_UTC", "Text", "UTC", SITE,
-               [Element("UTC", "UTC Time", ""), Element("OFFSET", "UTC Offset", "0")], perm="ro"),
+               [Element("UTC", "UTC Time", ""), Element("OFFSET", "UTC Offset", "0")]),
         Vector(d, "TELESCOPE_INFO", "Number", "Scope Properties", "Options",
                [_n("TELESCOPE_APERTURE", "Aperture (mm)", "%g", 10, 5000),
                 _n("TELESCOPE_FOCAL_LENGTH", "Focal Length (mm)", "%g", 10, 50000),
@@ -103,15 +107,21 @@ def properties() -> list[Vector]:
                 _n("GUIDER_FOCAL_LENGTH", "Guider Focal Length (mm)", "%g", 10, 50000)]),
         Vector(d, "SAT_TLE_TEXT", "Text", "Orbit Params", SAT, [Element("TLE", "TLE", "")]),
         Vector(d, "SAT_PASS_WINDOW", "Text", "Pass Window", SAT,
-               [Element("SAT_PASS_WIN_START", "Start", ""),
-                Element("SAT_PASS_WIN_END", "End", "")]),
+               [Element("SAT_PASS_WINDOW_START", "Start", ""),
+                Element("SAT_PASS_WINDOW_END", "End", "")]),
         Vector(d, "SAT_TRACKING_STAT", "Switch", "Sat tracking", SAT,
                [_s("SAT_TRACK", "Track"), _s("SAT_HALT", "Halt", True)]),
     ]
 
 
 class IndiTelescope:
-    """The driver's state and handlers; `out(text)` writes XML to indiserver."""
+    """The driver's state and handlers; `out(text)` writes XML to indiserver.
+
+    What the telescope does is read from the VSS status; the driver remembers only which
+    of its own commands a property waits for (`busy`: property → generation, so a
+    superseded command's answer is dropped), the park it released, and the client's
+    pass window.
+    """
 
     def __init__(self, out, url: str, password: str | None) -> None:
         self.out = out
@@ -119,24 +129,39 @@ class IndiTelescope:
         self.password = password
         self.props = {v.name: v for v in properties()}
         self.vss: VssClient | None = None
-        self.busy: dict[str, int | None] = {}  # property → VSS operation it waits for
+        self.busy: dict[str, int] = {}
+        self.generation = 0
+        self.pulse_end_us: dict[str, tuple[int, int]] = {}  # guide property → (op id, end µs)
+        self.unparked_op: int | None = None
+        self.window_from_client = False
+        self.last_op_id: int | None = None  # the VSS operation the last poll saw
+        self.alert_op: dict[str, int | None] = {}  # property → operation its Alert was about
         self.tasks: set[asyncio.Task] = set()
 
     # ------------------------------------------------------------------ output
     def send(self, name: str, message: str | None = None) -> None:
         self.out(self.props[name].set_xml(message))
 
-    def say(self, text: str) -> None:
-        self.out(message_xml(DEVICE, text))
-
     def set_state(self, name: str, state: str, message: str | None = None) -> None:
         self.props[name].state = state
-        if state != BUSY:
-            self.busy.pop(name, None)
+        self.busy.pop(name, None)
+        if state == ALERT:  # it stays Alert until the telescope does something else
+            self.alert_op[name] = self.last_op_id
         self.send(name, message)
+
+    def spawn(self, coro) -> None:
+        task = asyncio.get_running_loop().create_task(coro)
+        self.tasks.add(task)
+        task.add_done_callback(self._done)
+
+    def _done(self, task: asyncio.Task) -> None:
+        self.tasks.discard(task)
+        if not task.cancelled() and task.exception() is not None:
+            log.error("internal error: %r", task.exception())
 
     # ------------------------------------------------------------------ input
     async def handle(self, req: Request) -> None:
+        """Answer one request; whatever goes wrong, the property says so (Alert)."""
         if req.tag == "getProperties":
             if req.device in (None, DEVICE):
                 for v in self.props.values():
@@ -146,14 +171,12 @@ class IndiTelescope:
         if req.device != DEVICE or req.name not in self.props:
             return
         prop = self.props[req.name]
-        if prop.perm == "ro":
-            self.set_state(prop.name, ALERT, f"{prop.name} is read-only")
-            return
-        handler = getattr(self, f"on_{prop.name.lower()}", None)
-        if req.name != "CONNECTION" and self.vss is None:
-            self.set_state(prop.name, ALERT, "not connected: switch CONNECTION to CONNECT")
-            return
         try:
+            if prop.perm == "ro":
+                raise ValueError(f"{prop.name} is read-only")
+            if req.name != "CONNECTION" and self.vss is None:
+                raise ValueError("not connected: switch CONNECTION to CONNECT")
+            handler = getattr(self, f"on_{prop.name.lower()}", None)
             if handler is None:
                 self._store(prop, req.members)
                 self.set_state(prop.name, OK)
@@ -165,66 +188,108 @@ class IndiTelescope:
             self.set_state(prop.name, ALERT, f"the VirtualStar Server does not answer: {exc}")
         except ValueError as exc:
             self.set_state(prop.name, ALERT, str(exc))
+        except Exception as exc:  # a bug must not end the driver: say it, keep serving
+            log.exception("%s: internal error", prop.name)
+            self.set_state(prop.name, ALERT, f"internal error: {exc!r}")
 
     @staticmethod
     def _store(prop: Vector, members: dict[str, str]) -> None:
+        """Apply a client's values (all or nothing); switch rules as libindi enforces them."""
+        unknown = sorted(set(members) - set(prop.index))
+        if unknown:
+            raise ValueError(f"{prop.name} has no member {', '.join(unknown)}; it has "
+                             f"{', '.join(prop.index)}")
+        new: dict[str, Any] = {}
         for name, text in members.items():
-            if name not in prop.index:
-                raise ValueError(f"{prop.name} has no member {name}")
-            el = prop[name]
             if prop.kind == "Number":
-                el.value = _number(prop.name, name, text)
+                new[name] = _number(prop.name, name, text)
             elif prop.kind == "Switch":
-                el.value = text.strip() == "On"
+                if text.strip() not in ("On", "Off"):
+                    raise ValueError(f"{prop.name}.{name}={text!r}: expected On or Off")
+                new[name] = text.strip() == "On"
             else:
-                el.value = text
-        if prop.kind == "Switch" and prop.rule == "OneOfMany":
-            on = [n for n, t in members.items() if t.strip() == "On"]
-            if on:
-                for e in prop.elements:
-                    e.value = e.name == on[-1]
+                new[name] = text
+        if prop.kind == "Switch":
+            after = {e.name: e.value for e in prop.elements}
+            on = [n for n, v in new.items() if v]
+            if prop.rule == "OneOfMany" and on:  # one On: the others go Off
+                after = {n: n == on[-1] for n in after}
+            else:
+                after.update(new)
+            count = sum(bool(v) for v in after.values())
+            if prop.rule == "OneOfMany" and count != 1:
+                raise ValueError(f"{prop.name}: exactly one of {', '.join(after)} must be On")
+            if prop.rule == "AtMostOne" and count > 1:
+                raise ValueError(f"{prop.name}: at most one of {', '.join(after)} may be On")
+            new = after
+        for name, value in new.items():
+            prop[name].value = value
 
     async def request(self, cmd: str, params: dict[str, Any] | None = None,
                       timeout_s: float | None = 30.0) -> Any:
         assert self.vss is not None
         return await self.vss.request(cmd, params or {}, timeout_s)
 
-    def begin(self, prop_name: str, cmd: str, params: dict[str, Any]) -> None:
-        """Send an operation; the property is Busy until it lands (Ok) or fails (Alert)."""
+    async def mount_status(self) -> dict[str, Any]:
+        st = await self.request("status")
+        if "mount_time_us" not in st:
+            raise ValueError("the VirtualStar Server has no mount connected "
+                             f"({st.get('mount_error') or 'connecting'})")
+        return st
+
+    async def refuse_if_parked(self, what: str) -> dict[str, Any]:
+        st = await self.mount_status()
+        if self.parked(st):
+            raise ValueError(f"{what}: the mount is parked; UNPARK first")
+        return st
+
+    def parked(self, st: dict[str, Any]) -> bool:
+        op = st.get("operation") or {}
+        return (op.get("kind") == "park" and op.get("phase") == "done"
+                and op.get("id") != self.unparked_op)
+
+    def begin(self, prop_name: str, cmd: str, params: dict[str, Any], then=None) -> None:
+        """Send an operation; the property is Busy until it lands (Ok) or fails (Alert).
+
+        A newer command on the same property supersedes this one: its answer is dropped.
+        """
+        self.generation += 1
+        mine = self.generation
         self.set_state(prop_name, BUSY)
-        self.busy[prop_name] = None
+        self.busy[prop_name] = mine
 
         async def run() -> None:
             try:
-                op = await self.request(cmd, params, None)
-                self.busy[prop_name] = op.get("id") if isinstance(op, dict) else None
-            except VssRequestError as exc:
-                if prop_name in self.busy:
-                    self.set_state(prop_name, ALERT, f"{exc.message} [VSS {exc.code}]")
+                await self.request(cmd, params, None)
+            except (VssRequestError, ServerUnavailable) as exc:
+                if self.busy.get(prop_name) == mine:
+                    code = f" [VSS {exc.code}]" if isinstance(exc, VssRequestError) else ""
+                    self.set_state(prop_name, ALERT, f"{getattr(exc, 'message', exc)}{code}")
                 return
-            except ServerUnavailable as exc:
-                self.set_state(prop_name, ALERT, str(exc))
-                return
-            if prop_name in self.busy:
+            if self.busy.get(prop_name) == mine:
                 self.set_state(prop_name, OK)
+                if then is not None:
+                    await then()
 
-        task = asyncio.get_running_loop().create_task(run())
-        self.tasks.add(task)
-        task.add_done_callback(self.tasks.discard)
+        self.spawn(run())
 
     # ------------------------------------------------------------------ handlers
     async def on_connection(self, prop: Vector, members: dict[str, str]) -> None:
         self._store(prop, members)
         if prop["CONNECT"].value:
             if self.vss is None:
-                self.vss = await VssClient.connect(self.url, reconnect=True,
-                                                   password=self.password)
-                if self.vss.role != "operator":
-                    await self.vss.close()
-                    self.vss = None
+                try:
+                    client = await VssClient.connect(self.url, reconnect=True,
+                                                     password=self.password)
+                except (ServerUnavailable, VssRequestError):
+                    prop["CONNECT"].value, prop["DISCONNECT"].value = False, True
+                    raise
+                if client.role != "operator":
+                    await client.close()
                     prop["CONNECT"].value, prop["DISCONNECT"].value = False, True
                     raise ValueError(f"{self.url} gave the observer role: set $VS_PASSWORD to "
                                      "the operator password")
+                self.vss = client
             self.set_state("CONNECTION", OK, f"connected to {self.url}")
             await self.poll()
         else:
@@ -238,61 +303,55 @@ class IndiTelescope:
         dec = _number(prop.name, "DEC", members.get("DEC", ""))
         if not (0 <= ra_h < 24 and -90 <= dec <= 90):
             raise ValueError(f"RA {ra_h:g} h, DEC {dec:g}°: expected 0 <= RA < 24, -90..90")
-        mode = next(e.name for e in self.props["ON_COORD_SET"].elements if e.value)
-        if mode == "SYNC":
-            raise ValueError("SYNC is not supported: VirtualStar corrects pointing with a fitted "
-                             "pointing model (vs pointing-run), not with syncs")
-        st = await self.request("status")
+        st = await self.refuse_if_parked("goto")
         ra, dec_icrs = jnow_to_icrs(ra_h * 15.0, dec, st["mount_time_us"])
-        self.begin(prop.name, "slew", {"ra_deg": ra, "dec_deg": dec_icrs})
-        if mode == "SLEW":
-            self._after(prop.name, self.request("stop"))
+        slew_only = self.props["ON_COORD_SET"]["SLEW"].value
 
-    def _after(self, prop_name: str, coro) -> None:
-        async def run() -> None:
-            while prop_name in self.busy:
-                await asyncio.sleep(0.05)
-            if self.props[prop_name].state == OK:
-                await coro
-            else:
-                coro.close()
+        async def stop_tracking() -> None:  # SLEW: go there and stay (INDI's meaning)
+            await self.request("stop")
 
-        task = asyncio.get_running_loop().create_task(run())
-        self.tasks.add(task)
-        task.add_done_callback(self.tasks.discard)
+        self.begin(prop.name, "slew", {"ra_deg": ra, "dec_deg": dec_icrs},
+                   then=stop_tracking if slew_only else None)
 
     async def on_horizontal_coord(self, prop: Vector, members: dict[str, str]) -> None:
         az = _number(prop.name, "AZ", members.get("AZ", ""))
         alt = _number(prop.name, "ALT", members.get("ALT", ""))
         if not (0 <= az < 360 and -90 <= alt <= 90):
             raise ValueError(f"AZ {az:g}, ALT {alt:g}: expected 0 <= AZ < 360, -90..90")
+        await self.refuse_if_parked("goto")
         self.begin(prop.name, "slew", {"az_deg": az, "el_deg": alt})
 
     async def on_telescope_abort_motion(self, prop: Vector, members: dict[str, str]) -> None:
+        busy = list(self.busy)
         await self.request("stop")
-        for name in list(self.busy):
+        for name in busy:
             self.set_state(name, ALERT, "aborted")
         for name in ("TELESCOPE_MOTION_NS", "TELESCOPE_MOTION_WE"):
             for e in self.props[name].elements:
                 e.value = False
             self.set_state(name, IDLE)
+        prop["ABORT"].value = False
         self.set_state(prop.name, OK, "motion aborted")
 
     async def on_telescope_park(self, prop: Vector, members: dict[str, str]) -> None:
         self._store(prop, members)
         if prop["PARK"].value:
+            self.unparked_op = None
             self.begin(prop.name, "park", {"wait": True})
-        else:
-            self.set_state(prop.name, OK, "unparked")
+            return
+        op = (await self.mount_status()).get("operation") or {}
+        if op.get("kind") == "park":
+            self.unparked_op = op.get("id")
+        self.set_state(prop.name, OK, "unparked")
 
     async def on_telescope_track_state(self, prop: Vector, members: dict[str, str]) -> None:
         self._store(prop, members)
         if prop["TRACK_ON"].value:
-            st = await self.request("status")
+            st = await self.refuse_if_parked("tracking")
             self.begin(prop.name, "track", dict(st["radec"]))
         else:
             await self.request("stop")
-            self.set_state(prop.name, OK)
+            self.set_state(prop.name, IDLE)
 
     async def _motion(self, prop: Vector, members: dict[str, str]) -> None:
         self._store(prop, members)
@@ -301,9 +360,11 @@ class IndiTelescope:
         az_rate = MOTION_RATE_DEG_S * (we["MOTION_EAST"].value - we["MOTION_WEST"].value)
         if az_rate == 0 and el_rate == 0:
             await self.request("stop")
-            self.set_state(prop.name, IDLE)
+            for name in ("TELESCOPE_MOTION_NS", "TELESCOPE_MOTION_WE"):
+                self.set_state(name, IDLE)
             return
-        await self.request("move", {"az_rate_deg_s": az_rate, "el_rate_deg_s": el_rate})
+        await self.refuse_if_parked("motion")
+        await self.request("move", {"az_rate_deg_s": az_rate, "el_rate_deg_s": el_rate}, None)
         self.set_state(prop.name, BUSY)
 
     on_telescope_motion_ns = _motion
@@ -312,10 +373,10 @@ class IndiTelescope:
     async def _guide(self, prop: Vector, members: dict[str, str]) -> None:
         self._store(prop, members)
         values = {n: float(v) for n, v in prop.values().items()}
-        north = values.get("TIMED_GUIDE_N", 0.0) - values.get("TIMED_GUIDE_S", 0.0)
-        east = values.get("TIMED_GUIDE_E", 0.0) - values.get("TIMED_GUIDE_W", 0.0)
         for e in prop.elements:
             e.value = 0.0
+        north = values.get("TIMED_GUIDE_N", 0.0) - values.get("TIMED_GUIDE_S", 0.0)
+        east = values.get("TIMED_GUIDE_E", 0.0) - values.get("TIMED_GUIDE_W", 0.0)
         ms = north if prop.name.endswith("NS") else east
         if ms == 0:
             self.set_state(prop.name, OK)
@@ -324,28 +385,72 @@ class IndiTelescope:
         key = "north_arcsec" if prop.name.endswith("NS") else "east_arcsec"
         pulse = await self.request("guide", {key: size, "rate_arcsec_s": GUIDE_RATE_ARCSEC_S})
         self.set_state(prop.name, BUSY)
-        self.busy[prop.name] = pulse["id"]
-        self._pulse_end = getattr(self, "_pulse_end", {})
-        self._pulse_end[prop.name] = pulse["end_us"]
+        self.pulse_end_us[prop.name] = (int(pulse["id"]), int(pulse["end_us"]))
 
     on_telescope_timed_guide_ns = _guide
     on_telescope_timed_guide_we = _guide
 
+    async def on_sat_pass_window(self, prop: Vector, members: dict[str, str]) -> None:
+        self._store(prop, members)
+        start, end = (str(prop[k].value).strip() for k in ("SAT_PASS_WINDOW_START",
+                                                            "SAT_PASS_WINDOW_END"))
+        if not start and not end:
+            self.window_from_client = False
+            self.set_state(prop.name, IDLE)
+            return
+        begin_us, end_us = _window_us(start, end)
+        if end_us <= begin_us:
+            raise ValueError(f"SAT_PASS_WINDOW: the end {end} is not after the start {start}")
+        self.window_from_client = True
+        self.set_state(prop.name, OK)
+
     async def on_sat_tracking_stat(self, prop: Vector, members: dict[str, str]) -> None:
         self._store(prop, members)
-        if prop["SAT_TRACK"].value:
-            tle = str(self.props["SAT_TLE_TEXT"]["TLE"].value)
-            if not tle.strip():
-                raise ValueError("set SAT_TLE_TEXT (the TLE: name line and two element lines) "
-                                 "first")
-            self.begin(prop.name, "track", {"tle": tle, "wait": True})
-        else:
+        if not prop["SAT_TRACK"].value:
             await self.request("stop")
-            self.set_state(prop.name, OK)
+            self.set_state(prop.name, IDLE)
+            return
+        tle = str(self.props["SAT_TLE_TEXT"]["TLE"].value)
+        if not tle.strip():
+            raise ValueError("set SAT_TLE_TEXT (the TLE: name line and two element lines) first")
+        st = await self.refuse_if_parked("satellite tracking")
+        params: dict[str, Any] = {"tle": tle, "wait": True}
+        if self.window_from_client:
+            w = self.props["SAT_PASS_WINDOW"]
+            _start_us, end_us = _window_us(str(w["SAT_PASS_WINDOW_START"].value),
+                                           str(w["SAT_PASS_WINDOW_END"].value))
+            if end_us <= st["mount_time_us"]:
+                raise ValueError("SAT_PASS_WINDOW ended before the mount time "
+                                 f"{st['mount_time_utc']}")
+            # only a pass that begins before the window's end
+            params["max_wait_s"] = (end_us - st["mount_time_us"]) / 1e6
+        self.begin(prop.name, "track", params)
+
+    async def on_geographic_coord(self, prop: Vector, members: dict[str, str]) -> None:
+        site = (await self.request("status"))["site"]
+        given = {n: _number(prop.name, n, t) for n, t in members.items()}
+        theirs = {"LAT": site["lat_deg"], "LONG": site["lon_deg"] % 360.0}
+        off = [f"{n} {given[n]:g} (the server's {theirs[n]:g})" for n in theirs
+               if n in given and abs((given[n] - theirs[n] + 180) % 360 - 180) > SITE_TOLERANCE_DEG]
+        if off:
+            raise ValueError("the site is the VirtualStar Server's (its --site-file): "
+                             + ", ".join(off))
+        self.set_state(prop.name, OK, "the client's location is the server's site")
+
+    async def on_time_utc(self, prop: Vector, members: dict[str, str]) -> None:
+        st = await self.mount_status()
+        text = members.get("UTC", "").strip()
+        (t_us, _end) = _window_us(text, text)
+        off_s = (t_us - st["mount_time_us"]) / 1e6
+        if abs(off_s) > TIME_TOLERANCE_S:
+            raise ValueError(f"UTC {text} is {off_s:+.0f} s from the mount clock "
+                             f"{st['mount_time_utc']}; the mount's clock is disciplined by its "
+                             "PPS and the VSS's time sync, not set by clients")
+        self.set_state(prop.name, OK, "the client's time agrees with the mount clock")
 
     # ------------------------------------------------------------------ status poll
     async def poll(self) -> None:
-        """Refresh the values from the VSS; never turn a Busy property Ok by itself."""
+        """Refresh values from the VSS; a property Busy with a command of ours stays Busy."""
         if self.vss is None:
             return
         st = await self.request("status")
@@ -353,48 +458,80 @@ class IndiTelescope:
             return
         t_us = st["mount_time_us"]
         op = st.get("operation") or {}
+        kind, phase = op.get("kind"), op.get("phase")
+        self.last_op_id = op.get("id")
+        for name, about in list(self.alert_op.items()):
+            if about != self.last_op_id:
+                del self.alert_op[name]
+                if self.props[name].state == ALERT and name not in self.busy:
+                    self.props[name].state = IDLE
+        moving = kind in MOTION_KINDS and phase in MOVING
+        tracking = (kind in ("slew", "track", "track_satellite") and phase not in ENDED
+                    and not op.get("info", {}).get("fixed"))
         ra, dec = icrs_to_jnow(st["radec"]["ra_deg"], st["radec"]["dec_deg"], t_us)
         eq = self.props["EQUATORIAL_EOD_COORD"]
         eq["RA"].value, eq["DEC"].value = ra / 15.0, dec
         hz = self.props["HORIZONTAL_COORD"]
         hz["AZ"].value, hz["ALT"].value = st["observed"]["az_deg"] % 360.0, st["observed"]["el_deg"]
         for name in ("EQUATORIAL_EOD_COORD", "HORIZONTAL_COORD"):
-            if name not in self.busy and self.props[name].state == BUSY:
-                self.props[name].state = OK
+            if name not in self.busy and self.props[name].state != ALERT:
+                # a motion another client (or the server) started shows as Busy too
+                self.props[name].state = BUSY if moving else OK
             self.send(name)
-        tracking = (op.get("kind") in ("slew", "track", "track_satellite")
-                    and op.get("phase") not in ENDED and not op.get("info", {}).get("fixed"))
+        if kind != "move" or phase in ENDED:  # the hand pad's move ended (a limit, a command)
+            for name in ("TELESCOPE_MOTION_NS", "TELESCOPE_MOTION_WE"):
+                motion = self.props[name]
+                if motion.state == BUSY:
+                    for e in motion.elements:
+                        e.value = False
+                    self.set_state(name, IDLE)
         ts = self.props["TELESCOPE_TRACK_STATE"]
         ts["TRACK_ON"].value, ts["TRACK_OFF"].value = tracking, not tracking
         if "TELESCOPE_TRACK_STATE" not in self.busy:
             ts.state = BUSY if tracking else IDLE
         self.send("TELESCOPE_TRACK_STATE")
-        for name, end in list(getattr(self, "_pulse_end", {}).items()):
-            if t_us >= end:
-                del self._pulse_end[name]
-                self.set_state(name, OK)
+        for name, (op_id, end) in list(self.pulse_end_us.items()):
+            if t_us >= end or op.get("id") != op_id:
+                del self.pulse_end_us[name]
+                if self.props[name].state == BUSY:
+                    self.set_state(name, OK if op.get("id") == op_id else ALERT)
         site = st["site"]
         geo = self.props["GEOGRAPHIC_COORD"]
         geo["LAT"].value, geo["LONG"].value = site["lat_deg"], site["lon_deg"] % 360.0
         geo["ELEV"].value = site["height_m"]
-        geo.state = OK
         self.send("GEOGRAPHIC_COORD")
         utc = self.props["TIME_UTC"]
         utc["UTC"].value = st["mount_time_utc"].split(".")[0]
-        utc.state = OK
         self.send("TIME_UTC")
-        parked = op.get("kind") == "park" and op.get("phase") == "done"
         park = self.props["TELESCOPE_PARK"]
-        if parked and "TELESCOPE_PARK" not in self.busy:
-            park["PARK"].value, park["UNPARK"].value = True, False
-            park.state = OK
-            self.send("TELESCOPE_PARK")
-        sat = self.props["SAT_PASS_WINDOW"]
-        if op.get("kind") == "track_satellite":
-            sat["SAT_PASS_WIN_START"].value = op["info"].get("pass_start_utc", "")
-            sat["SAT_PASS_WIN_END"].value = op["info"].get("pass_end_utc", "")
-            sat.state = OK
+        if "TELESCOPE_PARK" not in self.busy:
+            parked = self.parked(st)
+            if park["PARK"].value != parked:
+                park["PARK"].value, park["UNPARK"].value = parked, not parked
+                park.state = OK
+                self.send("TELESCOPE_PARK")
+        window = self.props["SAT_PASS_WINDOW"]
+        if kind == "track_satellite" and not self.window_from_client:
+            window["SAT_PASS_WINDOW_START"].value = op["info"].get("pass_start_utc", "")
+            window["SAT_PASS_WINDOW_END"].value = op["info"].get("pass_end_utc", "")
+            window.state = OK
             self.send("SAT_PASS_WINDOW")
+
+
+def _window_us(start: str, end: str) -> tuple[int, int]:
+    """Mount times (µs) of two ISO-8601 UTC texts; ValueError naming what is wrong."""
+    from virtualstar.astro import UtcTimes
+    from virtualstar.astro.exceptions import AstroError
+
+    out = []
+    for text in (start, end):
+        try:
+            out.append(int(UtcTimes.from_iso([text if text.endswith("Z") else text + "Z"])
+                           .to_unix_us()[0]))
+        except (AstroError, ValueError):
+            raise ValueError(f"{text!r}: expected an ISO-8601 UTC time, e.g. "
+                             "2024-05-18T21:10:00") from None
+    return out[0], out[1]
 
 
 def _number(prop: str, name: str, text: str) -> float:
@@ -418,22 +555,37 @@ async def run(url: str, password: str | None) -> None:
 
     scope = IndiTelescope(out, url, password)
     parser = Reader()
+    queue: asyncio.Queue[Request] = asyncio.Queue()
+
+    async def worker() -> None:  # requests in the order they came ...
+        while True:
+            await scope.handle(await queue.get())
 
     async def poller() -> None:
         while True:
             await asyncio.sleep(POLL_S)
             try:
                 await scope.poll()
-            except (VssRequestError, ServerUnavailable, TimeoutError) as exc:
+            except (VssRequestError, ServerUnavailable, TimeoutError, KeyError) as exc:
                 log.warning("status poll: %s", exc)
 
-    poll_task = loop.create_task(poller())
+    tasks = [loop.create_task(poller()), loop.create_task(worker())]
     try:
         while data := await reader.read(65536):
-            for req in parser.feed(data):
-                await scope.handle(req)
+            try:
+                requests = list(parser.feed(data))
+            except ET.ParseError as exc:
+                log.error("unreadable XML from indiserver (%s): the stream starts afresh", exc)
+                parser = Reader()
+                continue
+            for req in requests:
+                if req.name == "TELESCOPE_ABORT_MOTION":
+                    scope.spawn(scope.handle(req))  # ... but an abort never waits its turn
+                else:
+                    queue.put_nowait(req)
     finally:
-        poll_task.cancel()
+        for task in tasks:
+            task.cancel()
         if scope.vss is not None:
             await scope.vss.close()
 
