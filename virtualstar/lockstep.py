@@ -113,6 +113,13 @@ class LockstepClock:
     def thaw(self) -> None:
         self.frozen = False
 
+    def set_pace(self, pace: float | None) -> None:
+        """Change the cap (mount seconds per wall second; None: as fast as the CPU allows)."""
+        if pace is not None and not pace > 0:
+            raise ValueError(f"pace={pace}: expected mount seconds per wall second > 0, or None")
+        self.pace = pace
+        self._anchor = None  # the new pace counts from now
+
     async def advance(self, mount_s: float) -> None:
         """Let `mount_s` of mount time pass (thawed), then freeze the clock again."""
         self.thaw()

@@ -6,6 +6,7 @@ Sun zone. The façade talks to the VSS in-process (`LocalVssClient`); alpyca tal
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from pathlib import Path
 
@@ -44,6 +45,28 @@ class AlpacaRig:
         if connect:
             t.Connected = True
         return t
+
+    @contextlib.contextmanager
+    def frozen(self):
+        """Mount time stands still inside the block (a check right after a command sees the
+        operation as it began, however slow the host): the rig's clock, frozen on its loop."""
+        clock = self.rig.clock
+        self.rig.loop.call_soon_threadsafe(clock.freeze)
+        try:
+            yield
+        finally:
+            self.rig.loop.call_soon_threadsafe(clock.thaw)
+
+    @contextlib.contextmanager
+    def paced(self, pace: float):
+        """Mount time at most `pace` × wall time inside the block (room for a stalled host)."""
+        clock = self.rig.clock
+        before = clock.pace
+        self.rig.loop.call_soon_threadsafe(clock.set_pace, pace)
+        try:
+            yield
+        finally:
+            self.rig.loop.call_soon_threadsafe(clock.set_pace, before)
 
     def close(self) -> None:
         self.rig.run(self.service.close())

@@ -130,10 +130,16 @@ def test_slew_to_j2000_coordinates_lands_on_astropys_place_and_tracks(night, sco
     assert math.hypot(d_ra, (scope.Declination - dec) * 3600) < 1.0
 
 
-def az_el_rates(night, wall_s: float = 0.1) -> tuple[float, float]:
-    """Axis rates (deg/s) from two emulator readings `wall_s` apart (mount time ×50)."""
+def mount_sleep(night, mount_s: float) -> None:
+    """Wait until `mount_s` seconds of mount time have passed (the host's speed aside)."""
+    t0 = encoders(night, 1)[2][0]
+    wait_for(lambda: encoders(night, 1)[2][0] >= t0 + mount_s * 1e6, what="mount time")
+
+
+def az_el_rates(night, mount_s: float = 3.0) -> tuple[float, float]:
+    """Axis rates (deg/s) from two emulator readings at least `mount_s` mount seconds apart."""
     a0, e0, t0 = encoders(night, 1)
-    time.sleep(wall_s)
+    mount_sleep(night, mount_s)
     a1, e1, t1 = encoders(night, 1)
     dt = (t1[0] - t0[0]) / 1e6
     return ((a1[0] - a0[0] + 180) % 360 - 180) / dt, (e1[0] - e0[0]) / dt
@@ -143,13 +149,15 @@ def test_abort_slew_stops_the_slew_and_tracking_goes_on_where_it_stopped(night, 
     scope.Tracking = True
     assert not scope.Slewing  # holding the sky still is not a slew
     ra_h, dec = j2000_of(ICRS[0] + 60.0, 20.0)
-    scope.SlewToCoordinatesAsync(ra_h, dec)
-    assert scope.Slewing
-    scope.AbortSlew()
+    with night.paced(1.0):  # the slew takes many wall seconds: the abort comes on the way
+        with night.frozen():
+            scope.SlewToCoordinatesAsync(ra_h, dec)
+            assert scope.Slewing
+        scope.AbortSlew()
     assert not scope.Slewing and scope.Tracking  # ASCOM: tracking as before the slew
-    time.sleep(0.3)  # ~15 mount seconds: the track of where it stopped has joined
+    mount_sleep(night, 15.0)  # the track of where it stopped has joined
     here = (scope.RightAscension, scope.Declination)
-    time.sleep(0.3)
+    mount_sleep(night, 10.0)
     now = (scope.RightAscension, scope.Declination)
     assert abs(now[0] - here[0]) * 15 * 3600 < 1 and abs(now[1] - here[1]) * 3600 < 1
     assert abs(now[0] - ra_h) * 15 > 1.0  # it stopped on the way, not at the target
@@ -181,15 +189,17 @@ def test_park_holds_the_park_position_refuses_slews_and_unpark_releases(night, s
 
 
 def test_move_axis_turns_each_axis_at_its_rate_and_stopping_both_resumes_tracking(night, scope):
+    scope.SlewToAltAzAsync(120.0, 60.0)  # from a known place: no limit near while it moves
+    wait_for(lambda: not scope.Slewing, what="the slew")
     scope.Tracking = True
     scope.MoveAxis(TelescopeAxes.axisPrimary, 1.5)
     assert scope.Slewing
     scope.MoveAxis(TelescopeAxes.axisSecondary, -0.5)
-    time.sleep(0.3)  # past the run-up (mount time runs ×50 here)
+    mount_sleep(night, 15.0)  # past the stop, the lead and the run-up
     az_rate, el_rate = az_el_rates(night)
     assert az_rate == pytest.approx(1.5, rel=1e-3) and el_rate == pytest.approx(-0.5, rel=1e-3)
     scope.MoveAxis(TelescopeAxes.axisPrimary, 0.0)
-    time.sleep(0.3)
+    mount_sleep(night, 15.0)
     az_rate, el_rate = az_el_rates(night)
     assert abs(az_rate) < 1e-4 and el_rate == pytest.approx(-0.5, rel=1e-3)
     with pytest.raises(InvalidValueException):
@@ -209,8 +219,9 @@ def test_move_axis_zero_with_no_move_running_leaves_a_slew_alone(night, scope):
 
 def test_pulse_guide_right_after_tracking_is_turned_on_is_accepted(night, scope):
     scope.Tracking = True
-    scope.PulseGuide(GuideDirections.guideWest, 1000)  # as ConformU does: at once
-    assert scope.IsPulseGuiding
+    with night.frozen():
+        scope.PulseGuide(GuideDirections.guideWest, 1000)  # as ConformU does: at once
+        assert scope.IsPulseGuiding
     wait_for(lambda: not scope.IsPulseGuiding, what="the pulse to end")
 
 
@@ -235,13 +246,14 @@ def test_pulse_guide_moves_the_track_north_by_rate_times_duration(night, scope):
     scope.Tracking = True
     scope.SlewToCoordinatesAsync(*j2000_of(*ICRS))
     wait_for(lambda: not scope.Slewing, what="the slew")
-    time.sleep(0.2)  # a few mount seconds: the track has settled
+    mount_sleep(night, 5.0)  # the track has settled
     dec0 = scope.Declination
     rate = scope.GuideRateDeclination
-    scope.PulseGuide(GuideDirections.guideNorth, 2000)
-    assert scope.IsPulseGuiding
+    with night.frozen():
+        scope.PulseGuide(GuideDirections.guideNorth, 2000)
+        assert scope.IsPulseGuiding
     wait_for(lambda: not scope.IsPulseGuiding, what="the pulse to end")
-    time.sleep(0.1)  # a few mount seconds of settling
+    mount_sleep(night, 3.0)  # settling after the pulse
     moved_arcsec = (scope.Declination - dec0) * 3600
     assert moved_arcsec == pytest.approx(rate * 3600 * 2.0, abs=0.3)
     scope.Tracking = False

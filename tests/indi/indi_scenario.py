@@ -11,6 +11,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -37,6 +38,58 @@ def wait_state(prop: str, states: tuple[str, ...], timeout_s: float = 120.0) -> 
         if state in states or time.monotonic() > deadline:
             return state
         time.sleep(0.1)
+
+
+class StateLog:
+    """Every state a property announces, in order, as a Python INDI client (indipyclient) sees
+    them: a Busy that lasts a moment is recorded even when a poll of indi_getprop misses it."""
+
+    def __init__(self) -> None:
+        self.events: list[tuple[str, str]] = []
+        self.lock = threading.Lock()
+        threading.Thread(target=lambda: asyncio.run(self._run()), daemon=True).start()
+
+    async def _run(self) -> None:
+        from indipyclient import IPyClient
+
+        log = self
+
+        class Recorder(IPyClient):
+            async def rxevent(self, event) -> None:
+                state = getattr(event, "state", None)
+                if event.devicename == D and event.vectorname and state:
+                    with log.lock:
+                        log.events.append((event.vectorname, state))
+
+        await Recorder(indihost="127.0.0.1", indiport=7624).asyncrun()
+
+    def mark(self) -> int:
+        with self.lock:
+            return len(self.events)
+
+    def states(self, vector: str, since: int) -> list[str]:
+        with self.lock:
+            return [st for name, st in self.events[since:] if name == vector]
+
+    def wait(self, vector: str, state: str, since: int, timeout_s: float = 120.0,
+             after: str | None = None) -> bool:
+        """True once `vector` has announced `state` after the mark `since` (and, with `after`,
+        after its first announcement of that state: Ok after Busy, not a poll's Ok before)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            states = self.states(vector, since)
+            if after is not None:
+                states = states[states.index(after) + 1:] if after in states else []
+            if state in states:
+                return True
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.02)
+
+    def from_first(self, vector: str, state: str, since: int) -> list[str]:
+        """The states announced after `since`, from the first `state` on."""
+        states = self.states(vector, since)
+        return states[states.index(state):] if state in states else states
 
 
 def status() -> dict:
@@ -72,31 +125,42 @@ async def python_client() -> dict:
     def vector(name):
         return client[D][name]
 
+    from virtualstar.vss_client import VssClient
+
+    vss = await VssClient.connect("ws://127.0.0.1:8740")
+
+    async def now() -> dict:
+        return await vss.request("status")
+
     async def rate_after(axis: str, since_us: int) -> float:
         """An axis rate (deg/s) measured over 5 mount seconds, 15 mount seconds after since_us
         (past the stop, the lead and the run-up however fast the host runs)."""
-        a = status()
+        a = await now()
         while a["mount_time_us"] < since_us + 15_000_000:
-            await asyncio.sleep(0.1)
-            a = status()
-        b = status()
+            await asyncio.sleep(0.02)
+            a = await now()
+        b = await now()
         while b["mount_time_us"] < a["mount_time_us"] + 5_000_000:
-            await asyncio.sleep(0.1)
-            b = status()
+            await asyncio.sleep(0.02)
+            b = await now()
         return ((b["encoder"][axis] - a["encoder"][axis])
                 / ((b["mount_time_us"] - a["mount_time_us"]) / 1e6))
 
     try:
         await until(lambda: "SAT_TRACKING_STAT" in client[D])
-        since = status()["mount_time_us"]
+        # from a known place, so that no limit is near while the hand pad runs
+        await client.send_newVector(D, "HORIZONTAL_COORD", members={"AZ": "180", "ALT": "30"})
+        await until(lambda: vector("HORIZONTAL_COORD").state == "Busy", 30)
+        await until(lambda: vector("HORIZONTAL_COORD").state == "Ok", 120)
+        since = (await now())["mount_time_us"]
         await client.send_newVector(D, "TELESCOPE_MOTION_WE", members={"MOTION_EAST": "On"})
         out["motion_busy"] = await until(lambda: vector("TELESCOPE_MOTION_WE").state == "Busy")
         out["motion_az_rate_deg_s"] = await rate_after("az_deg", since)
-        since = status()["mount_time_us"]
-        await client.send_newVector(D, "TELESCOPE_MOTION_NS", members={"MOTION_SOUTH": "On"})
+        since = (await now())["mount_time_us"]
+        await client.send_newVector(D, "TELESCOPE_MOTION_NS", members={"MOTION_NORTH": "On"})
         out["motion_el_rate_deg_s"] = await rate_after("el_deg", since)
         await client.send_newVector(D, "TELESCOPE_MOTION_WE", members={"MOTION_EAST": "Off"})
-        await client.send_newVector(D, "TELESCOPE_MOTION_NS", members={"MOTION_SOUTH": "Off"})
+        await client.send_newVector(D, "TELESCOPE_MOTION_NS", members={"MOTION_NORTH": "Off"})
         out["motion_idle"] = await until(lambda: vector("TELESCOPE_MOTION_WE").state == "Idle"
                                          and vector("TELESCOPE_MOTION_NS").state == "Idle")
         tle = Path(sys.argv[3]).read_text()
@@ -123,6 +187,7 @@ async def python_client() -> dict:
         out["sat_after_abort"] = await until(
             lambda: vector("SAT_TRACKING_STAT").state == "Alert", 30)
     finally:
+        await vss.close()
         client.shutdown()
         await asyncio.wait_for(running, 30)
     return out
@@ -143,6 +208,8 @@ def main() -> None:
         while not get("CONNECTION.CONNECT") and time.monotonic() < deadline:
             time.sleep(0.2)
         seen["connect_before"] = get("CONNECTION.CONNECT")
+        log = StateLog()
+        time.sleep(0.5)
         put("CONNECTION.CONNECT=On")
         seen["connection_state"] = wait_state("CONNECTION", ("Ok", "Alert"), 30)
         time.sleep(1.5)  # one status poll
@@ -166,8 +233,10 @@ def main() -> None:
         # (indi_setprop returns once sent: the driver's answer is awaited, never assumed)
         seen["bad_state"] = wait_state("EQUATORIAL_EOD_COORD", ("Alert",), 30)
         # slew and track a JNow place: Busy at once, Ok only when the VSS says it landed
+        mark = log.mark()
         put(f"EQUATORIAL_EOD_COORD.RA;DEC={ra_h};{dec}")
-        states = [wait_state("EQUATORIAL_EOD_COORD", ("Busy", "Ok"), 30)]
+        log.wait("EQUATORIAL_EOD_COORD", "Busy", mark, 30)
+        states = [get("EQUATORIAL_EOD_COORD._STATE")]
         op_phases = [phase()]
         while states[-1] == "Busy":
             time.sleep(0.1)
@@ -175,6 +244,8 @@ def main() -> None:
             states.append(get("EQUATORIAL_EOD_COORD._STATE"))
         seen["slew_states"] = states
         seen["slew_phases"] = op_phases
+        log.wait("EQUATORIAL_EOD_COORD", "Ok", mark, 60, after="Busy")
+        seen["slew_announced"] = log.from_first("EQUATORIAL_EOD_COORD", "Busy", mark)
         st = status()
         seen["after_slew"] = {"t_us": st["mount_time_us"], "observed": st["observed"],
                               "phase": st["operation"]["phase"]}
@@ -182,42 +253,42 @@ def main() -> None:
         seen["eod"] = [float(get("EQUATORIAL_EOD_COORD.RA")), float(get("EQUATORIAL_EOD_COORD.DEC"))]
         seen["track_state"] = get("TELESCOPE_TRACK_STATE.TRACK_ON")
         # a guide pulse north: Busy, then Ok
+        mark = log.mark()
         put("TELESCOPE_TIMED_GUIDE_NS.TIMED_GUIDE_N;TIMED_GUIDE_S=2000;0")
-        seen["guide_state"] = wait_state("TELESCOPE_TIMED_GUIDE_NS", ("Busy", "Alert"), 30)
-        seen["guide_end_state"] = wait_state("TELESCOPE_TIMED_GUIDE_NS", ("Ok", "Alert"), 60)
+        log.wait("TELESCOPE_TIMED_GUIDE_NS", "Ok", mark, 60, after="Busy")
+        seen["guide_states"] = log.from_first("TELESCOPE_TIMED_GUIDE_NS", "Busy", mark)
         # a second goto while the first is Busy: the first's end is not reported as Alert
+        mark = log.mark()
         put("HORIZONTAL_COORD.AZ;ALT=200;40")
-        wait_state("HORIZONTAL_COORD", ("Busy",), 30)
+        log.wait("HORIZONTAL_COORD", "Busy", mark, 30)
         put("HORIZONTAL_COORD.AZ;ALT=210;45")
-        states = [get("HORIZONTAL_COORD._STATE")]
-        deadline = time.monotonic() + 120
-        while states[-1] != "Ok" and time.monotonic() < deadline:
-            time.sleep(0.05)
-            states.append(get("HORIZONTAL_COORD._STATE"))
-        seen["second_goto_states"] = states
+        log.wait("HORIZONTAL_COORD", "Ok", mark, 120, after="Busy")
+        seen["second_goto_states"] = log.from_first("HORIZONTAL_COORD", "Busy", mark)
         time.sleep(1.5)  # a status poll after the landing
         seen["second_goto_az"] = float(get("HORIZONTAL_COORD.AZ"))
         # ON_COORD_SET SLEW: go there and stay (tracking off afterwards)
         put("ON_COORD_SET.SLEW=On")
+        mark = log.mark()
         put(f"EQUATORIAL_EOD_COORD.RA;DEC={ra_h};{dec}")
-        wait_state("EQUATORIAL_EOD_COORD", ("Busy",), 30)
-        seen["slew_mode_end"] = wait_state("EQUATORIAL_EOD_COORD", ("Ok", "Alert"), 120)
+        log.wait("EQUATORIAL_EOD_COORD", "Ok", mark, 120, after="Busy")
+        seen["slew_mode_end"] = get("EQUATORIAL_EOD_COORD._STATE")
         time.sleep(1.5)  # a status poll
         seen["slew_mode_tracking"] = get("TELESCOPE_TRACK_STATE.TRACK_ON")
         put("ON_COORD_SET.TRACK=On")
         # abort a long slew: Alert on the coordinates, the mount at rest
+        mark = log.mark()
         put("HORIZONTAL_COORD.AZ;ALT=300;30")
-        time.sleep(0.3)
-        wait_state("HORIZONTAL_COORD", ("Busy",), 30)
+        log.wait("HORIZONTAL_COORD", "Busy", mark, 30)
         put("TELESCOPE_ABORT_MOTION.ABORT=On")
         seen["abort_state"] = wait_state("HORIZONTAL_COORD", ("Alert", "Ok"), 30)
         seen["after_abort"] = phase()
         seen.update(asyncio.run(python_client()))
         # park; indi_eval waits for the state Ok (1)
+        mark = log.mark()
         put("TELESCOPE_PARK.PARK;UNPARK=On;Off")
-        seen["park_busy"] = wait_state("TELESCOPE_PARK", ("Busy", "Alert"), 30)
         subprocess.run(["indi_eval", *HOST, "-w", "-t", "120",
                         f'"{D}.TELESCOPE_PARK._STATE"==1'], timeout=150)
+        seen["park_states"] = log.from_first("TELESCOPE_PARK", "Busy", mark)
         seen["park_end"] = get("TELESCOPE_PARK._STATE")
         seen["parked"] = get("TELESCOPE_PARK.PARK")
         put("HORIZONTAL_COORD.AZ;ALT=100;40")
