@@ -163,6 +163,9 @@ def _add_functions(coll: Collection, emu: MountEmulator) -> None:
                       doc="Return the mount clock (µs since 1970 UTC)")
     coll.add_function("safety.reset", m.safety_reset,
                       doc="Clear latched faults; faulted axes go to OFF")
+    coll.add_function("fault.clear_injections", m.clear_injections,
+                      doc="End every fault injection: inject_* parameters to their defaults, "
+                          "grown friction, rattling, heat and clock drift back to zero")
     coll.add_function("guide.measure", emu.guide_measure,
                       args=[("star_az_deg", "f64"), ("star_el_deg", "f64")], returns="f64[2]",
                       doc="Offset (arcsec) of a star at observed (az, el) from the optical axis, "
