@@ -26,12 +26,15 @@ from scipy.signal import lombscargle
 
 __all__ = ["CurrentModel", "estimate_cogging_periods", "fit_current_model"]
 
-FRICTION_SMOOTHING_RAD_S = (3e-5, 1e-4, 3e-4, 1e-3)
+FRICTION_SMOOTHING_RAD_S = (3e-5, 1e-4, 3e-4)
 MIN_COGGING_PERIODS = 8.0  # below: a slow drift of the residual, not a motor property
 MAX_COGGING_PERIODS = 1024.0
 MIN_COGGING_SHARE = 0.1  # the harmonic must explain this share of the residual variance
 MAX_PERIODOGRAM_POINTS = 20_000
-RIDGE = 1e-8  # relative: keeps nearly collinear terms (a short reference stretch) bounded
+# Relative ridge: the friction terms are nearly collinear over tracking rates; without it
+# the fit cancels large coefficients against each other and extrapolates poorly beyond
+# the reference stretch (measured: 3x the reference's residual 10 minutes later)
+RIDGE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -85,7 +88,7 @@ def estimate_cogging_periods(p: np.ndarray, residual: np.ndarray) -> float:
     freqs = np.arange(lo, MAX_COGGING_PERIODS, resolution)[:20_000]
     if len(freqs) == 0:
         return 0.0
-    power = lombscargle(p, r, freqs, precenter=True)
+    power = lombscargle(p, r, freqs)
     best = float(freqs[int(np.argmax(power))])
     # share of variance the best harmonic explains (a one-frequency least-squares fit)
     x = np.stack([np.cos(best * p), np.sin(best * p)], axis=1)

@@ -19,6 +19,7 @@ __all__ = ["DEFAULT_REFERENCE_S", "AnomalyReport", "detect_anomalies"]
 DEFAULT_REFERENCE_S = 900.0  # the first 15 minutes are taken as the mount's usual self
 CHUNK_US = 900_000_000  # read 15 minutes at a time: bounded memory over a whole night
 RATE_PROBE_US = 10_000_000
+MIN_REFERENCE_S = 300.0  # a few of the longest detector windows (temperature: 120 s)
 
 
 @dataclass
@@ -78,10 +79,12 @@ def detect_anomalies(reader, from_t_us: int, to_t_us: int, *,
     seg: Segments = reduce_blocks(_blocks(reader, names, from_t_us, to_t_us), axes, rate)
     read_s = time.perf_counter() - start
     ref = (seg.t_first_us >= reference[0]) & (seg.t_last_us < reference[1])
-    if np.count_nonzero(ref) < 20:
+    held_s = float(np.sum(seg.t_last_us[ref] - seg.t_first_us[ref])) * 1e-6
+    if held_s < MIN_REFERENCE_S:
         raise QueryError(f"the reference stretch {reference[0]}..{reference[1]} µs holds "
-                         f"{int(np.count_nonzero(ref))} segments of the window; it needs 20 or "
-                         "more (a few minutes of recording)")
+                         f"{held_s:.0f} s of the window's samples; it needs "
+                         f"{MIN_REFERENCE_S:.0f} s or more (give --reference-from/--reference-to "
+                         "inside the window)")
     anomalies, traces = run_detectors(seg, ref, axes, cfg)
     return AnomalyReport(from_t_us, to_t_us, reference, rate, len(seg), anomalies, traces,
                          {"read_and_reduce": read_s,
