@@ -29,6 +29,7 @@ from typing import Any
 import erfa
 import numpy as np
 
+from astcom_client.events import EventLog
 from virtualstar.astro import (
     AvoidanceZones,
     EarthOrientation,
@@ -166,6 +167,13 @@ class Telescope:
         self._mount_state: int | None = None
         self._tasks: set[asyncio.Task] = set()
         self.programs = ProgramControl(self, lambda kind, data: self.emit(kind, data))
+        self.log = EventLog("vss")
+        self.last_mount_us: int | None = None  # the newest tracking-error sample's time
+
+    def log_event(self, level: str, kind: str, message: str, **fields: Any) -> None:
+        """Log an event at the mount time last seen (the host clock before any sample)."""
+        t_us = self.last_mount_us if self.last_mount_us is not None else time.time_ns() // 1000
+        self.log.add(t_us, level, kind, message, **fields)
 
     @property
     def op(self) -> Operation | None:
@@ -256,6 +264,8 @@ class Telescope:
         fault = self.codes["fault"]
 
         def on_packet(packet) -> None:
+            if len(packet.t_us):
+                self.last_mount_us = int(packet.t_us[-1])
             self.errors.add(packet.t_us, packet.column(az_name) * s_az,
                             packet.column(el_name) * s_el, packet.column(pos_name) * s_pos)
             states = packet.column(state_name)
