@@ -8,8 +8,8 @@ from pathlib import Path
 from virtualstar.anomalies.scoring import InjectedFault
 from virtualstar.recorder.experiment import Injection, SineExperiment, run_sine_experiment
 
-MINUTES = 20.0
-AT_S = 660.0  # injections 11 minutes in: after the 10-minute reference stretch (half the run)
+MINUTES = 30.0
+AT_S = 960.0  # injections 16 minutes in: after the 15-minute reference stretch
 
 
 def record(out: Path, injections: tuple[Injection, ...], *, minutes: float = MINUTES,

@@ -1,4 +1,4 @@
-"""Recordings shared by the anomaly tests (each made once per session: ~3 s apiece)."""
+"""Recordings shared by the anomaly tests (each made once per session: ~5 s apiece)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from anomaly_helpers import CASES, record
 
 @pytest.fixture(scope="session")
 def clean_recording(tmp_path_factory):
-    """A 20-minute sine recording with nothing injected: (store, trajectory start µs)."""
+    """A 30-minute sine recording with nothing injected: (store, trajectory start µs)."""
     return record(tmp_path_factory.mktemp("clean"), ())
 
 

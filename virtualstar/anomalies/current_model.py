@@ -31,10 +31,14 @@ MIN_COGGING_PERIODS = 8.0  # below: a slow drift of the residual, not a motor pr
 MAX_COGGING_PERIODS = 1024.0
 MIN_COGGING_SHARE = 0.1  # the harmonic must explain this share of the residual variance
 MAX_PERIODOGRAM_POINTS = 20_000
-# Relative ridge: the friction terms are nearly collinear over tracking rates; without it
-# the fit cancels large coefficients against each other and extrapolates poorly beyond
-# the reference stretch (measured: 3x the reference's residual 10 minutes later)
-RIDGE = 1e-3
+# Relative ridge on the scaled columns: the friction terms are nearly collinear over
+# tracking rates, and so are the offset and gravity terms over a few degrees of
+# elevation; unbounded, the fit cancels large coefficients against each other and
+# extrapolates poorly beyond the reference stretch. 3e-4 was chosen on clean recordings
+# (a 12-h azimuth night, 20 min of azimuth, 30 min of elevation) and faulty ones: 1e-8
+# let a 20-minute elevation run drift by 14 A; 1e-2 blunts a 20 % winding fault to the
+# flagging limit.
+RIDGE = 3e-4
 
 
 @dataclass(frozen=True)

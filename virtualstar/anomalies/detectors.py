@@ -273,19 +273,23 @@ def run_detectors(seg: Segments, ref: np.ndarray, axes: dict[str, dict[str, str]
     usual = float(np.median(seg.spacing_us))
     valid = np.abs(seg.spacing_us - usual) <= 0.001 * usual
     for axis, names in axes.items():
+        calm = valid
+        if "error_arcsec" in names or "current" in names:
+            found, spikes = detect_spikes(seg, ref, valid, axis, names, cfg)
+            anomalies += found
+            # a segment with a one-sample jump is the spike detector's: it would bend the
+            # current's window mean and the error's spectrum
+            calm = valid & ~(np.nan_to_num(spikes.score) >= 1.0)
         if {"position", "current"} <= names.keys():
-            found, trace, _ = detect_current(seg, ref, valid, axis, names, cfg)
+            found, trace, _ = detect_current(seg, ref, calm, axis, names, cfg)
             anomalies += found
             traces.append(trace)
         if "error_arcsec" in names:
-            for detector in (detect_vibration, detect_spikes):
-                found, trace = detector(seg, ref, valid, axis, names, cfg)
-                anomalies += found
-                traces.append(trace)
-        elif "current" in names:
-            found, trace = detect_spikes(seg, ref, valid, axis, names, cfg)
+            found, trace = detect_vibration(seg, ref, calm, axis, names, cfg)
             anomalies += found
             traces.append(trace)
+        if "error_arcsec" in names or "current" in names:
+            traces.append(spikes)
         if "temperature" in names:
             found, trace = detect_temperature(seg, ref, valid, axis, names, cfg)
             anomalies += found

@@ -45,17 +45,19 @@ class Scores:
 
 
 def _overlaps(a: Anomaly, f: InjectedFault, early_us: int) -> bool:
-    return a.start_us < f.end_us and a.end_us > f.start_us - early_us
+    """The anomaly begins inside the fault's window (or at most `early_us` before it): a
+    flag that was already up before the fault cannot count as finding it."""
+    return f.start_us - early_us <= a.start_us < f.end_us
 
 
 def score_detections(anomalies: list[Anomaly], faults: list[InjectedFault], *,
                      early_us: int = 0) -> Scores:
     """Match anomalies with faults.
 
-    A fault is found when an anomaly of its kind and axis overlaps its window; an anomaly
-    is true when it overlaps the window of any fault of the recording (a rattling part
+    A fault is found when an anomaly of its kind and axis begins in its window; an anomaly
+    is true when it begins in the window of any fault of the recording (a rattling part
     also moves the current: that flag is no false alarm). `early_us` lets an anomaly
-    start that much before the injection (a window's start is rounded down).
+    begin that much before the injection (a window's start is rounded down).
     """
     found = sum(any(a.kind == f.kind and a.axis == f.axis and _overlaps(a, f, early_us)
                     for a in anomalies) for f in faults)
