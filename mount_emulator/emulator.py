@@ -120,8 +120,12 @@ class MountEmulator:
         return (int(m.state[L.G_MOUNT_STATE]),
                 *(int(m.axis_slot(a, f)) for a in range(2) for f in (L.A_STATE, L.A_FAULTS)))
 
-    def _log_block(self, events: int) -> None:
-        """Log what changed during a block: mount state, latched faults, syncs, underruns."""
+    def _log_block(self, events: int, armed_s: float) -> None:
+        """Log what changed during a block: mount state, latched faults, syncs, underruns.
+
+        They carry the mount time at the end of the block (at most 0.2 s after the tick
+        they happened on), except a clock sync: the PPS edge it happened on.
+        """
         now = self._states()
         before, self._last_states = self._last_states, now
         if events & EV_FAULT or now[2::2] != before[2::2]:
@@ -134,10 +138,11 @@ class MountEmulator:
             self.log_event("info", "state", f"mount {AxisState(before[0]).name} → "
                            f"{AxisState(now[0]).name}", old=AxisState(before[0]).name,
                            new=AxisState(now[0]).name)
-        if events & EV_SYNC:
-            self.log_event("info", "clock_sync", "mount clock set on the PPS edge "
-                           f"(it was {self.model.state[L.G_PPS_ERR_US]:+.0f} µs off)",
-                           pps_error_us=float(self.model.state[L.G_PPS_ERR_US]))
+        if events & EV_SYNC and armed_s >= 0:
+            err = float(self.model.state[L.G_PPS_ERR_US])
+            self.log.add(int(armed_s) * 1_000_000, "info", "clock_sync",
+                         f"mount clock set to {int(armed_s)} s on the PPS edge (it was "
+                         f"{err:+.0f} µs off)", utc_second=int(armed_s), pps_error_us=err)
         if events & EV_UNDERRUN:
             self.log_event("warning", "underrun", "trajectory buffer ran dry while tracking",
                            underruns=int(self.model.state[L.G_TRAJ_UNDERRUNS]))
@@ -164,6 +169,7 @@ class MountEmulator:
         first_tick = int(model.state[L.G_TICK]) + 1
         first_t_us = model.mount_time_us + L.TICK_US
         src, dst = self._trace_columns()
+        armed_s = model.state[L.G_PENDING_UTC_S]  # the second a PPS edge in this block sets
         if len(src):
             trace = np.empty((n_ticks, self.collection.trace_width))
             events = model.run(n_ticks, trace, src, dst)
@@ -172,7 +178,7 @@ class MountEmulator:
             events = model.run(n_ticks)
         self.endpoint.publish(first_tick, first_t_us, n_ticks, trace)
         self.ticks_run += n_ticks
-        self._log_block(events)
+        self._log_block(events, armed_s)
         return events
 
     @property
