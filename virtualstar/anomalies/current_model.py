@@ -108,7 +108,16 @@ def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray
     x = _regressors(p, v, a, gravity, 0.0)
     coef, scales = _lstsq(x[ref], i[ref])
     if cogging_periods is None:
-        cogging_periods = estimate_cogging_periods(p, i - (x / scales) @ coef)
+        base = i - (x / scales) @ coef
+        first = estimate_cogging_periods(p, base)
+        # A fault after the reference (a current step, a ramp) leaks into the periodogram
+        # and can move its peak: estimate again on the rows that the model with the first
+        # estimate explains as well as it explains the reference.
+        x1 = _regressors(p, v, a, gravity, first)
+        c1, s1 = _lstsq(x1[ref], i[ref])
+        dev = np.abs(i - (x1 / s1) @ c1)
+        usual = dev <= 2.0 * float(np.max(dev[ref])) if ref.any() else np.ones_like(ref)
+        cogging_periods = estimate_cogging_periods(p[usual], base[usual])
     if cogging_periods > 0:
         x = _regressors(p, v, a, gravity, cogging_periods)
         coef, scales = _lstsq(x[ref], i[ref])

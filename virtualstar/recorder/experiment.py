@@ -199,10 +199,12 @@ async def _push_until(control: Client, exp: SineExperiment, t0_us: int, pushed_t
 
 async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
                               on_progress: Callable[[float, float, float], None] | None = None,
-                              plots: bool = True) -> SineResult:
+                              plots: bool = True, detect: bool = False) -> SineResult:
     """Run `exp` on an in-process emulator, record into `out_dir`/store, write the plots.
 
     `on_progress(sim_s, total_s, speed)` is called about once per simulated minute.
+    `detect` runs the anomaly detectors live; what they find goes into the store's event
+    log (virtualstar.anomalies.live).
     Raises ExperimentError when the mount faults or a sample is lost.
     """
     out = Path(out_dir)
@@ -219,7 +221,13 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
         return await Client.open(emu.endpoint.connect_in_memory(maxsize=256), name="recorder",
                                  queue_packets=4096)
 
-    recorder = Recorder(connect, exp.names, exp.record_hz, writer,
+    watch = None
+    if detect:
+        from virtualstar.anomalies.live import LiveAnomalies
+
+        live = LiveAnomalies(exp.names, exp.record_hz, lambda a: recorder.anomaly_found(a))
+        watch = live.feed
+    recorder = Recorder(connect, exp.names, exp.record_hz, writer, watch=watch,
                         source=f"in-process mount emulator, sine experiment on {exp.axis}")
     task: asyncio.Task | None = None
     try:

@@ -165,6 +165,21 @@ def dtype_of(type_name: str) -> str:
 Connector = Callable[[], Awaitable[Client]]
 
 
+class _Watched:
+    """A store writer that also hands every block to `watch`."""
+
+    def __init__(self, writer: StoreWriter, watch: Callable[[SampleBlock], None]) -> None:
+        self._writer = writer
+        self._watch = watch
+
+    def write(self, block: SampleBlock) -> None:
+        self._writer.write(block)
+        self._watch(block)
+
+    def __getattr__(self, name: str):
+        return getattr(self._writer, name)
+
+
 class Recorder:
     """Record `names` at `rate_hz` from the endpoint `connect()` reaches, into `writer`.
 
@@ -176,7 +191,8 @@ class Recorder:
 
     def __init__(self, connect: Connector, names: list[str], rate_hz: float, writer: StoreWriter,
                  *, source: str = "", on_gap: Callable[[Gap], None] | None = None,
-                 reconnect_delay_s: float = DEFAULT_RECONNECT_DELAY_S) -> None:
+                 reconnect_delay_s: float = DEFAULT_RECONNECT_DELAY_S,
+                 watch: Callable[[SampleBlock], None] | None = None) -> None:
         if not names:
             raise RecorderError("name at least one signal to record")
         if len(set(names)) != len(names):
@@ -188,7 +204,9 @@ class Recorder:
         self.source = source
         self.reconnect_delay_s = reconnect_delay_s
         self._on_gap = on_gap
-        self.sink = SampleSink(writer, self.names, on_gap=self._gap)
+        # `watch` sees every block written (live anomaly detection, virtualstar.anomalies.live)
+        sink_writer = writer if watch is None else _Watched(writer, watch)
+        self.sink = SampleSink(sink_writer, self.names, on_gap=self._gap)
         self.summary = RecordingSummary(self.names, self.rate_hz)
         self.log = EventLog("recorder")
         self._logged_seq = 0
@@ -231,6 +249,15 @@ class Recorder:
             self._logged_seq = own[-1].seq
         if write is not None and self.sink.session and (own or device):
             write(sorted(own + device, key=lambda e: e.t_us))
+
+    def anomaly_found(self, anomaly) -> None:
+        """Log an anomaly the live detectors found (virtualstar.anomalies.Anomaly)."""
+        d = anomaly.as_dict()
+        self._event("warning", "anomaly", f"{d['kind']} {d['axis'] or ''} anomaly from "
+                    f"{d['start_utc']}: {d['detail']}".replace("  ", " "),
+                    anomaly_kind=d["kind"], axis=d["axis"], score=d["score"],
+                    start_utc=d["start_utc"], end_utc=d["end_utc"],
+                    signals=",".join(d["signals"]))
 
     def _gap(self, gap: Gap) -> None:
         self._event("warning", "gap", f"{gap.lost_samples} samples lost ({gap.reason})",
