@@ -47,9 +47,10 @@ def log(
     duration: Annotated[float | None, typer.Option(
         "--duration", help="With --follow: stop after this many seconds.")] = None,
 ) -> None:
-    """Print structured events (time, level, source, kind, message, fields), filtered.
+    """Print the event log of a store or a VSS (filters: time, level, source, kind, text;
+    --follow a VSS live).
 
-    From a store: the events the recorder kept beside the samples (its own, and the
+    Each event: time, level, source, kind, message, fields. From a store: the events the recorder kept beside the samples (its own, and the
     mount emulator's). From a VSS URL: the server's log (operations and phases, faults,
     safety actions, commands with client and role, connections); --follow keeps polling.
     Table by default; --json gives {"seq", "t_us", "utc", "source", "level", "kind",
