@@ -20,6 +20,7 @@ from datetime import UTC, datetime
 import numpy as np
 
 from astcom_client import Endpoint, EndpointConfig
+from astcom_client.endpoint import current_client
 from astcom_client.events import EventLog
 from mount_emulator import layout as L
 from mount_emulator.config import EmulatorConfig
@@ -77,6 +78,7 @@ class MountEmulator:
         self.endpoint = Endpoint(self.collection, EndpointConfig(
             loop_rate_hz=LOOP_RATE_HZ, passwords=config.passwords, name="mount-emulator",
             flush_interval_s=config.stream_flush_s))
+        self.endpoint.on_client = self._client_event
         self._wanted_key: bytes | None = None
         self._src = np.zeros(0, dtype=np.int64)
         self._dst = np.zeros(0, dtype=np.int64)
@@ -103,11 +105,23 @@ class MountEmulator:
 
     # ------------------------------------------------------------ event log
     def log_event(self, level: str, kind: str, message: str, **fields: object) -> None:
-        """Log an event at the current mount time (astcom_client.events; `log.since`)."""
+        """Log an event at the current mount time (astcom_client.events; `log.since`).
+
+        While an ASTCom request runs, its client's name and role go into the fields.
+        """
+        name, role, _ = current_client.get()
+        if role:
+            fields = {**fields, "client": name, "role": role}
+            message = f"{message} by {name or 'a client'} ({role})"
         self.log.add(self.model.mount_time_us, level, kind, message, **fields)
         if kind == "fault_reset":
             # faults were cleared between blocks: one that trips again is a new fault
             self._last_states = self._states()
+
+    def _client_event(self, what: str, name: str, role: str, client_id: int) -> None:
+        self.log.add(self.model.mount_time_us, "info", "connection",
+                     f"client {name or client_id} ({role}) {what}", client=name, role=role,
+                     client_id=client_id, what=what)
 
     def param_written(self, name: str, old: float, new: float) -> None:
         """Log a parameter write (old → new); a fault injection is a warning."""

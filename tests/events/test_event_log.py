@@ -41,7 +41,7 @@ def test_the_log_numbers_events_and_hands_on_only_the_newer_ones():
         log.add(START_US, "loud", "state", "no such level")
 
 
-def test_the_emulator_logs_commands_states_faults_resets_parameter_writes_and_syncs():
+def test_the_emulator_logs_clients_commands_states_faults_resets_parameter_writes_and_syncs():
     async def run() -> list[dict]:
         emu = MountEmulator(EmulatorConfig(start_us=START_US, seeing_arcsec=0.0))
         await emu.start(None, run_loop=False)
@@ -67,14 +67,20 @@ def test_the_emulator_logs_commands_states_faults_resets_parameter_writes_and_sy
     by_kind = {}
     for d in docs:
         by_kind.setdefault(d["kind"], []).append(d)
-    assert by_kind["command"][0]["fields"]["command"] == "mount.power_on"
+    power_on = by_kind["command"][0]
+    assert power_on["fields"] == {"command": "mount.power_on", "args": [], "client": "test",
+                                  "role": "operator"}
+    assert power_on["message"] == "mount.power_on() by test (operator)"
+    assert by_kind["connection"][0]["fields"]["what"] == "connected"
+    assert by_kind["connection"][0]["fields"]["client"] == "test"
     assert {"OFF → HOLDING", "HOLDING → FAULT"} <= {d["message"].split("mount ")[1]
                                                      for d in by_kind["state"]}
     fault = by_kind["fault"][0]
     assert fault["level"] == "error" and fault["fields"] == {"axis": "az", "bits": 4}
     inject = by_kind["param"][0]
     assert inject["level"] == "warning"
-    assert inject["fields"] == {"name": "axis.az.inject_encoder_fault", "old": 0.0, "new": 1.0}
+    assert inject["fields"] == {"name": "axis.az.inject_encoder_fault", "old": 0.0, "new": 1.0,
+                                "client": "test", "role": "operator"}
     assert by_kind["param"][1]["level"] == "info"  # the injection ended
     assert by_kind["fault_reset"][0]["fields"]["command"] == "safety.reset"
     sync = by_kind["clock_sync"][0]
