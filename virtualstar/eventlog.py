@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 from astcom_client.events import Event, level_rank, utc_text
 
-__all__ = ["FOLLOW_POLL_S", "EventFilter", "follow_vss", "format_event", "store_events"]
+__all__ = ["FOLLOW_POLL_S", "EventFilter", "VssEventSource", "follow_vss", "format_event",
+           "store_events"]
 
 FOLLOW_POLL_S = 0.5
 
@@ -91,3 +92,39 @@ async def follow_vss(url: str, flt: EventFilter, on_event: Callable[[Event], Non
     return passed
 
 
+
+
+class VssEventSource:
+    """A VSS's event log as a recorder event source: `await since(seq)` returns the events
+    after `seq` through any client with `request(cmd, params)` (`VssClient`, the
+    in-process `LocalVssClient`), or through a connection it opens itself to `url`."""
+
+    def __init__(self, client=None, *, url: str = "", password: str | None = None) -> None:
+        self.client = client
+        self.url = url
+        self.password = password
+        self._own = False  # the connection is ours to close
+
+    async def close(self) -> None:
+        if self._own and self.client is not None:
+            await self.client.close()
+            self.client = None
+
+    def __repr__(self) -> str:
+        return f"the VSS {self.url or '(in-process)'}"
+
+    async def since(self, seq: int) -> list[Event]:
+        if self.client is None:
+            from virtualstar.vss_client import VssClient
+
+            self.client = await VssClient.connect(self.url, password=self.password,
+                                                  reconnect=True)
+            self._own = True
+        out: list[Event] = []
+        while True:
+            doc = await self.client.request("log", {"since": seq})
+            events = [Event.from_dict(d) for d in doc["events"]]
+            out += events
+            if len(events) < 1000:
+                return out
+            seq = events[-1].seq

@@ -16,7 +16,7 @@ from astcom_client.events import Event, EventLog, utc_text
 from mount_emulator.config import EmulatorConfig
 from mount_emulator.emulator import MountEmulator
 from virtualstar.cli.main import app
-from virtualstar.eventlog import EventFilter
+from virtualstar.eventlog import EventFilter, VssEventSource
 from virtualstar.recorder.parquet_store import ParquetStoreReader, ParquetStoreWriter
 from virtualstar.recorder.subscriber import Recorder
 
@@ -99,7 +99,8 @@ def _scripted_night(store: Path):
             return await vss.emulator.connect_in_memory(name="recorder")
 
         recorder = Recorder(connect, ["axis.az.position", "axis.az.current"], 100.0, writer,
-                            source="scripted night")
+                            source="scripted night",
+                            event_sources=[VssEventSource(vss.client())])
         task = asyncio.ensure_future(recorder.run())
         await recorder.started.wait()
         vs = vss.client()
@@ -112,7 +113,6 @@ def _scripted_night(store: Path):
         await vs.request("reset_faults")
         await clock.sleep(2.0)
         log = await vs.request("log", {"since": 0})
-        await recorder.poll_device_log()
         recorder.stop()
         await task
         return log
@@ -146,6 +146,9 @@ def test_a_scripted_run_logs_every_kind_with_its_fields(night_store):
         by_source.setdefault(e.source, set()).add(e.kind)
     assert {"command", "state", "param", "fault", "fault_reset"} <= by_source["emulator"]
     assert "session" in by_source["recorder"]
+    assert {"command", "phase", "fault"} <= by_source["vss"]  # the VSS's log, kept too
+    stored_vss = [e.seq for e in stored if e.source == "vss"]
+    assert len(stored_vss) == len(set(stored_vss))  # each VSS event stored once
     t0, t1 = ParquetStoreReader(store).time_range()
     for e in stored:  # mount time, within the recording (the emulator's from before it too)
         assert e.t_us <= t1 + 2_000_000, e

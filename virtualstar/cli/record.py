@@ -39,6 +39,9 @@ def record(
         "--spool", help="Where InfluxDB batches wait while the database is down "
                         "(default: <tmp>/vs-record-spool/DB).")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    vss: Annotated[str | None, typer.Option(
+        "--vss-log", help="Also keep this VSS's event log (ws://HOST:PORT) in the store: "
+        "operations, phases, commands with client and role.")] = None,
     detect: Annotated[bool, typer.Option(
         "--detect-anomalies", help="Run the `vs data anomalies` detectors live (after a "
         "15-minute reference): each anomaly goes to stderr and into the store's event "
@@ -82,8 +85,16 @@ def record(
             raise _fail("--detect-anomalies needs axis.<az|el>.position/current/error_arcsec/"
                         "temperature among the names")
         watch = live.feed
+    sources = []
+    if vss is not None:
+        if not vss.startswith(("ws://", "wss://")):
+            raise _fail(f"--vss-log {vss!r}: expected a VSS URL, ws://HOST:PORT")
+        from virtualstar.cli.status import api_password
+        from virtualstar.eventlog import VssEventSource
+
+        sources.append(VssEventSource(url=vss, password=api_password()))
     recorder = Recorder(client_connector(url, password=password), list(names), rate, writer,
-                        source=url, on_gap=on_gap, watch=watch)
+                        source=url, on_gap=on_gap, watch=watch, event_sources=sources)
     try:
         summary = asyncio.run(_run(recorder, duration))
     except (RecorderError, AstcomError, OSError) as exc:

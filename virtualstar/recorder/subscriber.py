@@ -192,7 +192,8 @@ class Recorder:
     def __init__(self, connect: Connector, names: list[str], rate_hz: float, writer: StoreWriter,
                  *, source: str = "", on_gap: Callable[[Gap], None] | None = None,
                  reconnect_delay_s: float = DEFAULT_RECONNECT_DELAY_S,
-                 watch: Callable[[SampleBlock], None] | None = None) -> None:
+                 watch: Callable[[SampleBlock], None] | None = None,
+                 event_sources: list | None = None) -> None:
         if not names:
             raise RecorderError("name at least one signal to record")
         if len(set(names)) != len(names):
@@ -214,6 +215,10 @@ class Recorder:
         self._device_seq = 0
         self._client: Client | None = None
         self._start_event: tuple[str, dict] | None = None  # logged at the first sample's time
+        # other logs to keep beside the samples (a VSS's: virtualstar.eventlog.VssEventSource):
+        # objects with `async since(seq) -> list[Event]`
+        self.event_sources = list(event_sources or [])
+        self._source_seqs = [0] * len(self.event_sources)
         self._progress = asyncio.Event()
         self._stop = asyncio.Event()
         self.started = asyncio.Event()  # set once the stream runs and the store has begun
@@ -284,10 +289,27 @@ class Recorder:
             self._store_events(events)
         return len(events)
 
+    async def poll_event_sources(self) -> int:
+        """Store the events of the other sources (e.g. a VSS) since the last poll."""
+        found: list[Event] = []
+        for k, source in enumerate(self.event_sources):
+            try:
+                events = await source.since(self._source_seqs[k])
+            except Exception as exc:  # a source that is down must not stop the recording
+                log.info("reading the event log of %s failed: %s", source, exc)
+                continue
+            if events:
+                self._source_seqs[k] = max(e.seq for e in events)
+                found += events
+        if found:
+            self._store_events(found)
+        return len(found)
+
     async def _pump_device_log(self) -> None:
         while not self._stop.is_set():
             await self._sleep(EVENT_POLL_S, None)
             await self.poll_device_log()
+            await self.poll_event_sources()
             self._store_events([])
 
     async def wait_for_tick(self, tick: int) -> None:
@@ -342,13 +364,15 @@ class Recorder:
         try:
             client, stream = await self._open(first=True)
             self.started.set()
-            if self._device_log:
+            if self._device_log or self.event_sources:
                 pump = asyncio.ensure_future(self._pump_device_log())
             delay = self.reconnect_delay_s
             while True:
                 ended = await self._consume(stream, deadline)
                 with contextlib.suppress(Exception):  # the device's last events, if it is there
                     await asyncio.wait_for(self.poll_device_log(), 2.0)
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(self.poll_event_sources(), 2.0)
                 with contextlib.suppress(Exception):
                     await asyncio.wait_for(client.close(), 2.0)
                 if not ended:
@@ -376,6 +400,11 @@ class Recorder:
             if pump is not None:
                 pump.cancel()
                 await asyncio.gather(pump, return_exceptions=True)
+            for source in self.event_sources:
+                close = getattr(source, "close", None)
+                if close is not None:
+                    with contextlib.suppress(Exception):
+                        await asyncio.wait_for(close(), 2.0)
             try:
                 if self.sink.session:
                     self._stop.set()  # the start event is due now, whatever came

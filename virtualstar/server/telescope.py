@@ -171,9 +171,14 @@ class Telescope:
         self.last_mount_us: int | None = None  # the newest tracking-error sample's time
 
     def log_event(self, level: str, kind: str, message: str, **fields: Any) -> None:
-        """Log an event at the mount time last seen (the host clock before any sample)."""
-        t_us = self.last_mount_us if self.last_mount_us is not None else time.time_ns() // 1000
-        self.log.add(t_us, level, kind, message, **fields)
+        """Log an event at the mount time last seen; before any sample, the lockstep
+        clock's mount time, or in real time the host's UTC (mount time is UTC there)."""
+        t_us = self.last_mount_us
+        if t_us is None:
+            t_us = getattr(self.clock, "now_us", None)
+        if t_us is None:
+            t_us = time.time_ns() // 1000
+        self.log.add(int(t_us), level, kind, message, **fields)
 
     @property
     def op(self) -> Operation | None:
