@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import contextvars
 import itertools
 import logging
 import ssl
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -92,8 +93,19 @@ class EndpointConfig:
                 "max_clients": self.max_clients, "max_pending": self.max_pending}
 
 
+# Who sent the request a device function or setter is running for: (client name, role
+# label, client id). Set around each request, so a device may log who asked (an event
+# log) without the registry knowing about connections.
+current_client: contextvars.ContextVar[tuple[str, str, int]] = contextvars.ContextVar(
+    "astcom_current_client", default=("", "", 0))
+
+
 class Endpoint:
-    """Serve `collection` over any number of URLs; `publish` feeds the streams."""
+    """Serve `collection` over any number of URLs; `publish` feeds the streams.
+
+    `on_client(what, name, role, client_id)`, if set, is called with "connected" once a
+    client is authenticated (its role known) and "disconnected" when it leaves.
+    """
 
     def __init__(self, collection: Collection, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
@@ -115,6 +127,15 @@ class Endpoint:
         self._servers: list[ServerHandle] = []
         self._sessions: set[asyncio.Task[None]] = set()
         self.urls: list[str] = []
+        self.on_client: Callable[[str, str, str, int], None] | None = None
+
+    def _announce(self, what: str, conn: ServerConnection) -> None:
+        if self.on_client is not None:
+            try:
+                self.on_client(what, conn.peer_name, conn.role.label if conn.role else "",
+                               conn.client_id)
+            except Exception:  # a device's logging must never cut a connection
+                log.exception("on_client failed")
 
     # -- device side ------------------------------------------------------------------------
     def publish(self, first_tick: int, first_t_us: int, n_ticks: int,
@@ -246,6 +267,7 @@ class Endpoint:
         writer = asyncio.create_task(self._writer(conn, transport, wake, control_lock))
         loop = asyncio.get_running_loop()
         timer = loop.call_later(self.config.auth_timeout_s, self._auth_expired, conn, wake)
+        announced = False
         try:
             while conn.state is not ServerState.CLOSED and not writer.done():
                 try:
@@ -261,6 +283,9 @@ class Endpoint:
                         await self._execute(conn, event)
                 if conn.role:
                     timer.cancel()
+                    if not announced:
+                        announced = True
+                        self._announce("connected", conn)
                 # Replies go out from here, without a hop through the writer task (latency).
                 try:
                     await self._send_control(conn, transport, control_lock)
@@ -270,6 +295,8 @@ class Endpoint:
                     wake.set()
         finally:
             timer.cancel()
+            if announced:
+                self._announce("disconnected", conn)
             self.service.detach(conn)
             if conn.state is not ServerState.CLOSED:
                 conn.close(1000, "")
@@ -279,6 +306,8 @@ class Endpoint:
             self._wakers.pop(conn.client_id, None)
 
     async def _execute(self, conn: ServerConnection, event: RequestReceived) -> None:
+        token = current_client.set((conn.peer_name, conn.role.label if conn.role else "",
+                                    conn.client_id))
         try:
             result = self.service.execute(conn, event.command)
             if isinstance(result, PendingInvoke):
@@ -286,6 +315,8 @@ class Endpoint:
         except AstcomError as exc:
             conn.send_error(event.seq, exc)
             return
+        finally:
+            current_client.reset(token)
         conn.send_result(event.seq, result)
 
     @staticmethod

@@ -20,6 +20,8 @@ from datetime import UTC, datetime
 import numpy as np
 
 from astcom_client import Endpoint, EndpointConfig
+from astcom_client.endpoint import current_client
+from astcom_client.events import EventLog
 from mount_emulator import layout as L
 from mount_emulator.config import EmulatorConfig
 from mount_emulator.exceptions import ConfigError
@@ -27,6 +29,7 @@ from mount_emulator.geometry import GuideCamera
 from mount_emulator.loop_health import LoopHealth
 from mount_emulator.model import MountModel
 from mount_emulator.registry import build_collection
+from mount_emulator.states import EV_FAULT, EV_SYNC, EV_UNDERRUN, AxisState, fault_text
 
 __all__ = ["LOOP_RATE_HZ", "MountEmulator"]
 
@@ -66,6 +69,8 @@ class MountEmulator:
         self.speed = float(config.speed)
         self.last_guide = (0.0, 0.0)
         self.health = LoopHealth()
+        self.log = EventLog("emulator")
+        self._last_states = self._states()
         self.collection, col_to_state = build_collection(self)
         self._col_to_state = np.zeros(self.collection.trace_width, dtype=np.int64)
         for col, idx in col_to_state.items():
@@ -73,6 +78,7 @@ class MountEmulator:
         self.endpoint = Endpoint(self.collection, EndpointConfig(
             loop_rate_hz=LOOP_RATE_HZ, passwords=config.passwords, name="mount-emulator",
             flush_interval_s=config.stream_flush_s))
+        self.endpoint.on_client = self._client_event
         self._wanted_key: bytes | None = None
         self._src = np.zeros(0, dtype=np.int64)
         self._dst = np.zeros(0, dtype=np.int64)
@@ -97,6 +103,64 @@ class MountEmulator:
         """Zero the loop-health counters (`loop.reset_health`)."""
         self.health.reset()
 
+    # ------------------------------------------------------------ event log
+    def log_event(self, level: str, kind: str, message: str, **fields: object) -> None:
+        """Log an event at the current mount time (astcom_client.events; `log.since`).
+
+        While an ASTCom request runs, its client's name and role go into the fields.
+        """
+        name, role, _ = current_client.get()
+        if role:
+            fields = {**fields, "client": name, "role": role}
+            message = f"{message} by {name or 'a client'} ({role})"
+        self.log.add(self.model.mount_time_us, level, kind, message, **fields)
+        if kind == "fault_reset":
+            # faults were cleared between blocks: one that trips again is a new fault
+            self._last_states = self._states()
+
+    def _client_event(self, what: str, name: str, role: str, client_id: int) -> None:
+        self.log.add(self.model.mount_time_us, "info", "connection",
+                     f"client {name or client_id} ({role}) {what}", client=name, role=role,
+                     client_id=client_id, what=what)
+
+    def param_written(self, name: str, old: float, new: float) -> None:
+        """Log a parameter write (old → new); a fault injection is a warning."""
+        level = "warning" if "inject_" in name and new != 0 else "info"
+        self.log_event(level, "param", f"{name}: {old:g} → {new:g}", name=name, old=old,
+                       new=new)
+
+    def _states(self) -> tuple[int, ...]:
+        m = self.model
+        return (int(m.state[L.G_MOUNT_STATE]),
+                *(int(m.axis_slot(a, f)) for a in range(2) for f in (L.A_STATE, L.A_FAULTS)))
+
+    def _log_block(self, events: int, armed_s: float) -> None:
+        """Log what changed during a block: mount state, latched faults, syncs, underruns.
+
+        They carry the mount time at the end of the block (at most 0.2 s after the tick
+        they happened on), except a clock sync: the PPS edge it happened on.
+        """
+        now = self._states()
+        before, self._last_states = self._last_states, now
+        if events & EV_FAULT or now[2::2] != before[2::2]:
+            for a, axis in enumerate(L.AXES):
+                bits, old = now[2 + 2 * a], before[2 + 2 * a]
+                if bits & ~old:
+                    self.log_event("error", "fault", f"{axis} axis faulted: "
+                                   f"{fault_text(bits & ~old)}", axis=axis, bits=bits & ~old)
+        if now[0] != before[0]:
+            self.log_event("info", "state", f"mount {AxisState(before[0]).name} → "
+                           f"{AxisState(now[0]).name}", old=AxisState(before[0]).name,
+                           new=AxisState(now[0]).name)
+        if events & EV_SYNC and armed_s >= 0:
+            err = float(self.model.state[L.G_PPS_ERR_US])
+            self.log.add(int(armed_s) * 1_000_000, "info", "clock_sync",
+                         f"mount clock set to {int(armed_s)} s on the PPS edge (it was "
+                         f"{err:+.0f} µs off)", utc_second=int(armed_s), pps_error_us=err)
+        if events & EV_UNDERRUN:
+            self.log_event("warning", "underrun", "trajectory buffer ran dry while tracking",
+                           underruns=int(self.model.state[L.G_TRAJ_UNDERRUNS]))
+
     def mount_time_iso(self) -> str:
         """Return the mount clock as ISO-8601 UTC text with microseconds."""
         t_us = self.model.mount_time_us
@@ -119,6 +183,7 @@ class MountEmulator:
         first_tick = int(model.state[L.G_TICK]) + 1
         first_t_us = model.mount_time_us + L.TICK_US
         src, dst = self._trace_columns()
+        armed_s = model.state[L.G_PENDING_UTC_S]  # the second a PPS edge in this block sets
         if len(src):
             trace = np.empty((n_ticks, self.collection.trace_width))
             events = model.run(n_ticks, trace, src, dst)
@@ -127,6 +192,7 @@ class MountEmulator:
             events = model.run(n_ticks)
         self.endpoint.publish(first_tick, first_t_us, n_ticks, trace)
         self.ticks_run += n_ticks
+        self._log_block(events, armed_s)
         return events
 
     @property

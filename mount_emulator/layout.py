@@ -95,6 +95,7 @@ G_SEG_TAIL = 29  # buffer tail when they were computed (a new point may change t
 G_SEG_T0_US = 30
 G_SEG_SPAN_US = 31
 G_SEG_COEF = 32  # 8 slots: per axis c0..c3 of p(s) = c0 + c1·s + c2·s² + c3·s³, s in [0, 1)
+G_DRIFT_INJ_PPM = 40  # clock drift added by the injected drift growth, ppm
 STATE_AXIS0 = 64
 
 # ----------------------------------------------------------- per-axis state
@@ -129,6 +130,11 @@ A_VEL_DEG_S = 27
 A_ERR_PEAK_AS = 28  # peak |following error| since last read reset
 A_TWIST_AS = 29  # motor - load angle, arcsec
 A_PREV_EV = 30  # previous velocity error (velocity-loop D term)
+# Injected degradations (docs/mount-emulator.md, "Fault injection"): what has grown so far
+A_FRIC_INJ = 31  # extra Coulomb friction, N·m
+A_RES_AMP = 32  # amplitude of the rattling torque of a loosened part, N·m
+A_RES_PHASE = 33  # its phase, rad
+A_HEAT_INJ = 34  # extra heat in the winding, W
 
 # --------------------------------------------------------- global parameters
 Q_DRIFT_PPM = 0
@@ -142,6 +148,7 @@ Q_CHOPPER_R = 7
 Q_OVERVOLTAGE_V = 8
 Q_AMBIENT_C = 9
 Q_LATE_MARGIN_US = 10
+Q_INJ_DRIFT_GROWTH = 11  # ppm per hour
 PARAM_AXIS0 = 16
 
 # ------------------------------------------------------ per-axis parameters
@@ -185,6 +192,14 @@ P_SETTLE_AS = 36
 P_FRIC_VS = 37
 P_FRIC_FF = 38
 P_INT_ZONE = 39
+# Fault injection of gradual degradations (the existing P_INJ_ENC freezes the encoder)
+P_INJ_FRIC_GROWTH = 40  # N·m per hour
+P_INJ_WINDING = 41  # fraction of the torque constant lost
+P_INJ_RES_GROWTH = 42  # N·m per hour
+P_INJ_RES_HZ = 43
+P_INJ_GLITCH_RATE = 44  # glitches per second
+P_INJ_GLITCH_COUNTS = 45
+P_INJ_HEAT_GROWTH = 46  # W per hour
 
 _DEG = math.pi / 180.0
 
@@ -246,6 +261,13 @@ def _axis_param_defaults(axis: str) -> dict[int, float]:
         P_FRIC_VS: 1e-4,
         P_INT_ZONE: 2.0 * ARCSEC,
         P_FRIC_FF: 0.8 * (3.0 if az else 2.0),
+        P_INJ_FRIC_GROWTH: 0.0,
+        P_INJ_WINDING: 0.0,
+        P_INJ_RES_GROWTH: 0.0,
+        P_INJ_RES_HZ: f_res,
+        P_INJ_GLITCH_RATE: 0.0,
+        P_INJ_GLITCH_COUNTS: 1.0,
+        P_INJ_HEAT_GROWTH: 0.0,
     }
 
 
@@ -271,6 +293,7 @@ _GLOBAL_STATE = [
     (G_REGEN_J, "power.regen_energy", "J", "Regenerated energy dissipated in the chopper since start", "signal"),
     (G_TRAJ_REF_AZ, "traj.ref_az", "rad", "Trajectory sample at the current tick, azimuth", "signal"),
     (G_TRAJ_REF_EL, "traj.ref_el", "rad", "Trajectory sample at the current tick, elevation", "signal"),
+    (G_DRIFT_INJ_PPM, "time.injected_drift_ppm", "ppm", "Clock drift added so far by time.inject_drift_growth (fault injection)", "signal"),
 ]
 
 _AXIS_STATE = [
@@ -303,6 +326,9 @@ _AXIS_STATE = [
     (A_FAULTS, "faults", "", "Latched fault bits (FAULT_*: 1 overcurrent, 2 overtemp, 4 encoder, 8 following error, 16 limit, 32 heartbeat, 64 overvoltage)", "status"),
     (A_TARGET, "target", "rad", "Slew target", "signal"),
     (A_MANUAL_RATE, "manual_rate", "rad/s", "Manual move rate", "signal"),
+    (A_FRIC_INJ, "injected_friction", "N*m", "Coulomb friction added so far by inject_friction_growth (fault injection)", "signal"),
+    (A_RES_AMP, "injected_resonance", "N*m", "Amplitude of the rattling torque grown so far by inject_resonance_growth (fault injection)", "signal"),
+    (A_HEAT_INJ, "injected_heat", "W", "Winding heat added so far by inject_heat_growth (fault injection)", "signal"),
 ]
 
 _GLOBAL_PARAMS = [
@@ -317,6 +343,7 @@ _GLOBAL_PARAMS = [
     (Q_OVERVOLTAGE_V, "safety.overvoltage", "V", "Watchdog trips above this bus voltage", 65.0),
     (Q_AMBIENT_C, "power.ambient_temperature", "degC", "Ambient temperature for the motor thermal model", 15.0),
     (Q_LATE_MARGIN_US, "traj.late_margin_us", "us", "A pushed point must be at least this far in the future", 0.0),
+    (Q_INJ_DRIFT_GROWTH, "time.inject_drift_growth", "ppm/h", "Fault injection: the clock's drift changes by this much per hour (a crystal warming or ageing); time.injected_drift_ppm holds what it added", 0.0),
 ]
 
 _AXIS_PARAMS = [
@@ -360,6 +387,13 @@ _AXIS_PARAMS = [
     (P_FRIC_VS, "friction_smoothing", "rad/s", "Coulomb friction rises linearly up to this velocity"),
     (P_INT_ZONE, "integral_zone", "rad", "The position integrator only runs while |error| is below this"),
     (P_FRIC_FF, "friction_ff", "N*m", "Coulomb friction feed-forward of the controller (an estimate)"),
+    (P_INJ_FRIC_GROWTH, "inject_friction_growth", "N*m/h", "Fault injection: Coulomb friction rises by this much per hour (a bearing wearing or drying); injected_friction holds what it added"),
+    (P_INJ_WINDING, "inject_winding_fault", "", "Fault injection: fraction of the torque constant lost at once (shorted turns): the current steps up by 1/(1 - f)"),
+    (P_INJ_RES_GROWTH, "inject_resonance_growth", "N*m/h", "Fault injection: a loosened part rattles at inject_resonance_hz with a torque amplitude growing this much per hour; injected_resonance holds it"),
+    (P_INJ_RES_HZ, "inject_resonance_hz", "Hz", "Frequency of the injected rattling (default: the axis's structural resonance)"),
+    (P_INJ_GLITCH_RATE, "inject_encoder_glitches", "1/s", "Fault injection: mean rate of encoder glitches (one tick's reading off by inject_encoder_glitch_counts counts, at pseudo-random ticks)"),
+    (P_INJ_GLITCH_COUNTS, "inject_encoder_glitch_counts", "count", "Size of one encoder glitch (sign alternates pseudo-randomly)"),
+    (P_INJ_HEAT_GROWTH, "inject_heat_growth", "W/h", "Fault injection: extra heat in the winding grows by this much per hour (a temperature runaway); injected_heat holds it"),
 ]
 
 # Measured quantities, reported in single precision like the real MCU's ADC and sensor
@@ -367,7 +401,9 @@ _AXIS_PARAMS = [
 _MEASURED_GLOBAL = {"power.bus_voltage", "power.supply_power", "power.chopper_power",
                     "power.regen_energy"}
 _MEASURED_AXIS = {"error_arcsec", "error_peak_arcsec", "load_error_arcsec", "twist_arcsec",
-                  "current", "current_cmd", "torque", "power", "temperature"}
+                  "current", "current_cmd", "torque", "power", "temperature",
+                  # the injected degradations are torques and powers like the measured ones
+                  "injected_friction", "injected_resonance", "injected_heat"}
 
 STATE_SIZE = STATE_AXIS0 + len(AXES) * AXIS_STRIDE
 PARAM_SIZE = PARAM_AXIS0 + len(AXES) * AXIS_STRIDE
@@ -424,6 +460,10 @@ _FIXED_RANGES: dict[str, tuple[float, float]] = {
     "settle_window": (1e-3, 3600.0), "integral_zone": (0.0, 1.0),
     "friction_smoothing": (1e-9, 1.0), "cogging_periods": (0.0, 1000.0),
     "safety.heartbeat_timeout": (1e-4, 1.0),
+    "inject_friction_growth": (-100.0, 100.0), "inject_winding_fault": (0.0, 0.9),
+    "inject_resonance_growth": (0.0, 100.0), "inject_resonance_hz": (0.1, 2000.0),
+    "inject_encoder_glitches": (0.0, 5000.0), "inject_encoder_glitch_counts": (-1e6, 1e6),
+    "inject_heat_growth": (-1000.0, 1000.0), "time.inject_drift_growth": (-1000.0, 1000.0),
 }
 _SCALED_RANGES: dict[str, tuple[float, float]] = {  # (lowest, highest × default)
     "kp": (0.0, 10.0), "ki": (0.0, 10.0), "kv": (0.0, 10.0), "kvi": (0.0, 10.0),

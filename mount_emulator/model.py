@@ -173,6 +173,21 @@ class MountModel:
                 self.state[i] = next_state(AxisState.FAULT, AxisEvent.RESET)
         self._refresh_mount_state()
 
+    def clear_injections(self) -> None:
+        """End every fault injection: ``inject_*`` parameters to their defaults, grown
+        degradations (friction, rattling, heat, clock drift) back to zero.
+
+        Latched faults stay latched (`safety_reset` clears them); the winding temperature
+        cools down by itself.
+        """
+        for slot in L.PARAM_SLOTS:
+            if "inject_" in slot.name:
+                self.params[slot.index] = slot.default
+        self.state[L.G_DRIFT_INJ_PPM] = 0.0
+        for a in range(2):
+            for field in (L.A_FRIC_INJ, L.A_RES_AMP, L.A_RES_PHASE, L.A_HEAT_INJ):
+                self.state[L.state_index(a, field)] = 0.0
+
     # --------------------------------------------------------------- trajectory
     @property
     def traj_capacity(self) -> int:

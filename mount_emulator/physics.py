@@ -24,6 +24,12 @@ One tick, per axis, in this order:
    resonance is sampled ≈ 400–550 times per period);
 7. power: I²R winding heating with a thermal time constant, DC bus with supply
    resistance, regeneration into the bus capacitor, brake chopper.
+
+Injected degradations (`inject_*` parameters, docs/mount-emulator.md "Fault injection")
+enter at steps 1, 2 and 6: a growing clock drift, encoder glitches on pseudo-random ticks,
+and on the plant a lost share of the torque constant, growing friction, a growing
+rattling torque on the tube and growing winding heat. They cost one flag per axis per
+block while none is set.
 """
 
 from __future__ import annotations
@@ -42,6 +48,8 @@ from mount_emulator.layout import (
     A_ERR_AS,
     A_ERR_PEAK_AS,
     A_FAULTS,
+    A_FRIC_INJ,
+    A_HEAT_INJ,
     A_INT_POS,
     A_INT_VEL,
     A_LOAD_ERR_AS,
@@ -55,6 +63,8 @@ from mount_emulator.layout import (
     A_REF,
     A_REF_ACC,
     A_REF_VEL,
+    A_RES_AMP,
+    A_RES_PHASE,
     A_STATE,
     A_TARGET,
     A_TEMP,
@@ -69,6 +79,7 @@ from mount_emulator.layout import (
     AXIS_STRIDE,
     G_BUS_V,
     G_CHOPPER_W,
+    G_DRIFT_INJ_PPM,
     G_EVENTS,
     G_FAULTS,
     G_HB_LAST_TICK,
@@ -113,6 +124,13 @@ from mount_emulator.layout import (
     P_I_MAX,
     P_I_TRIP,
     P_INJ_ENC,
+    P_INJ_FRIC_GROWTH,
+    P_INJ_GLITCH_COUNTS,
+    P_INJ_GLITCH_RATE,
+    P_INJ_HEAT_GROWTH,
+    P_INJ_RES_GROWTH,
+    P_INJ_RES_HZ,
+    P_INJ_WINDING,
     P_INT_ZONE,
     P_J_FF,
     P_JL,
@@ -143,6 +161,7 @@ from mount_emulator.layout import (
     Q_CHOPPER_R,
     Q_DRIFT_PPM,
     Q_HB_TIMEOUT_S,
+    Q_INJ_DRIFT_GROWTH,
     Q_INJECT_HB_MISS,
     Q_OVERVOLTAGE_V,
     Q_SUPPLY_R,
@@ -211,7 +230,11 @@ K_DT_JL = 5  # dt / J_load
 K_INV_KT = 6
 K_INV_VS = 7  # 1 / friction smoothing velocity
 K_DT_TAU_TH = 8  # dt / thermal tau
-N_K = 9
+K_KT_EFF = 9  # torque constant less an injected winding fault
+K_GLITCH_P = 10  # probability of an injected encoder glitch per tick
+K_DEGRADE = 11  # 1 while a gradual degradation is injected or has grown (see _degrade)
+N_K = 12
+PER_HOUR = 1.0 / 3600.0
 RAD_TO_DEG = 180.0 / math.pi
 
 
@@ -476,10 +499,46 @@ def _watchdog(state, params, sb, pb, mount_faults):
 
 
 @_inline
+def _glitch(tick, salt, p, size):
+    """Return this tick's injected encoder error in counts: ±size with probability p, else 0.
+
+    A counter-based hash (splitmix64 of the tick and the axis), not a random generator:
+    the same run glitches at the same ticks, whatever the block sizes.
+    """
+    x = np.uint64(int(tick)) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(salt)
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    x = x ^ (x >> np.uint64(31))
+    u = float(x >> np.uint64(11)) * (1.0 / 9007199254740992.0)  # 53 bits → [0, 1)
+    if u >= p:
+        return 0.0
+    return size if u < 0.5 * p else -size
+
+
+@_inline
+def _degrade(state, params, sb, pb, dt):
+    """Grow the injected degradations of one axis by one tick; return the rattling torque (N·m)."""
+    h = dt * PER_HOUR
+    state[sb + A_FRIC_INJ] += params[pb + P_INJ_FRIC_GROWTH] * h
+    state[sb + A_HEAT_INJ] += params[pb + P_INJ_HEAT_GROWTH] * h
+    amp = state[sb + A_RES_AMP] + params[pb + P_INJ_RES_GROWTH] * h
+    state[sb + A_RES_AMP] = amp
+    if amp == 0.0:
+        return 0.0
+    ph = state[sb + A_RES_PHASE] + TWO_PI * params[pb + P_INJ_RES_HZ] * dt
+    if ph > TWO_PI:
+        ph -= TWO_PI
+    state[sb + A_RES_PHASE] = ph
+    return amp * math.sin(ph)
+
+
+@_inline
 def _sense(state, params, sb, pb, dt, k):
     """Read the absolute encoder (unless faulted) and update the velocity estimate."""
     if params[pb + P_INJ_ENC] == 0.0:
         counts = math.floor(state[sb + A_POS_M] * k[K_CPR] + 0.5)
+        if k[K_GLITCH_P] > 0.0:
+            counts += _glitch(state[G_TICK], sb, k[K_GLITCH_P], params[pb + P_INJ_GLITCH_COUNTS])
         state[sb + A_ENC_COUNTS] = counts
         state[sb + A_ENC] = counts * k[K_RPC]
     enc = state[sb + A_ENC]
@@ -489,8 +548,11 @@ def _sense(state, params, sb, pb, dt, k):
 
 
 @_inline
-def _plant(state, params, sb, pb, i_cmd, dt, ambient_c, k):
-    """Integrate one axis over one tick; return the electrical power drawn (W)."""
+def _plant(state, params, sb, pb, i_cmd, dt, ambient_c, k, t_rattle):
+    """Integrate one axis over one tick; return the electrical power drawn (W).
+
+    ``t_rattle`` is an injected disturbance torque on the load (a loosened part), N·m.
+    """
     cur = state[sb + A_CUR]
     cur += (i_cmd - cur) * k[K_ALPHA_I]
     state[sb + A_CUR] = cur
@@ -499,13 +561,13 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c, k):
     vm = state[sb + A_VEL_M]
     pl = state[sb + A_POS_L]
     vl = state[sb + A_VEL_L]
-    kt = params[pb + P_KT]
+    kt = k[K_KT_EFF]
     t_motor = kt * cur + params[pb + P_COG] * math.sin(params[pb + P_COG_N] * pm)
     t_spring = params[pb + P_K] * (pm - pl) + params[pb + P_C] * (vm - vl)
     t_grav = params[pb + P_GRAV] * math.cos(pl) if params[pb + P_GRAV] != 0.0 else 0.0
     dt_jm = k[K_DT_JM]
     vm_free = vm + (t_motor - t_spring - params[pb + P_VISC] * vm) * dt_jm
-    fc = params[pb + P_COULOMB]
+    fc = max(params[pb + P_COULOMB] + state[sb + A_FRIC_INJ], 0.0)
     st = int(state[sb + A_STATE])
     if st in (OFF, FAULT):
         # holding brake: exact stiction (implicit clamp), it never creeps
@@ -526,7 +588,7 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c, k):
             vm = vm_free - dv_c
         elif vm < -v_s:
             vm = vm_free + dv_c
-    vl = vl + (t_spring - t_grav) * k[K_DT_JL]
+    vl = vl + (t_spring - t_grav + t_rattle) * k[K_DT_JL]
     state[sb + A_VEL_M] = vm
     state[sb + A_VEL_L] = vl
     state[sb + A_POS_M] = pm + dt * vm
@@ -534,7 +596,7 @@ def _plant(state, params, sb, pb, i_cmd, dt, ambient_c, k):
     state[sb + A_TORQUE] = t_motor
     # winding temperature: C·dT/dt = I²R − (T − T_amb)/R_th, C = τ/R_th
     r_th = params[pb + P_RTH]
-    heat = cur * cur * params[pb + P_R_OHM]
+    heat = cur * cur * params[pb + P_R_OHM] + state[sb + A_HEAT_INJ]
     temp = state[sb + A_TEMP]
     state[sb + A_TEMP] = temp + (heat * r_th - (temp - ambient_c)) * k[K_DT_TAU_TH]
     power = heat + kt * cur * vm
@@ -570,7 +632,10 @@ def _clock(state, params):
     ev = 0
     state[G_TICK] += 1.0
     state[G_TRUE_US] += TICK_US
-    frac = state[G_MOUNT_FRAC_US] + TICK_US * (1.0 + params[Q_DRIFT_PPM] * 1e-6)
+    if params[Q_INJ_DRIFT_GROWTH] != 0.0:
+        state[G_DRIFT_INJ_PPM] += params[Q_INJ_DRIFT_GROWTH] * (TICK_S * PER_HOUR)
+    drift_ppm = params[Q_DRIFT_PPM] + state[G_DRIFT_INJ_PPM]
+    frac = state[G_MOUNT_FRAC_US] + TICK_US * (1.0 + drift_ppm * 1e-6)
     whole = math.floor(frac)
     state[G_MOUNT_US] += whole
     state[G_MOUNT_FRAC_US] = frac - whole
@@ -606,7 +671,7 @@ def _mount_state(state):
 
 
 @_inline
-def _block_constants(params, dt):
+def _block_constants(state, params, dt):
     """Return the per-axis constants (``K_*``) derived from the parameters for one block."""
     k = np.empty((2, N_K))
     for a in range(2):
@@ -621,6 +686,12 @@ def _block_constants(params, dt):
         k[a, K_INV_KT] = 1.0 / params[pb + P_KT]
         k[a, K_INV_VS] = 1.0 / params[pb + P_FRIC_VS]
         k[a, K_DT_TAU_TH] = dt / params[pb + P_TAU_TH]
+        k[a, K_KT_EFF] = params[pb + P_KT] * (1.0 - params[pb + P_INJ_WINDING])
+        k[a, K_GLITCH_P] = params[pb + P_INJ_GLITCH_RATE] * dt
+        sb = STATE_AXIS0 + a * AXIS_STRIDE
+        growing = (params[pb + P_INJ_FRIC_GROWTH] != 0.0 or params[pb + P_INJ_RES_GROWTH] != 0.0
+                   or params[pb + P_INJ_HEAT_GROWTH] != 0.0 or state[sb + A_RES_AMP] != 0.0)
+        k[a, K_DEGRADE] = 1.0 if growing else 0.0
     return k
 
 
@@ -631,7 +702,7 @@ def step(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace
     ``trace`` (n_ticks × width, or any 2-D array when ``trace_src`` is empty)
     receives ``state[trace_src[j]]`` in column ``trace_dst[j]`` after every tick.
     """
-    kk = _block_constants(params, TICK_S)
+    kk = _block_constants(state, params, TICK_S)
     return _ticks(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, trace_dst,
                   kk, np.zeros(6))
 
@@ -688,7 +759,8 @@ def _ticks(state, params, traj_t, traj_p, traj_v, n_ticks, trace, trace_src, tra
                     events |= EV_FAULT
             if int(state[sb + A_STATE]) == FAULT:
                 i_cmd = 0.0
-            p_total += _plant(state, params, sb, pb, i_cmd, dt, ambient, k)
+            t_rattle = _degrade(state, params, sb, pb, dt) if k[K_DEGRADE] != 0.0 else 0.0
+            p_total += _plant(state, params, sb, pb, i_cmd, dt, ambient, k, t_rattle)
             _peak(state, sb)
             if n_trace > 0:
                 _derived(state, sb)

@@ -35,7 +35,9 @@ NONNEGATIVE_PARAMS = {"stiffness", "damping", "winding_resistance", "viscous_fri
                       "coulomb_friction", "cogging", "brake_torque", "friction_ff", "integral_zone"}
 
 
-def _param_setter(params: np.ndarray, slot: L.Slot) -> Callable[[float], None]:
+def _param_setter(params: np.ndarray, slot: L.Slot,
+                  on_write: Callable[[str, float, float], None] | None = None
+                  ) -> Callable[[float], None]:
     short = slot.name.rsplit(".", 1)[-1]
 
     def put(value: float) -> None:
@@ -48,7 +50,10 @@ def _param_setter(params: np.ndarray, slot: L.Slot) -> Callable[[float], None]:
             raise ValueError(f"{slot.name} must be >= 0 {slot.unit}, got {v}")
         if short == "encoder_bits" and not 8 <= v <= 40:
             raise ValueError(f"{slot.name} must be between 8 and 40 bits, got {v}")
+        old = float(params[slot.index])
         params[slot.index] = v
+        if on_write is not None and old != v:
+            on_write(slot.name, old, v)
 
     return put
 
@@ -74,12 +79,48 @@ def build_collection(emu: MountEmulator) -> tuple[Collection, dict[int, int]]:
             lo = 1e-6 * slot.default  # the step divides by it: never 0
         coll.add_variable(slot.name, "f64", kind="parameter", access="rw", unit=slot.unit,
                           doc=f"{slot.doc} (default {slot.default:g})",
-                          get=lambda i=slot.index: float(params[i]), set=_param_setter(params, slot),
+                          get=lambda i=slot.index: float(params[i]),
+                          set=_param_setter(params, slot, emu.param_written),
                           min_value=lo, max_value=hi)
     _add_text_signals(coll, emu)
     _add_loop_health(coll, emu)
     _add_functions(coll, emu)
+    _add_log(coll, emu)
     return coll, column_to_state
+
+
+# Commands that change what the mount does are logged (kind "command"); reads and the
+# frequent trajectory pushes are not.
+LOGGED_COMMANDS = {"mount.power_on", "mount.power_off", "mount.stop", "mount.slew",
+                   "axis.az.move", "axis.el.move", "traj.init", "traj.start", "traj.reset",
+                   "time.set_utc", "safety.reset", "fault.clear_injections"}
+
+
+def _add_log(coll: Collection, emu: MountEmulator) -> None:
+    """`log.*`: the emulator's structured event log (astcom_client.events)."""
+    coll.add_variable("log.last_seq", "u64", doc="Sequence number of the newest logged event",
+                      get=lambda: emu.log.last_seq)
+    coll.add_function("log.since", emu.log.since_json, args=[("seq", "u64")], returns="str",
+                      doc="Events after sequence number seq, oldest first, as a JSON list of "
+                          "{seq, t_us, utc, source, level, kind, message, fields}")
+    for name in LOGGED_COMMANDS:
+        func = coll.function(name)
+        func.fn = _logged(emu, name, func.fn)
+
+
+def _logged(emu: MountEmulator, name: str, fn: Callable) -> Callable:
+    def call(*args):
+        result = fn(*args)
+        shown = ", ".join(f"{a:g}" if isinstance(a, float) else str(a) for a in args)
+        emu.log_event("info", "fault_reset" if name == "safety.reset" else "command",
+                      f"{name}({shown})", command=name, args=[_plain(a) for a in args])
+        return result
+
+    return call
+
+
+def _plain(value):
+    return value.item() if hasattr(value, "item") else value
 
 
 def _add_loop_health(coll: Collection, emu: MountEmulator) -> None:
@@ -163,6 +204,9 @@ def _add_functions(coll: Collection, emu: MountEmulator) -> None:
                       doc="Return the mount clock (µs since 1970 UTC)")
     coll.add_function("safety.reset", m.safety_reset,
                       doc="Clear latched faults; faulted axes go to OFF")
+    coll.add_function("fault.clear_injections", m.clear_injections,
+                      doc="End every fault injection: inject_* parameters to their defaults, "
+                          "grown friction, rattling, heat and clock drift back to zero")
     coll.add_function("guide.measure", emu.guide_measure,
                       args=[("star_az_deg", "f64"), ("star_el_deg", "f64")], returns="f64[2]",
                       doc="Offset (arcsec) of a star at observed (az, el) from the optical axis, "

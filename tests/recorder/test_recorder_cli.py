@@ -71,6 +71,7 @@ def test_vs_data_plot_and_export_write_their_files(recorded, tmp_path):
     (["--store", "mongo:x"], "unknown store kind 'mongo'"),
     (["--rate", "-5"], "--rate -5.0: expected a positive"),
     (["--duration", "0"], "--duration 0.0: expected a positive"),
+    (["--detect-anomalies"], "--detect-anomalies needs axis.<az|el>"),
 ])
 def test_vs_record_rejects_bad_options_clearly(device_url, tmp_path, args, message):
     res = runner.invoke(app, ["record", device_url, "counter", *args])

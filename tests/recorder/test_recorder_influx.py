@@ -121,3 +121,20 @@ def test_a_database_that_never_answers_keeps_the_batches_on_disk_for_later(influ
     assert not w2.spooled_files()
     back = InfluxStoreReader(conn).window(0, 2**62)
     np.testing.assert_array_equal(back.t_us, block.t_us)
+
+
+def test_influx_store_keeps_events_even_two_at_one_microsecond(influx, tmp_path):
+    from astcom_client.events import EventLog
+
+    log = EventLog("emulator")
+    log.add(START_US, "warning", "param", 'axis.az.inject_winding_fault: 0 → 0.2 "quoted"',
+            name="axis.az.inject_winding_fault", old=0.0, new=0.2)
+    log.add(START_US, "error", "fault", "az axis faulted: following error", axis="az", bits=8)
+    log.add(START_US + 5, "info", "state", "mount HOLDING → FAULT")
+    writer = InfluxStoreWriter(InfluxConnection(influx.url, "ev"), spool_dir=tmp_path / "spool")
+    writer.begin(SIGNALS, source="test", rate_hz=1000.0)
+    writer.write(_synthetic(10))
+    writer.write_events(log.since(0))
+    writer.close()
+    back = open_reader(f"influx:{influx.url}/ev").events()
+    assert [e.as_dict() for e in back] == [e.as_dict() for e in log.since(0)]

@@ -265,3 +265,72 @@ def recover(
         typer.echo(json.dumps(doc))
     else:
         typer.echo(str(report) if report else f"{directory}: nothing to recover")
+
+
+@app.command()
+def anomalies(
+    store: StoreArg,
+    t_from: FromOpt = "start",
+    t_to: ToOpt = "end",
+    ref_from: Annotated[str | None, typer.Option(
+        "--reference-from", help="Start of the reference stretch (the mount as usual), same "
+                                 "forms as --from; default: the start of the window.")] = None,
+    ref_to: Annotated[str | None, typer.Option(
+        "--reference-to", help="End of the reference stretch; default: 15 minutes after its "
+                               "start (at most half the window).")] = None,
+    threshold: Annotated[float, typer.Option(
+        "--threshold", help="Flag beyond this many robust sigmas of the reference (each "
+                            "detector also has an absolute floor).")] = 8.0,
+    cogging: Annotated[float | None, typer.Option(
+        "--cogging-periods", help="Cogging periods per motor revolution in the current model; "
+                                  "default: found from the recording; 0: none.")] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the anomalies as JSON.")] = False,
+    plot_path: Annotated[Path | None, typer.Option(
+        "--plot", help="Write a PNG of every detector's score over time here.")] = None,
+) -> None:
+    """Flag the stretches where the mount behaves unlike itself on a reference stretch.
+
+    Detects on residuals: the current minus a model fitted from position, velocity and
+    acceleration (friction rising, winding faults), the tracking error's octave-band
+    spectrum (a growing resonance), one-sample jumps (encoder glitches), the temperature's
+    trend (runaway) and the clock rate seen in the sample times (drift). --json prints a
+    list of {"start_utc", "end_utc", "start_t_us", "end_t_us", "kind", "signals", "score",
+    "axis", "detail"}; score >= 1 is past the flagging limit. Exit 0 whether or not
+    anything is found; docs/anomalies.md says what each kind means.
+    """
+    from virtualstar.anomalies import DetectorConfig, detect_anomalies
+
+    if not threshold > 0:
+        raise _fail(f"--threshold {threshold}: expected a number of sigmas > 0")
+    if cogging is not None and not cogging >= 0:
+        raise _fail(f"--cogging-periods {cogging}: expected >= 0 (0: no cogging term)")
+    try:
+        reader = _open(store)
+        a, b = _window(reader, t_from, t_to)
+        reference = None
+        if ref_from is not None or ref_to is not None:
+            ra = parse_time_bound(ref_from or "start", a, b - 1, option="--reference-from")
+            rb = (parse_time_bound(ref_to, a, b - 1, option="--reference-to") if ref_to
+                  else ra + 900_000_000)
+            if rb <= ra:
+                raise RecorderError(f"empty reference: --reference-to ({rb} µs) is not after "
+                                    f"--reference-from ({ra} µs)")
+            reference = (ra, rb)
+        report = detect_anomalies(reader, a, b, reference=reference,
+                                  config=DetectorConfig(threshold=threshold,
+                                                        cogging_periods=cogging))
+        if plot_path is not None:
+            from virtualstar.anomalies.plot import plot_report
+
+            plot_report(report, plot_path, title=f"{store}: {len(report.anomalies)} anomalies")
+    except (RecorderError, OSError) as exc:
+        raise _fail(str(exc)) from None
+    if json_out:
+        typer.echo(json.dumps(report.as_list()))
+        return
+    typer.echo(f"{len(report.anomalies)} anomalies from {utc_text(a)} to {utc_text(b)} "
+               f"({report.segments} segments at {report.rate_hz:g} Hz; reference "
+               f"{utc_text(report.reference_t_us[0])} to {utc_text(report.reference_t_us[1])})")
+    for x in report.anomalies:
+        typer.echo(f"  {utc_text(x.start_us)} .. {utc_text(x.end_us)}  {x.kind:<11} "
+                   f"{x.axis or '-':<3} score {x.score:6.2f}  {x.detail}")

@@ -70,6 +70,9 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
         "Load or drop the pointing model the server applies to every target."),
     "data": ("virtualstar.cli.data", "app",
         "Query, plot and export recorded signals."),
+    "log": ("virtualstar.cli.log", "log",
+        "Print the event log of a store or a VSS (filters: time, level, source, kind, "
+        "text; --follow a VSS live)."),
     "experiment": ("virtualstar.cli.experiment", "app",
         "Reproduce the paper's experiments on the mount emulator."),
 }

@@ -39,6 +39,13 @@ def record(
         "--spool", help="Where InfluxDB batches wait while the database is down "
                         "(default: <tmp>/vs-record-spool/DB).")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    vss: Annotated[str | None, typer.Option(
+        "--vss-log", help="Also keep this VSS's event log (ws://HOST:PORT) in the store: "
+        "operations, phases, commands with client and role.")] = None,
+    detect: Annotated[bool, typer.Option(
+        "--detect-anomalies", help="Run the `vs data anomalies` detectors live (after a "
+        "15-minute reference): each anomaly goes to stderr and into the store's event "
+        "log.")] = False,
 ) -> None:
     """Record NAME... from URL at --rate into --store until --duration or Ctrl-C.
 
@@ -63,8 +70,31 @@ def record(
                    f"{gap.after_t_us} and {gap.before_t_us}", err=True)
 
     logging.basicConfig(level=logging.WARNING, format="vs record: %(message)s")
+    watch = None
+    live = None
+    if detect:
+        from virtualstar.anomalies.live import LiveAnomalies
+
+        def on_anomaly(anomaly) -> None:
+            recorder.anomaly_found(anomaly)
+            typer.echo(f"vs record: anomaly: {anomaly.kind} {anomaly.axis} from "
+                       f"{anomaly.as_dict()['start_utc']}: {anomaly.detail}", err=True)
+
+        live = LiveAnomalies(list(names), rate, on_anomaly)
+        if not live.active:
+            raise _fail("--detect-anomalies needs axis.<az|el>.position/current/error_arcsec/"
+                        "temperature among the names")
+        watch = live.feed
+    sources = []
+    if vss is not None:
+        if not vss.startswith(("ws://", "wss://")):
+            raise _fail(f"--vss-log {vss!r}: expected a VSS URL, ws://HOST:PORT")
+        from virtualstar.cli.status import api_password
+        from virtualstar.eventlog import VssEventSource
+
+        sources.append(VssEventSource(url=vss, password=api_password()))
     recorder = Recorder(client_connector(url, password=password), list(names), rate, writer,
-                        source=url, on_gap=on_gap)
+                        source=url, on_gap=on_gap, watch=watch, event_sources=sources)
     try:
         summary = asyncio.run(_run(recorder, duration))
     except (RecorderError, AstcomError, OSError) as exc:

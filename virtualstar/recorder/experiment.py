@@ -35,7 +35,8 @@ from .parquet_store import ParquetStoreReader, ParquetStoreWriter
 from .plots import plot_envelope, plot_window
 from .subscriber import Recorder, RecordingSummary
 
-__all__ = ["SineExperiment", "SineResult", "commanded_position", "run_sine_experiment"]
+__all__ = ["Injection", "SineExperiment", "SineResult", "commanded_position",
+           "run_sine_experiment"]
 
 DEFAULT_START_US = 1_772_395_200_000_000  # 2026-03-01T20:00:00Z, an evening in mount time
 DRIFT_RAD_PER_MIN = 0.0095  # the paper's average axis speed
@@ -50,6 +51,19 @@ START_DELAY_US = 200_000  # the first point lies this far after traj.start
 
 
 @dataclass(frozen=True)
+class Injection:
+    """Write parameter `name` = `value` on the mount `at_s` seconds after the trajectory
+    starts (a fault injection, docs/mount-emulator.md; exact to the tick)."""
+
+    at_s: float
+    name: str
+    value: float
+
+    def at_us(self, t0_us: int) -> int:
+        return t0_us + round(self.at_s * 1e6)
+
+
+@dataclass(frozen=True)
 class SineExperiment:
     """Parameters of the run; angles in radians, times in seconds unless named otherwise."""
 
@@ -60,6 +74,8 @@ class SineExperiment:
     period_s: float = 600.0
     start_us: int = DEFAULT_START_US
     other_axis_deg: float = 45.0
+    extra_names: tuple[str, ...] = ()  # recorded beside position, current and error
+    injections: tuple[Injection, ...] = ()
 
     def __post_init__(self) -> None:
         if self.axis not in ("az", "el"):
@@ -94,7 +110,8 @@ class SineExperiment:
     @property
     def names(self) -> list[str]:
         a = self.axis
-        return [f"axis.{a}.position", f"axis.{a}.current", f"axis.{a}.error_arcsec"]
+        return [f"axis.{a}.position", f"axis.{a}.current", f"axis.{a}.error_arcsec",
+                *self.extra_names]
 
 
 def commanded_position(exp: SineExperiment, t_us: np.ndarray, t0_us: int) -> tuple[np.ndarray, np.ndarray]:
@@ -182,10 +199,12 @@ async def _push_until(control: Client, exp: SineExperiment, t0_us: int, pushed_t
 
 async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
                               on_progress: Callable[[float, float, float], None] | None = None,
-                              plots: bool = True) -> SineResult:
+                              plots: bool = True, detect: bool = False) -> SineResult:
     """Run `exp` on an in-process emulator, record into `out_dir`/store, write the plots.
 
     `on_progress(sim_s, total_s, speed)` is called about once per simulated minute.
+    `detect` runs the anomaly detectors live; what they find goes into the store's event
+    log (virtualstar.anomalies.live).
     Raises ExperimentError when the mount faults or a sample is lost.
     """
     out = Path(out_dir)
@@ -202,7 +221,13 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
         return await Client.open(emu.endpoint.connect_in_memory(maxsize=256), name="recorder",
                                  queue_packets=4096)
 
-    recorder = Recorder(connect, exp.names, exp.record_hz, writer,
+    watch = None
+    if detect:
+        from virtualstar.anomalies.live import LiveAnomalies
+
+        live = LiveAnomalies(exp.names, exp.record_hz, lambda a: recorder.anomaly_found(a))
+        watch = live.feed
+    recorder = Recorder(connect, exp.names, exp.record_hz, writer, watch=watch,
                         source=f"in-process mount emulator, sine experiment on {exp.axis}")
     task: asyncio.Task | None = None
     try:
@@ -226,8 +251,14 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
         next_report = report_every
         loop_start = time.perf_counter()
         step_s = 0.0
+        pending = sorted(exp.injections, key=lambda j: j.at_s)
         while done < total_ticks:
             n = min(BLOCK_TICKS, total_ticks - done)
+            while pending and pending[0].at_us(t0_us) <= emb.mount_time_us:
+                j = pending.pop(0)
+                await control.write({j.name: j.value})
+            if pending:  # end the block on the tick the next injection is due
+                n = max(1, min(n, (pending[0].at_us(t0_us) - emb.mount_time_us) // 100))
             s0 = time.perf_counter()
             emu.advance(n)
             step_s += time.perf_counter() - s0

@@ -52,6 +52,7 @@ log = logging.getLogger("virtualstar.recorder.influx")
 
 MEASUREMENT = "signals"
 GAPS_MEASUREMENT = "recorder_gaps"
+EVENTS_MEASUREMENT = "events"  # the event log (docs/events.md); tags source, level, kind, seq
 SIGNALS_MEASUREMENT = "recorder_signals"
 DEFAULT_BATCH_LINES = 5000  # InfluxDB 1.x documents 5 000–10 000 points per write as optimal
 DEFAULT_TIMEOUT_S = 5.0
@@ -298,6 +299,16 @@ class InfluxStoreWriter:
             f"after_t_us={gap.after_t_us}i,before_t_us={gap.before_t_us}i,"
             f"lost_samples={gap.lost_samples}i,reason={_quote(gap.reason)} {at}")
 
+    def write_events(self, events: list) -> None:
+        """Queue structured events (astcom_client.events.Event) as points of `events`; the
+        source's seq is a tag, so two events at one microsecond both stay."""
+        for e in events:
+            self._lines.append(
+                f"{EVENTS_MEASUREMENT},source={_escape_key(e.source)},level={_escape_key(e.level)},"
+                f"kind={_escape_key(e.kind)},seq={e.seq},session={_escape_key(self.session)} "
+                f"message={_quote(e.message)},fields={_quote(json.dumps(e.fields))} "
+                f"{_clamp(e.t_us)}")
+
     def flush(self) -> None:
         """Hand over what is queued and wait until it is written or spooled."""
         self._submit()
@@ -521,6 +532,17 @@ class InfluxStoreReader:
         maxs = {nm: np.array([r[3 + 2 * j] for r in rows], dtype=np.float64)
                 for j, nm in enumerate(names)}
         return Envelope(bucket_us, t, n, mins, maxs)
+
+    def events(self) -> list:
+        """Return the stored events (astcom_client.events.Event) by time."""
+        from astcom_client.events import Event
+
+        series = self.conn.query(f"SELECT seq, message, fields, source, level, kind "
+                                 f"FROM {_ident(EVENTS_MEASUREMENT)}")
+        out = [Event(int(r[0]), r[4], r[5], r[6], r[2] or "", json.loads(r[3] or "{}"),
+                     int(r[1])) for s in series for r in s["values"]]
+        out.sort(key=lambda e: (e.t_us, e.source, e.seq))
+        return out
 
     def gaps(self) -> list[Gap]:
         """Return every recorded gap in time order."""

@@ -38,6 +38,7 @@ import pyarrow.parquet as pq
 
 from .background import BackgroundWriter, new_session_id
 from .decimation import Envelope, envelope, rebucket
+from .event_store import EventJournal, read_events
 from .exceptions import EmptyStore, QueryError, StoreError
 from .parquet_journal import (
     GAP_FIELDS,
@@ -111,6 +112,7 @@ class ParquetStoreWriter:
         self._lock = WriterLock(self.path)
         self._journal: HourJournal | None = None
         self._journal_hour: int | None = None
+        self._events: EventJournal | None = None
         self._closed = False
 
     # -- session -------------------------------------------------------------------------
@@ -154,6 +156,7 @@ class ParquetStoreWriter:
         self._schema = pa.schema(fields, metadata={"format": PARQUET_FORMAT,
                                                    "session": self.session})
         self._last_flush = time.monotonic()
+        self._events = EventJournal(self.path, self.session)
         return self.session
 
     # -- samples -------------------------------------------------------------------------
@@ -200,6 +203,12 @@ class ParquetStoreWriter:
         except OSError as exc:
             raise StoreError(f"cannot append to {path}: {exc.strerror}") from None
 
+    def write_events(self, events: list) -> None:
+        """Append structured events (astcom_client.events.Event) to the store at once."""
+        if self._events is None:
+            raise StoreError("write_events before begin: start the session first")
+        self._events.append(events)
+
     def flush(self) -> None:
         """Journal what is buffered and wait until it is on disk."""
         self._flush()
@@ -214,6 +223,8 @@ class ParquetStoreWriter:
             self._flush()
             self._thread.submit(self._finish_hour)
             self._thread.wait(0)
+            if self._events is not None:
+                self._events.finish()
         finally:
             self._thread.shutdown()
             self._lock.release()
@@ -445,6 +456,10 @@ class ParquetStoreReader:
         with path.open(newline="") as f:
             return [Gap(int(r["after_t_us"]), int(r["before_t_us"]), int(r["lost_samples"]),
                         r["reason"], r["session"]) for r in csv.DictReader(f)]
+
+    def events(self) -> list:
+        """Return the store's structured events (astcom_client.events.Event), by time."""
+        return read_events(self.path)
 
     def iter_blocks(self, names: list[str] | None = None,
                     batch_rows: int = 1 << 18) -> Any:

@@ -74,6 +74,12 @@ class TeeWriter:
         for w in self.writers:
             w.write_gap(gap)
 
+    def write_events(self, events: list) -> None:
+        for w in self.writers:
+            write = getattr(w, "write_events", None)
+            if write is not None:
+                write(events)
+
     def flush_if_due(self) -> None:
         for w in self.writers:
             flush_if_due = getattr(w, "flush_if_due", None)

@@ -20,6 +20,7 @@ from typing import Protocol
 import numpy as np
 
 from astcom_client import AstcomError, Client, StreamPacket, parse_type
+from astcom_client.events import Event, EventLog
 
 from .exceptions import RecorderError
 from .samples import UNKNOWN_LOST, Gap, SampleBlock, SignalInfo
@@ -32,6 +33,7 @@ DEFAULT_RECONNECT_DELAY_S = 0.2
 IDLE_FLUSH_S = 0.5  # a quiet stream still lets the store journal what it holds this often
 MAX_RECONNECT_DELAY_S = 5.0
 CLIENT_QUEUE_PACKETS = 65_536  # client-side packet queue: a burst of several seconds at 10 kHz
+EVENT_POLL_S = 1.0  # wall seconds between two reads of the device's event log (log.since)
 
 
 class StoreWriter(Protocol):
@@ -163,6 +165,21 @@ def dtype_of(type_name: str) -> str:
 Connector = Callable[[], Awaitable[Client]]
 
 
+class _Watched:
+    """A store writer that also hands every block to `watch`."""
+
+    def __init__(self, writer: StoreWriter, watch: Callable[[SampleBlock], None]) -> None:
+        self._writer = writer
+        self._watch = watch
+
+    def write(self, block: SampleBlock) -> None:
+        self._writer.write(block)
+        self._watch(block)
+
+    def __getattr__(self, name: str):
+        return getattr(self._writer, name)
+
+
 class Recorder:
     """Record `names` at `rate_hz` from the endpoint `connect()` reaches, into `writer`.
 
@@ -174,7 +191,9 @@ class Recorder:
 
     def __init__(self, connect: Connector, names: list[str], rate_hz: float, writer: StoreWriter,
                  *, source: str = "", on_gap: Callable[[Gap], None] | None = None,
-                 reconnect_delay_s: float = DEFAULT_RECONNECT_DELAY_S) -> None:
+                 reconnect_delay_s: float = DEFAULT_RECONNECT_DELAY_S,
+                 watch: Callable[[SampleBlock], None] | None = None,
+                 event_sources: list | None = None) -> None:
         if not names:
             raise RecorderError("name at least one signal to record")
         if len(set(names)) != len(names):
@@ -185,8 +204,21 @@ class Recorder:
         self.writer = writer
         self.source = source
         self.reconnect_delay_s = reconnect_delay_s
-        self.sink = SampleSink(writer, self.names, on_gap=on_gap)
+        self._on_gap = on_gap
+        # `watch` sees every block written (live anomaly detection, virtualstar.anomalies.live)
+        sink_writer = writer if watch is None else _Watched(writer, watch)
+        self.sink = SampleSink(sink_writer, self.names, on_gap=self._gap)
         self.summary = RecordingSummary(self.names, self.rate_hz)
+        self.log = EventLog("recorder")
+        self._logged_seq = 0
+        self._device_log = False  # the device serves log.since: its events are stored too
+        self._device_seq = 0
+        self._client: Client | None = None
+        self._start_event: tuple[str, dict] | None = None  # logged at the first sample's time
+        # other logs to keep beside the samples (a VSS's: virtualstar.eventlog.VssEventSource):
+        # objects with `async since(seq) -> list[Event]`
+        self.event_sources = list(event_sources or [])
+        self._source_seqs = [0] * len(self.event_sources)
         self._progress = asyncio.Event()
         self._stop = asyncio.Event()
         self.started = asyncio.Event()  # set once the stream runs and the store has begun
@@ -195,6 +227,90 @@ class Recorder:
     def stop(self) -> None:
         """Ask `run` to finish after the packets already received."""
         self._stop.set()
+
+    # -- events --------------------------------------------------------------------------
+    def _now_us(self) -> int:
+        """Mount time of the recorder's own events: the newest sample, else the host clock."""
+        return self.sink.last_t_us if self.sink.last_t_us is not None else time.time_ns() // 1000
+
+    def _event(self, level: str, kind: str, message: str, **fields: object) -> None:
+        self.log.add(self._now_us(), level, kind, message, **fields)
+        self._store_events([])
+
+    def _log_start(self) -> None:
+        if self._start_event is not None and (self.sink.first_t_us is not None
+                                              or self._stop.is_set()):
+            message, fields = self._start_event
+            self._start_event = None
+            t_us = self.sink.first_t_us if self.sink.first_t_us is not None else self._now_us()
+            self.log.add(t_us, "info", "session", message, **fields)
+
+    def _store_events(self, device: list[Event]) -> None:
+        """Hand the recorder's new events and the device's to the store (if it keeps them)."""
+        self._log_start()
+        write = getattr(self.writer, "write_events", None)
+        own = self.log.since(self._logged_seq)
+        if own:
+            self._logged_seq = own[-1].seq
+        if write is not None and self.sink.session and (own or device):
+            write(sorted(own + device, key=lambda e: e.t_us))
+
+    def anomaly_found(self, anomaly) -> None:
+        """Log an anomaly the live detectors found (virtualstar.anomalies.Anomaly)."""
+        d = anomaly.as_dict()
+        self._event("warning", "anomaly", f"{d['kind']} {d['axis'] or ''} anomaly from "
+                    f"{d['start_utc']}: {d['detail']}".replace("  ", " "),
+                    anomaly_kind=d["kind"], axis=d["axis"], score=d["score"],
+                    start_utc=d["start_utc"], end_utc=d["end_utc"],
+                    signals=",".join(d["signals"]))
+
+    def _gap(self, gap: Gap) -> None:
+        self._event("warning", "gap", f"{gap.lost_samples} samples lost ({gap.reason})",
+                    after_t_us=gap.after_t_us, before_t_us=gap.before_t_us,
+                    lost_samples=gap.lost_samples, reason=gap.reason)
+        if self._on_gap is not None:
+            self._on_gap(gap)
+
+    async def poll_device_log(self) -> int:
+        """Store the device's events logged since the last poll; return how many."""
+        client = self._client
+        if not self._device_log or client is None:
+            return 0
+        import json
+
+        try:
+            docs = json.loads(await client.invoke("log.since", self._device_seq))
+        except (AstcomError, OSError, ConnectionError, ValueError) as exc:
+            log.info("reading the device's event log failed: %s", exc)
+            return 0
+        events = [Event.from_dict(d) for d in docs]
+        if events:
+            self._device_seq = events[-1].seq
+            self._store_events(events)
+        return len(events)
+
+    async def poll_event_sources(self) -> int:
+        """Store the events of the other sources (e.g. a VSS) since the last poll."""
+        found: list[Event] = []
+        for k, source in enumerate(self.event_sources):
+            try:
+                events = await source.since(self._source_seqs[k])
+            except Exception as exc:  # a source that is down must not stop the recording
+                log.info("reading the event log of %s failed: %s", source, exc)
+                continue
+            if events:
+                self._source_seqs[k] = max(e.seq for e in events)
+                found += events
+        if found:
+            self._store_events(found)
+        return len(found)
+
+    async def _pump_device_log(self) -> None:
+        while not self._stop.is_set():
+            await self._sleep(EVENT_POLL_S, None)
+            await self.poll_device_log()
+            await self.poll_event_sources()
+            self._store_events([])
 
     async def wait_for_tick(self, tick: int) -> None:
         """Wait until a sample of tick >= `tick` was received (simulated-time pacing)."""
@@ -211,6 +327,7 @@ class Recorder:
                 if unknown:
                     raise RecorderError(f"the endpoint has no signal {', '.join(unknown)}; "
                                         f"`astcom list URL` shows its {len(infos)} names")
+                self._device_log = "log.since" in infos
                 bad = [n for n in self.names if infos[n].kind == "function"]
                 if bad:
                     raise RecorderError(f"{', '.join(bad)} are functions, not signals")
@@ -228,6 +345,11 @@ class Recorder:
             session = self.writer.begin(self.signals, source=self.source, rate_hz=stream.rate_hz,
                                         period_us=1e6 / stream.rate_hz)
             self.sink.session = self.summary.session = session
+            self._start_event = (f"recording {', '.join(self.names)} at {stream.rate_hz:g} Hz "
+                                 f"from {self.source or 'the device'}",
+                                 {"session": session, "names": self.names,
+                                  "rate_hz": stream.rate_hz})
+        self._client = client
         return client, stream
 
     async def run(self, duration_s: float | None = None) -> RecordingSummary:
@@ -237,18 +359,28 @@ class Recorder:
         """
         t0 = time.monotonic()
         deadline = None if duration_s is None else t0 + duration_s
+        pump: asyncio.Task | None = None
+        client = None
         try:
             client, stream = await self._open(first=True)
             self.started.set()
+            if self._device_log or self.event_sources:
+                pump = asyncio.ensure_future(self._pump_device_log())
             delay = self.reconnect_delay_s
             while True:
                 ended = await self._consume(stream, deadline)
+                with contextlib.suppress(Exception):  # the device's last events, if it is there
+                    await asyncio.wait_for(self.poll_device_log(), 2.0)
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(self.poll_event_sources(), 2.0)
                 with contextlib.suppress(Exception):
                     await asyncio.wait_for(client.close(), 2.0)
                 if not ended:
                     break  # stopped or out of time
                 log.warning("connection lost; reconnecting")
-                client = stream = None
+                self._event("warning", "connection", "connection to the device lost; "
+                            "reconnecting")
+                client = stream = self._client = None
                 while client is None:
                     if self._stop.is_set() or (deadline and time.monotonic() >= deadline):
                         break
@@ -263,8 +395,22 @@ class Recorder:
                 delay = self.reconnect_delay_s
                 self.summary.reconnects += 1
                 self.sink.reconnected()
+                self._event("info", "connection", "reconnected to the device")
         finally:
+            if pump is not None:
+                pump.cancel()
+                await asyncio.gather(pump, return_exceptions=True)
+            for source in self.event_sources:
+                close = getattr(source, "close", None)
+                if close is not None:
+                    with contextlib.suppress(Exception):
+                        await asyncio.wait_for(close(), 2.0)
             try:
+                if self.sink.session:
+                    self._stop.set()  # the start event is due now, whatever came
+                    self._event("info", "session", f"recording ended: {self.sink.samples} "
+                                f"samples, {self.sink.lost} lost",
+                                samples=self.sink.samples, lost=self.sink.lost)
                 self.writer.close()
             finally:
                 self._finish_summary(time.monotonic() - t0)

@@ -7,7 +7,7 @@ the server compares every role's MAC in constant time, grants the highest role w
 password matches, and proves it knows the password too. The password never crosses
 the wire. Roles:
 
-* `observer`: `ping`, `status`, `errors`, `wait`, `program` and the events (watching);
+* `observer`: `ping`, `status`, `errors`, `wait`, `program`, `log` and the events (watching);
 * `operator`: everything else — whatever moves the mount or changes the server.
 
 Without passwords every connection is an operator; that is allowed on loopback only
@@ -32,7 +32,7 @@ from .exceptions import BadRequest, Forbidden, Unauthorized
 __all__ = ["OBSERVER_COMMANDS", "AccessConfig", "Session", "check_listen", "refuse_origin"]
 
 OPEN_COMMANDS = frozenset({"ping", "auth"})  # allowed before authenticating
-OBSERVER_COMMANDS = frozenset({"ping", "auth", "status", "errors", "wait", "program"})
+OBSERVER_COMMANDS = frozenset({"ping", "auth", "status", "errors", "wait", "program", "log"})
 MAX_AUTH_FAILURES = 3  # then the connection is closed
 
 

@@ -321,6 +321,20 @@ async def _program(t: Telescope, p: NoParams) -> Any:
     return t.programs.status()
 
 
+@dataclass(frozen=True)
+class LogParams:
+    since: int = 0  # the last seq the client has seen
+    limit: int = 1000
+
+
+async def _log(t: Telescope, p: LogParams) -> Any:
+    if p.since < 0 or not 1 <= p.limit <= 10_000:
+        raise BadRequest(f"log: since must be >= 0 and limit 1..10000, got since={p.since}, "
+                         f"limit={p.limit}")
+    events = t.log.since(p.since)[: p.limit]
+    return {"events": [e.as_dict() for e in events], "last_seq": t.log.last_seq}
+
+
 COMMANDS: dict[str, Command] = {
     "ping": Command(NoParams, _ping, "Answer at once (liveness)."),
     "status": Command(NoParams, _status, "Positions, RA/Dec, states, errors, mount time."),
@@ -355,6 +369,9 @@ COMMANDS: dict[str, Command] = {
                         "has begun, or at its end with wait=true."),
     "program": Command(NoParams, _program, "The program run: state, current block, the "
                        "blocks done with their tracking figures, re-plans, the plan."),
+    "log": Command(LogParams, _log, "The server's event log after seq `since` (at most "
+                   "`limit`): operations and phases, faults, safety actions, commands with "
+                   "their client and role, connections; {events, last_seq}."),
 }
 
 # Commands that move the mount or change who drives it: they end a running program first.

@@ -27,6 +27,7 @@ from websockets.http11 import Request, Response
 
 from .access import AccessConfig, Session, check_listen, refuse_origin
 from .commands import COMMANDS, dispatch
+from .event_log import QUIET_COMMANDS, describe
 from .exceptions import BadRequest, VssError
 from .protocol import API_VERSION, ErrorReply, Event, Reply, decode_request
 from .telescope import Telescope
@@ -89,7 +90,14 @@ class VssServer:
         telescope.emit = self.broadcast
 
     def broadcast(self, kind: str, data: dict[str, Any]) -> None:
-        """Push an event to every connected client (and every in-process subscriber)."""
+        """Push an event to every connected client (and every in-process subscriber);
+        keep it in the event log (`log` command, docs/events.md)."""
+        logged = describe(kind, data)
+        if logged is not None:
+            level, log_kind, message = logged
+            fields = {(f"{kind}_{k}" if k in _RESERVED else k): v
+                      for k, v in data.items() if _flat(v)}
+            self.telescope.log_event(level, log_kind, message, event=kind, **fields)
         seq = next(self._seq)
         text = Event(kind, data, seq).to_json()
         for client in list(self._clients):
@@ -117,6 +125,10 @@ class VssServer:
         In-process callers are trusted as operators (they could drive the mount anyway).
         """
         self.requests += 1
+        if cmd not in QUIET_COMMANDS:
+            self.telescope.log_event("info", "command", f"{cmd} (in-process)", command=cmd,
+                                     client="in-process", role="operator",
+                                     params=json.dumps(params or {})[:500])
         return await dispatch(self.telescope, cmd, params or {})
 
     async def start(self, url: str | None = f"ws://127.0.0.1:{DEFAULT_PORT}") -> str:
@@ -168,6 +180,8 @@ class VssServer:
     async def _session(self, ws: ServerConnection) -> None:
         client = _Client(ws, asyncio.Queue(EVENT_QUEUE), Session(self.access))
         self._clients.add(client)
+        peer = _peer(ws)
+        self.telescope.log_event("info", "connection", f"client {peer} connected", client=peer)
         writer = asyncio.get_running_loop().create_task(self._writer(client))
         tasks: set[asyncio.Task] = set()
         client.queue.put_nowait(Event("hello", {
@@ -183,10 +197,28 @@ class VssServer:
             pass
         finally:
             self._clients.discard(client)
+            self.telescope.log_event("info", "connection", f"client {peer} disconnected",
+                                     client=peer)
             pending = {*tasks, writer}
             for task in pending:
                 task.cancel()
             await asyncio.wait(pending)
+
+    def _log_command(self, client: _Client, cmd: str, params: dict[str, Any]) -> None:
+        """Check the client may send `cmd` (raise as `permit` does) and log it with the
+        client and its role; a refused command is a warning."""
+        peer = _peer(client.ws)
+        role = client.session.role.label if client.session.role else "none"
+        try:
+            client.session.permit(cmd)
+        except VssError as exc:
+            self.telescope.log_event("warning", "command", f"{cmd} from {peer} ({role}) "
+                                     f"refused: {exc}", command=cmd, client=peer, role=role)
+            raise
+        if cmd not in QUIET_COMMANDS:
+            self.telescope.log_event("info", "command", f"{cmd} from {peer} ({role})",
+                                     command=cmd, client=peer, role=role,
+                                     params=json.dumps(params)[:500])
 
     async def _writer(self, client: _Client) -> None:
         with contextlib.suppress(ConnectionClosed):
@@ -202,7 +234,7 @@ class VssServer:
             if request.cmd == "auth":
                 result = client.session.authenticate(request.params)
             else:
-                client.session.permit(request.cmd)
+                self._log_command(client, request.cmd, request.params)
                 result = await dispatch(self.telescope, request.cmd, request.params)
             text = Reply(rid, result).to_json()
         except BadRequest as exc:
@@ -220,6 +252,18 @@ class VssServer:
             await client.ws.send(text)
             if client.session.closed_for_failures:
                 await client.ws.close(1008, "too many wrong passwords")
+
+
+def _peer(ws: ServerConnection) -> str:
+    addr = getattr(ws, "remote_address", None)
+    return f"{addr[0]}:{addr[1]}" if isinstance(addr, tuple) and len(addr) >= 2 else "?"
+
+
+_RESERVED = frozenset({"t_us", "level", "kind", "message", "event"})  # the record's own names
+
+
+def _flat(value: Any) -> bool:
+    return isinstance(value, str | int | float | bool) or value is None
 
 
 def _guess_id(message: str | bytes) -> Any:

@@ -29,6 +29,7 @@ from typing import Any
 import erfa
 import numpy as np
 
+from astcom_client.events import EventLog
 from virtualstar.astro import (
     AvoidanceZones,
     EarthOrientation,
@@ -169,6 +170,18 @@ class Telescope:
         self._tasks: set[asyncio.Task] = set()
         self.programs = ProgramControl(self, lambda kind, data: self.emit(kind, data))
         self._guide: tuple[int, GuideOffsets] | None = None  # (operation id, its offsets)
+        self.log = EventLog("vss")
+        self.last_mount_us: int | None = None  # the newest tracking-error sample's time
+
+    def log_event(self, level: str, kind: str, message: str, **fields: Any) -> None:
+        """Log an event at the mount time last seen; before any sample, the lockstep
+        clock's mount time, or in real time the host's UTC (mount time is UTC there)."""
+        t_us = self.last_mount_us
+        if t_us is None:
+            t_us = getattr(self.clock, "now_us", None)
+        if t_us is None:
+            t_us = time.time_ns() // 1000
+        self.log.add(int(t_us), level, kind, message, **fields)
 
     @property
     def op(self) -> Operation | None:
@@ -259,6 +272,8 @@ class Telescope:
         fault = self.codes["fault"]
 
         def on_packet(packet) -> None:
+            if len(packet.t_us):
+                self.last_mount_us = int(packet.t_us[-1])
             self.errors.add(packet.t_us, packet.column(az_name) * s_az,
                             packet.column(el_name) * s_el, packet.column(pos_name) * s_pos)
             states = packet.column(state_name)
