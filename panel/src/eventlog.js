@@ -109,6 +109,22 @@ export function haystack(e) {
   return `${e.message ?? ''} ${parts.join(' ')}`;
 }
 
+/**
+ * Return what is wrong with `e` as an event, or '' for a well-formed one: integer `t_us`
+ * and `seq`, a known `level`, text `source` and `kind` (what the filters and the table need;
+ * the devices' logs write these so, docs/events.md).
+ */
+export function eventProblem(e) {
+  if (e === null || typeof e !== 'object' || Array.isArray(e)) return 'not an object';
+  if (!Number.isSafeInteger(e.t_us)) return `t_us ${JSON.stringify(e.t_us)} is not an integer (µs)`;
+  if (!Number.isSafeInteger(e.seq ?? 0)) return `seq ${JSON.stringify(e.seq)} is not an integer`;
+  if (!LEVELS.includes(e.level)) return `level ${JSON.stringify(e.level)}: expected one of ${LEVELS.join(', ')}`;
+  for (const key of ['source', 'kind']) if (typeof e[key] !== 'string') return `${key} is missing`;
+  return '';
+}
+
+const hayCache = new WeakMap(); // event -> its haystack, lowercased (events never change)
+
 /** Return whether event `e` passes filter `f` (from `eventFilter`). */
 export function matches(f, e) {
   if (f.fromTUs !== null && e.t_us < f.fromTUs) return false;
@@ -117,7 +133,10 @@ export function matches(f, e) {
   if (f.sources.size && !f.sources.has(e.source)) return false;
   if (f.kinds.size && !f.kinds.has(e.kind)) return false;
   // Python's lower() and JS's toLowerCase() agree on the text such logs hold
-  return !f.text || haystack(e).toLowerCase().includes(f.text);
+  if (!f.text) return true;
+  let hay = hayCache.get(e);
+  if (hay === undefined) hayCache.set(e, (hay = haystack(e).toLowerCase()));
+  return hay.includes(f.text);
 }
 
 /** Split comma-separated words as `vs log --kind a,b` does. */

@@ -11,7 +11,7 @@
 // Rows live outside Vue's reactivity (up to maxRows, the oldest dropped); `state.version`
 // says when they changed. Paused, new events wait aside and join on follow: a pause loses none.
 import { reactive } from 'vue';
-import { mergeEvents } from './eventlog.js';
+import { eventProblem, mergeEvents } from './eventlog.js';
 
 export class LogFeed {
   constructor(sources, { maxRows = 20_000 } = {}) {
@@ -19,7 +19,7 @@ export class LogFeed {
     this.maxRows = maxRows;
     this.rows = [];
     this.waiting = [];
-    this.feeds = Object.fromEntries(sources.map((s) => [s.name, { since: 0, link: null, busy: false }]));
+    this.feeds = Object.fromEntries(sources.map((s) => [s.name, { since: 0, link: null, busy: false, skipped: 0, problem: '' }]));
     this.state = reactive({
       version: 0, following: true, pending: 0, total: 0,
       status: Object.fromEntries(sources.map((s) => [s.name, 'not polled yet'])),
@@ -53,11 +53,17 @@ export class LogFeed {
     }
     for (;;) {
       const events = await src.since(link, feed.since);
-      if (events.length) feed.since = events[events.length - 1].seq;
-      this.take(events);
+      const good = events.filter((e) => {
+        const problem = eventProblem(e);
+        if (problem) [feed.skipped, feed.problem] = [feed.skipped + 1, problem];
+        return !problem;
+      });
+      if (good.length) feed.since = Math.max(feed.since, good[good.length - 1].seq);
+      this.take(good);
       if (events.length < src.page) break;
     }
-    this.state.status[src.name] = `following (seq ${feed.since})`;
+    const skipped = feed.skipped ? `; ${feed.skipped} malformed events left out (last: ${feed.problem})` : '';
+    this.state.status[src.name] = `following (seq ${feed.since})${skipped}`;
   }
 
   async pollOne(src) {

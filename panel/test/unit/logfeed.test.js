@@ -121,3 +121,16 @@ test('the oldest rows go beyond the limit, and a failing source is said without 
   assert.deepEqual(seqs(feed, 'emulator'), [4, 5, 6, 7, 8]);
   assert.equal(feed.state.status.vss, 'error: not connected to ws://x');
 });
+
+test('a malformed event is left out and said, the well-formed ones around it kept', async () => {
+  const { a, feed } = await polledOnce('emulator', 1);
+  a.add(3);
+  a.events[1] = { ...a.events[1], level: 'fatal' };
+  a.events[2] = { ...a.events[2], t_us: '12' };
+  await feed.poll();
+  assert.deepEqual(seqs(feed, 'emulator'), [1, 4]);
+  assert.match(feed.state.status.emulator, /^following \(seq 4\); 2 malformed events left out \(last: t_us "12" is not an integer/);
+  a.add(1);
+  await feed.poll();
+  assert.deepEqual(seqs(feed, 'emulator'), [1, 4, 5]);
+});
