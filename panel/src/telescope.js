@@ -141,3 +141,13 @@ export async function vssCommand(cmd, params = {}) {
 }
 
 export const vssConnected = () => link.client !== null;
+
+/** Send a read-only request (the Log tab's polls) without logging it; rejects when not connected. */
+export function vssQuiet(cmd, params = {}) {
+  const c = link.client;
+  if (!c) return Promise.reject(new Error('VSS not connected'));
+  return c.request(cmd, params);
+}
+
+/** The VSS connection in use (a new object after a reconnection), or null. */
+export const vssLink = () => link.client;

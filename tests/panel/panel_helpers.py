@@ -10,6 +10,8 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -116,3 +118,21 @@ def ensure_panel_built() -> None:
         raise RuntimeError("panel/node_modules is missing: run `bash setup/30-panel.sh`")
     if not (ROOT / "virtualstar" / "panel" / "static" / "index.html").is_file():
         subprocess.run(["npm", "run", "build"], cwd=PANEL_DIR, check=True, capture_output=True)
+
+
+@contextmanager
+def vss_and_panel(*server_args: str) -> Iterator[dict[str, str]]:
+    """Run `vs server --emulator SERVER_ARGS` (tests/vss/vss_rig.py) and `vs panel` proposing
+    it; yield the URLs {"vss", "emulator" (its ASTCom endpoint), "panel"}."""
+    import pytest
+    from vss_rig import vs_server_process
+
+    from virtualstar.panel import PanelConfig, PanelServer
+
+    ensure_panel_built()
+    if not CHROMIUM.is_file():
+        pytest.fail(f"{CHROMIUM} is missing: run `bash setup/30-panel.sh` (installs Debian's chromium)")
+    with vs_server_process("--emulator", *server_args) as server:
+        emulator_url = re.search(r"other clients: (ws://\S+?)\)", server.line).group(1)
+        with PanelServer(PanelConfig(port=0, endpoint=emulator_url, vss=server.url)) as panel:
+            yield {"vss": server.url, "emulator": emulator_url, "panel": panel.start()}

@@ -249,7 +249,7 @@ def test_wrong_password_is_reported_in_the_board_log(e2e):
 def test_every_tab_saves_its_state_and_loads_it_back(e2e):
     result, _ = e2e
     states = result["states"]
-    assert sorted(states) == sorted([*(t.capitalize() for t in TABS), "Telescope"])
+    assert sorted(states) == sorted([*(t.capitalize() for t in TABS), "Telescope", "Log"])
     for tab, doc in states.items():
         assert doc["panel"] == "virtualstar-rsp" and doc["tab"] == tab and doc["version"] == 1
     assert "password" not in json.dumps(states["Board"]["state"])
@@ -259,6 +259,8 @@ def test_every_tab_saves_its_state_and_loads_it_back(e2e):
     assert axes["az_rad"]["expr"] == AZ_FORMULA and axes["el_rad"]["p0_signal"] == "axis.el.position"
     assert states["Compute"]["state"]["expressions"][0]["name"] == "az_err_arcsec"
     assert states["Compute"]["state"]["expressions"][0]["unit"] == "arcsec"
+    assert states["Log"]["state"] == {"filters": {"from": "", "to": "", "level": "debug", "source": "",
+                                                  "kind": "", "text": ""}, "following": True}
 
 
 def test_an_injected_fault_turns_its_diagnostics_card_and_board_row_red(e2e):

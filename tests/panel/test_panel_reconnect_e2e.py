@@ -4,7 +4,8 @@ Two processes on fixed loopback ports: a real-time mount emulator and `vs server
 it. The page (panel/test/e2e/reconnect.e2e.mjs) is connected to both and streams a signal;
 this test kills each process (SIGKILL, as a crash would) and starts it again on the same
 port when the page asks, and checks what the page showed in between: values kept but marked
-stale, then fresh again, the stream running again, and the VSS's own view of its mount.
+stale, then fresh again, the stream running again, the VSS's own view of its mount, and
+the Log tab reading each restarted process's event log from its first event.
 """
 
 from __future__ import annotations
@@ -98,6 +99,18 @@ async def _drive(procs: Processes, panel_url: str, result_path) -> tuple[list[st
     return done, "".join(out)
 
 
+async def _logs(procs: Processes) -> dict[str, list[dict]]:
+    """The event logs of the running (restarted) emulator and VSS, read by our own clients."""
+    from astcom_client import Client
+    from virtualstar.vss_client import VssClient
+
+    async with await Client.connect(procs.emulator_url, password=PASSWORD) as c:
+        emulator = json.loads(await c.invoke("log.since", 0))
+    async with await VssClient.connect(procs.vss_url, password=OPERATOR_PASSWORD) as vss:
+        server = (await vss.request("log", {"since": 0, "limit": 10_000}))["events"]
+    return {"emulator": emulator, "vss": server}
+
+
 @pytest.fixture(scope="module")
 def reconnect(tmp_path_factory):
     ensure_panel_built()
@@ -114,6 +127,7 @@ def reconnect(tmp_path_factory):
         assert result.get("ok"), f"{result.get('error')}\n{out}"
         assert done == ["kill-mount", "restart-mount", "kill-vss", "restart-vss"]
         assert not result.get("pageErrors"), result["pageErrors"]
+        result["truth_logs"] = asyncio.run(_logs(procs))
         return result
     finally:
         procs.close()
@@ -153,3 +167,14 @@ def test_a_killed_vss_leaves_the_telescope_board_stale_then_fresh_after_restart(
     assert killed["astcom"] == "connected" and not killed["astcomStaleClass"]
     assert back["vss"] == "connected" and not back["vssStaleClass"] and back["vssStaleNote"] == ""
     assert "VSS reconnected" in back["log"]
+
+
+def test_the_log_tab_reads_each_restarted_log_from_its_first_event(reconnect):
+    rows = reconnect["logRows"]
+    for source, truth in reconnect["truth_logs"].items():
+        mine = [e for e in rows if e["source"] == source]
+        restart = max(i for i, e in enumerate(mine) if e["seq"] == 1)
+        assert restart > 0, source  # events of the first process came before
+        since_restart = mine[restart:]
+        assert since_restart == truth[: len(since_restart)], source
+        assert [e["seq"] for e in since_restart] == list(range(1, len(since_restart) + 1))

@@ -15,11 +15,10 @@ import re
 import subprocess
 
 import pytest
-from panel_helpers import ARTIFACTS, CHROMIUM, PANEL_DIR, ensure_panel_built, node
-from vss_rig import STARS_PROGRAM, vs_server_process
+from panel_helpers import ARTIFACTS, CHROMIUM, PANEL_DIR, node, vss_and_panel
+from vss_rig import STARS_PROGRAM
 
 from astcom_client import Client
-from virtualstar.panel import PanelConfig, PanelServer
 from virtualstar.vss_client import VssClient
 
 MOUNT_PASSWORD, OPERATOR_PASSWORD = "mount-secret", "operator-secret"
@@ -33,15 +32,9 @@ AT_REST_DEG = 1e-4  # tracking at x20 moves the encoders more than this in 0.5 s
 
 @pytest.fixture(scope="module")
 def rig():
-    ensure_panel_built()
-    if not CHROMIUM.is_file():
-        pytest.fail(f"{CHROMIUM} is missing: run `bash setup/30-panel.sh` (installs Debian's chromium)")
-    with vs_server_process("--emulator", "--speed", PACE, "--start", START,
-                           "--password", MOUNT_PASSWORD,
-                           "--operator-password", OPERATOR_PASSWORD) as server:
-        emulator_url = re.search(r"other clients: (ws://\S+?)\)", server.line).group(1)
-        with PanelServer(PanelConfig(port=0, endpoint=emulator_url, vss=server.url)) as panel:
-            yield {"vss": server.url, "emulator": emulator_url, "panel": panel.start()}
+    with vss_and_panel("--speed", PACE, "--start", START, "--password", MOUNT_PASSWORD,
+                       "--operator-password", OPERATOR_PASSWORD) as urls:
+        yield urls
 
 
 def run_scenario(rig, scenario: str, tmp_path) -> dict:

@@ -4,6 +4,7 @@
 // answer echoes; events arrive between answers. The server sends a heartbeat every
 // `heartbeat_s`: a connection silent for several heartbeats is treated as gone even when
 // the socket looks open (a frozen server, a dead network), as VssClient does in Python.
+import { markFloats } from '../eventlog.js';
 import { authRequest } from './auth.js';
 
 export const HEARTBEATS_MISSED = 5; // silent this many heartbeats (and at least SILENT_MIN_MS): gone
@@ -99,7 +100,8 @@ export class VssClient {
     this.lastHeardMs = Date.now();
     let doc;
     try {
-      doc = JSON.parse(typeof data === 'string' ? data : new TextDecoder().decode(data));
+      // markFloats: an event field written 0.0 stays a float for the Log tab's text filter
+      doc = JSON.parse(typeof data === 'string' ? data : new TextDecoder().decode(data), markFloats);
     } catch {
       return; // not ours to answer: the server sends JSON only
     }

@@ -164,7 +164,7 @@ try {
 
   // Every tab saves its state to a JSON file and loads it back.
   result.states = {};
-  for (const name of ['Board', 'Telescope', 'Diagnostics', 'Signals', 'Plot', 'Compute', 'Parameters', 'Input']) {
+  for (const name of ['Board', 'Telescope', 'Diagnostics', 'Signals', 'Plot', 'Compute', 'Parameters', 'Input', 'Log']) {
     await tab(page, name);
     const [file] = await Promise.all([page.waitForEvent('download'), page.click(`#tab-${name} button.save-state`)]);
     const path = join(ARTIFACTS, `state-${name.toLowerCase()}.json`);

@@ -51,6 +51,8 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'reconnect-result.json'), join
   await page.fill('input[name=vss-password]', env.VSS_PASSWORD);
   await page.click('button.vss-connect');
   await until(page, () => window.panelTelescope.state?.connected === true);
+  await page.click('button[data-tab=Log]'); // the Log tab follows both logs from now on
+  await until(page, () => ['emulator', 'vss'].every((s) => window.panelEventLog.rows().some((e) => e.source === s)));
   result.fresh = await look(page);
 
   await ask('kill-mount');
@@ -81,4 +83,10 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'reconnect-result.json'), join
   await until(page, (t0) => window.panelTelescope.status === 'connected' && window.panelTelescope.updatedMs > t0, before);
   result.vssBack = await look(page);
   result.steps.push('vss back');
+
+  // the Log tab read each restarted process's log from its first event (numbered from 1 again)
+  await until(page, () => ['emulator', 'vss'].every(
+    (s) => window.panelEventLog.rows().filter((e) => e.source === s && e.seq === 1).length === 2));
+  result.logRows = await page.evaluate(() => JSON.parse(JSON.stringify(window.panelEventLog.rows())));
+  result.steps.push('log read again from each restart');
 });

@@ -1,0 +1,106 @@
+// Follow several event logs (docs/events.md) by polling each for the events after the
+// last `seq` seen, and keep them merged by mount time. No I/O of its own: each source
+// says how to reach its log, so the same logic runs against fakes in the unit tests.
+//
+// A source: {name, link() -> the connection in use or null, offline -> text shown when
+// link() is null, lastSeq(link) -> the newest seq of the log (or null if unknown),
+// since(link, seq) -> the events after seq, oldest first, page -> the most one answer
+// holds (a full page is followed at once by the next)}. A new link whose log is behind
+// the seq seen is a restarted device, numbered from 1 again: its log is read from the start.
+//
+// Rows live outside Vue's reactivity (up to maxRows, the oldest dropped); `state.version`
+// says when they changed. Paused, new events wait aside and join on follow: a pause loses none.
+import { reactive } from 'vue';
+import { eventProblem, mergeEvents } from './eventlog.js';
+
+export class LogFeed {
+  constructor(sources, { maxRows = 20_000 } = {}) {
+    this.sources = sources;
+    this.maxRows = maxRows;
+    this.rows = [];
+    this.waiting = [];
+    this.feeds = Object.fromEntries(sources.map((s) => [s.name, { since: 0, link: null, busy: false, skipped: 0, problem: '' }]));
+    this.state = reactive({
+      version: 0, following: true, pending: 0, total: 0,
+      status: Object.fromEntries(sources.map((s) => [s.name, 'not polled yet'])),
+    });
+  }
+
+  take(events) {
+    if (!events.length) return;
+    if (!this.state.following) {
+      this.waiting.push(...events);
+      this.state.pending = this.waiting.length;
+      return;
+    }
+    mergeEvents(this.rows, events);
+    if (this.rows.length > this.maxRows) this.rows.splice(0, this.rows.length - this.maxRows);
+    this.state.total = this.rows.length;
+    this.state.version++;
+  }
+
+  async pollSource(src) {
+    const feed = this.feeds[src.name];
+    const link = src.link();
+    if (!link) {
+      this.state.status[src.name] = src.offline;
+      return;
+    }
+    if (link !== feed.link) {
+      const last = await src.lastSeq(link);
+      if (last !== null && last < feed.since) feed.since = 0;
+      feed.link = link;
+    }
+    for (;;) {
+      const events = await src.since(link, feed.since);
+      const good = events.filter((e) => {
+        const problem = eventProblem(e);
+        if (problem) [feed.skipped, feed.problem] = [feed.skipped + 1, problem];
+        return !problem;
+      });
+      if (good.length) feed.since = Math.max(feed.since, good[good.length - 1].seq);
+      this.take(good);
+      if (events.length < src.page) break;
+    }
+    const skipped = feed.skipped ? `; ${feed.skipped} malformed events left out (last: ${feed.problem})` : '';
+    this.state.status[src.name] = `following (seq ${feed.since})${skipped}`;
+  }
+
+  async pollOne(src) {
+    const feed = this.feeds[src.name];
+    if (feed.busy) return; // a slow answer: the next poll asks again from the same seq
+    feed.busy = true;
+    try {
+      await this.pollSource(src);
+    } catch (err) {
+      this.state.status[src.name] = `error: ${err.message}`;
+    } finally {
+      feed.busy = false;
+    }
+  }
+
+  /** Poll every source once. */
+  poll() {
+    return Promise.all(this.sources.map((s) => this.pollOne(s)));
+  }
+
+  /** Pause (`false`: new events wait aside) or follow (`true`: they join the rows). */
+  setFollowing(on) {
+    this.state.following = on;
+    if (on && this.waiting.length) {
+      const events = this.waiting;
+      this.waiting = [];
+      this.state.pending = 0;
+      this.take(events);
+    }
+  }
+
+  /** Forget the events held; polling goes on after the last seq seen. */
+  clear() {
+    this.rows.length = 0;
+    this.waiting = [];
+    this.state.pending = 0;
+    this.state.total = 0;
+    this.state.version++;
+  }
+}
