@@ -213,3 +213,20 @@ def test_vs_log_follows_a_running_vss():
         assert any(d["kind"] == "mode" and d["message"] == "mode passive" for d in lines)
     finally:
         rig.close()
+
+
+def test_a_command_the_server_refuses_is_logged_as_a_warning_with_its_code():
+    from virtualstar.vss_client import VssRequestError, call_server
+
+    rig = Rig(start_us=START_US + 22 * 3_600_000_000).start()
+    try:
+        with pytest.raises(VssRequestError) as exc:
+            call_server(rig.url, "slew", {"az_deg": 100.0, "el_deg": -20.0})
+        events = [e for e in rig.server.telescope.log.since(0) if e.kind == "command"]
+    finally:
+        rig.close()
+    assert exc.value.code == "unreachable"
+    info, warning = events[-2:]
+    assert info.level == "info" and info.fields["command"] == "slew"
+    assert warning.level == "warning" and warning.fields["code"] == "unreachable"
+    assert "refused" in warning.message

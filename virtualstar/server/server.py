@@ -206,7 +206,7 @@ class VssServer:
 
     def _log_command(self, client: _Client, cmd: str, params: dict[str, Any]) -> None:
         """Check the client may send `cmd` (raise as `permit` does) and log it with the
-        client and its role; a refused command is a warning."""
+        client and its role; a command its role may not send is a warning."""
         peer = _peer(client.ws)
         role = client.session.role.label if client.session.role else "none"
         try:
@@ -219,6 +219,17 @@ class VssServer:
             self.telescope.log_event("info", "command", f"{cmd} from {peer} ({role})",
                                      command=cmd, client=peer, role=role,
                                      params=json.dumps(params)[:500])
+
+    def _log_refusal(self, client: _Client, cmd: str, exc: VssError) -> None:
+        """A command the server refused or that failed (a bad target, the Sun zone, not
+        arrived...): a warning with the code, beside the command's own info line."""
+        if cmd in QUIET_COMMANDS:
+            return
+        peer = _peer(client.ws)
+        role = client.session.role.label if client.session.role else "none"
+        self.telescope.log_event("warning", "command", f"{cmd} from {peer} ({role}) refused: "
+                                 f"{exc} [{exc.code}]", command=cmd, client=peer, role=role,
+                                 code=exc.code)
 
     async def _writer(self, client: _Client) -> None:
         with contextlib.suppress(ConnectionClosed):
@@ -235,7 +246,11 @@ class VssServer:
                 result = client.session.authenticate(request.params)
             else:
                 self._log_command(client, request.cmd, request.params)
-                result = await dispatch(self.telescope, request.cmd, request.params)
+                try:
+                    result = await dispatch(self.telescope, request.cmd, request.params)
+                except VssError as exc:
+                    self._log_refusal(client, request.cmd, exc)
+                    raise
             text = Reply(rid, result).to_json()
         except BadRequest as exc:
             text = ErrorReply(rid if rid is not None else _guess_id(message), exc.code,
