@@ -95,6 +95,16 @@ def test_a_refused_command_with_json_prints_the_error_object_on_stdout(rig):
     assert json.loads(res.stdout)["error"]["code"] == "server_unavailable"
 
 
+@pytest.mark.parametrize("args", [["slew", "--radec", "xx"], ["slew", "--altaz", "400"],
+                                  ["slew"], ["track", "--sat", "ISS", "--star", "Vega"],
+                                  ["track", "--star", "Vega", "--duration", "-1"]])
+def test_a_bad_argument_with_json_prints_the_error_object_on_stdout_too(args):
+    res = runner.invoke(app, [*args, "--server", "ws://127.0.0.1:9", "--json"])
+    assert res.exit_code == 2
+    error = json.loads(res.stdout)["error"]
+    assert error["code"] == "bad_input" and error["message"] in res.stderr
+
+
 def test_the_cli_says_how_to_fix_an_unreachable_server():
     res = runner.invoke(app, ["status", "--server", "ws://127.0.0.1:9"])
     assert res.exit_code == 2

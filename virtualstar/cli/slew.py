@@ -25,7 +25,8 @@ StarOpt = Annotated[str | None, typer.Option(
                    '"alf Lyr"), or a planet.')]
 
 
-def target_params(radec: str | None, altaz: str | None, star: str | None) -> dict[str, Any]:
+def target_params(radec: str | None, altaz: str | None, star: str | None, *,
+                  as_json: bool = False) -> dict[str, Any]:
     """Return the API target parameters of exactly one option, or exit (2) with an error.
 
     --radec and --altaz are checked here, so a malformed one is a bad argument (2), not a
@@ -33,30 +34,31 @@ def target_params(radec: str | None, altaz: str | None, star: str | None) -> dic
     """
     given = {k: v for k, v in (("radec", radec), ("altaz", altaz), ("star", star)) if v}
     if len(given) != 1:
-        raise fail("give exactly one of --radec \"RA DEC\", --altaz \"AZ EL\" or --star NAME")
+        raise fail("give exactly one of --radec \"RA DEC\", --altaz \"AZ EL\" or --star NAME",
+                   as_json=as_json)
     if radec:
-        check_radec(radec)
+        check_radec(radec, as_json=as_json)
     if altaz:
-        check_altaz(altaz)
+        check_altaz(altaz, as_json=as_json)
     return given
 
 
-def check_radec(text: str) -> None:
+def check_radec(text: str, *, as_json: bool = False) -> None:
     from virtualstar.astro import AstroError, parse_radec
 
     try:
         parse_radec(text)
     except AstroError as exc:
-        raise fail(f"--radec: {exc}") from None
+        raise fail(f"--radec: {exc}", as_json=as_json) from None
 
 
-def check_altaz(text: str) -> None:
+def check_altaz(text: str, *, as_json: bool = False) -> None:
     from virtualstar.astro import AstroError, parse_altaz
 
     try:
         parse_altaz(text)
     except AstroError as exc:
-        raise fail(f"--altaz {exc}") from None
+        raise fail(f"--altaz {exc}", as_json=as_json) from None
 
 
 def op_table(op: dict[str, Any], title: str) -> Table:
@@ -90,7 +92,7 @@ def slew(radec: RadecOpt = None, altaz: AltazOpt = None, star: StarOpt = None,
     Targets within the Sun's exclusion zone (30°) or below the horizon are refused; a slew
     whose path would cross the zone goes round it.
     """
-    params: dict[str, Any] = target_params(radec, altaz, star)
+    params: dict[str, Any] = target_params(radec, altaz, star, as_json=as_json)
     if allow_sun:
         params["allow_sun"] = True
     op = ask(server, "slew", params, progress=True, quiet=as_json)

@@ -33,11 +33,14 @@ def track(
     """Track a target; returns once tracking has begun (satellite: once the pass is planned)."""
     given = [n for n, v in (("--tle", tle), ("--radec", radec), ("--star", star)) if v]
     if len(given) != 1:
-        raise fail("give exactly one of --tle FILE [--sat NAME], --radec \"RA DEC\" or --star NAME")
+        raise fail("give exactly one of --tle FILE [--sat NAME], --radec \"RA DEC\" or --star NAME",
+                   as_json=as_json)
     if sat and not tle:
-        raise fail("--sat selects a satellite in a --tle file; give --tle FILE too")
+        raise fail("--sat selects a satellite in a --tle file; give --tle FILE too",
+                   as_json=as_json)
     if duration is not None and not duration > 0:
-        raise fail(f"--duration {duration}: expected a positive number of seconds")
+        raise fail(f"--duration {duration}: expected a positive number of seconds",
+                   as_json=as_json)
     params: dict = {"wait": wait}
     if allow_sun:
         params["allow_sun"] = True
@@ -47,13 +50,13 @@ def track(
         try:
             params["tle"] = tle.read_text(encoding="utf-8")
         except OSError as exc:
-            raise fail(f"cannot read TLE file {tle}: {exc.strerror}") from None
+            raise fail(f"cannot read TLE file {tle}: {exc.strerror}", as_json=as_json) from None
         except UnicodeDecodeError:
-            raise fail(f"{tle} is not a text TLE file") from None
+            raise fail(f"{tle} is not a text TLE file", as_json=as_json) from None
         if sat:
             params["sat"] = sat
     elif radec:
-        check_radec(radec)
+        check_radec(radec, as_json=as_json)
         params["radec"] = radec
     else:
         params["star"] = star
