@@ -25,6 +25,7 @@ from typing import Any
 from virtualstar.astro import EarthOrientation
 from virtualstar.astro.equatorial import icrs_to_j2000, j2000_to_icrs, local_sidereal_time_hours
 from virtualstar.vss_client import ServerUnavailable, VssRequestError
+from virtualstar.vss_operations import hand_pad_rates, is_moving, is_parked, is_tracking
 
 from .protocol import (
     ACTION_NOT_IMPLEMENTED,
@@ -44,9 +45,6 @@ __all__ = ["AlpacaTelescope", "TelescopeOptions"]
 log = logging.getLogger("virtualstar.alpaca")
 
 SIDEREAL_DEG_S = 15.041067 / 3600.0  # the sidereal rate on the sky (degrees per second)
-MOVING_PHASES = frozenset({"starting", "preparing", "slewing", "joining", "settling",
-                           "interrupted", "ending", "waiting"})
-ENDED_PHASES = frozenset({"done", "failed", "aborted"})
 ACTIONS = ("TrackSatellite", "OperationStatus")
 
 # VSS error codes → ASCOM error numbers (the VSS message goes along)
@@ -172,36 +170,22 @@ class AlpacaTelescope:
         return st.get("operation")
 
     def is_tracking(self, st: dict[str, Any]) -> bool:
-        op = self._op(st)
-        return (op is not None and op["kind"] in ("slew", "track", "track_satellite")
-                and op["phase"] not in ENDED_PHASES and not op["info"].get("fixed"))
+        return is_tracking(self._op(st))
 
     def is_slewing(self, st: dict[str, Any]) -> bool:
         op = self._op(st)
-        if op is None or op["phase"] in ENDED_PHASES and op["kind"] != "move":
-            return self._settling(op, st)
-        if op["kind"] == "move":
-            return op["phase"] not in ENDED_PHASES
-        if op["id"] in self.quiet_ops:
+        if op is None or op["id"] in self.quiet_ops:
             return False
-        if op["kind"] == "track_satellite" and op["phase"] in ("waiting", "pass planned"):
-            return False  # holding for a pass that has not risen: not moving
-        if op["phase"] in MOVING_PHASES:
-            return True
-        return self._settling(op, st)
+        return is_moving(op) or self._settling(op, st)
 
-    def _settling(self, op: dict[str, Any] | None, st: dict[str, Any]) -> bool:
-        landed = None if op is None else op["info"].get("landed_us")
+    def _settling(self, op: dict[str, Any], st: dict[str, Any]) -> bool:
+        landed = op["info"].get("landed_us")
         return bool(self.slew_settle_s and landed
                     and st["mount_time_us"] < landed + self.slew_settle_s * 1_000_000)
 
     def move_rates(self, st: dict[str, Any]) -> list[float]:
         """The hand pad's axis rates (deg/s): those of the running VSS move, else zero."""
-        op = self._op(st)
-        if op is None or op["kind"] != "move" or op["phase"] in ENDED_PHASES:
-            return [0.0, 0.0]
-        return [float(op["info"].get("az_rate_deg_s", 0.0)),
-                float(op["info"].get("el_rate_deg_s", 0.0))]
+        return hand_pad_rates(self._op(st))
 
     def is_pulse_guiding(self, st: dict[str, Any]) -> bool:
         op = self._op(st)
@@ -209,9 +193,7 @@ class AlpacaTelescope:
         return op is not None and op["id"] == op_id and st["mount_time_us"] < end_us
 
     def at_park(self, st: dict[str, Any]) -> bool:
-        op = self._op(st)
-        return (op is not None and op["kind"] == "park" and op["phase"] == "done"
-                and op["id"] != self.unparked_op)
+        return is_parked(self._op(st), self.unparked_op)
 
     async def refuse_if_parked(self, what: str) -> dict[str, Any]:
         st = await self.status()

@@ -32,6 +32,7 @@ from virtualstar.vss_client import (
     VssRequestError,
     default_server_url,
 )
+from virtualstar.vss_operations import hand_pad_rates, is_moving, is_parked, is_tracking
 
 from .protocol import ALERT, BUSY, IDLE, OK, Element, Reader, Request, Vector
 
@@ -43,12 +44,9 @@ DEVICE = "VirtualStar"
 POLL_S = 1.0
 MOTION_RATE_DEG_S = 1.0  # TELESCOPE_MOTION_* hand-pad rate
 GUIDE_RATE_ARCSEC_S = 0.5 * 15.041067
-MOVING = frozenset({"starting", "preparing", "slewing", "joining", "settling", "interrupted",
-                    "ending"})
 MOTION_KINDS = frozenset({"slew", "track", "park", "move", "pointing_sample"})
 SITE_TOLERANCE_DEG = 0.01  # a client's location within this of the VSS's site is the same
 TIME_TOLERANCE_S = 60.0  # a client's UTC within this of the mount clock is the same
-ENDED = frozenset({"done", "failed", "aborted"})
 MAIN, MOTION, SITE, SAT = "Main Control", "Motion Control", "Site Management", "Satellite"
 
 
@@ -244,9 +242,7 @@ class IndiTelescope:
         return st
 
     def parked(self, st: dict[str, Any]) -> bool:
-        op = st.get("operation") or {}
-        return (op.get("kind") == "park" and op.get("phase") == "done"
-                and op.get("id") != self.unparked_op)
+        return is_parked(st.get("operation"), self.unparked_op)
 
     def begin(self, prop_name: str, cmd: str, params: dict[str, Any], then=None) -> None:
         """Send an operation; the property is Busy until it lands (Ok) or fails (Alert).
@@ -457,17 +453,17 @@ class IndiTelescope:
         if "mount_time_us" not in st:
             return
         t_us = st["mount_time_us"]
-        op = st.get("operation") or {}
-        kind, phase = op.get("kind"), op.get("phase")
+        current = st.get("operation")
+        op = current or {}
+        kind = op.get("kind")
         self.last_op_id = op.get("id")
         for name, about in list(self.alert_op.items()):
             if about != self.last_op_id:
                 del self.alert_op[name]
                 if self.props[name].state == ALERT and name not in self.busy:
                     self.props[name].state = IDLE
-        moving = kind in MOTION_KINDS and phase in MOVING
-        tracking = (kind in ("slew", "track", "track_satellite") and phase not in ENDED
-                    and not op.get("info", {}).get("fixed"))
+        moving = kind in MOTION_KINDS and is_moving(current)
+        tracking = is_tracking(current)
         ra, dec = icrs_to_jnow(st["radec"]["ra_deg"], st["radec"]["dec_deg"], t_us)
         eq = self.props["EQUATORIAL_EOD_COORD"]
         eq["RA"].value, eq["DEC"].value = ra / 15.0, dec
@@ -478,7 +474,7 @@ class IndiTelescope:
                 # a motion another client (or the server) started shows as Busy too
                 self.props[name].state = BUSY if moving else OK
             self.send(name)
-        if kind != "move" or phase in ENDED:  # the hand pad's move ended (a limit, a command)
+        if hand_pad_rates(current) == [0.0, 0.0]:  # the hand pad's move ended
             for name in ("TELESCOPE_MOTION_NS", "TELESCOPE_MOTION_WE"):
                 motion = self.props[name]
                 if motion.state == BUSY:
