@@ -10,8 +10,9 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 
 SETUP_SCRIPTS := $(sort $(wildcard setup/*.sh))
+SETUP_LIBS := $(wildcard setup/lib/*.bash)
 
-$(STAMP): pyproject.toml $(SETUP_SCRIPTS) | $(PY)
+$(STAMP): pyproject.toml $(SETUP_SCRIPTS) $(SETUP_LIBS) | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
 	for s in $(SETUP_SCRIPTS); do echo "== $$s"; bash $$s || exit 1; done
