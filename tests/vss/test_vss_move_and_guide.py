@@ -184,3 +184,32 @@ def test_finished_pulses_fold_into_one_offset_without_moving_the_path():
     full = reference.sky_offsets(later)
     assert np.allclose(folded, full, rtol=0, atol=1e-15)
     assert offsets.total_arcsec() == pytest.approx(reference.total_arcsec(), abs=1e-9)
+
+
+def test_move_toward_the_sun_comes_to_rest_outside_its_zone():
+    from astropy.coordinates import get_body
+    from astropy.time import Time
+
+    from virtualstar.astro import UtcTimes
+
+    site = load_site()
+    day = "2024-05-18T10:00:00Z"
+
+    def sun_place(t_us: int) -> tuple[float, float]:
+        aa = get_body("sun", Time(t_us / 1e6, format="unix", scale="utc")).transform_to(
+            observed_frame([t_us], site))
+        return float(aa.az.deg[0]), float(aa.alt.deg[0])
+
+    sun_az, sun_el = sun_place(int(UtcTimes.from_iso([day]).to_unix_us()[0]))
+
+    async def scenario(vss, clock):
+        c = vss.client()
+        await c.request("slew", {"az_deg": (sun_az - 70.0) % 360.0, "el_deg": sun_el})
+        op = await c.request("move", {"az_rate_deg_s": 2.0})
+        done = await c.request("wait", {"id": op["id"]})
+        return done, await encoders(vss)
+
+    done, (az, el, t_us) = run_lockstep_scenario(day, scenario)
+    assert done["phase"] == "done" and "Sun" in done["info"]["ended"]
+    sep_deg = float(sky_sep_arcsec(az, el, *sun_place(t_us))) / 3600
+    assert 30.0 <= sep_deg < 33.0  # at rest just outside the 30° zone, not far short of it

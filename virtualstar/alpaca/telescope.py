@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from virtualstar.astro import EarthOrientation
+from virtualstar.astro.constants import SIDEREAL_RATE_ARCSEC_S
 from virtualstar.astro.equatorial import icrs_to_j2000, j2000_to_icrs, local_sidereal_time_hours
 from virtualstar.vss_client import ServerUnavailable, VssRequestError
 from virtualstar.vss_operations import hand_pad_rates, is_moving, is_parked, is_tracking
@@ -44,7 +45,7 @@ __all__ = ["AlpacaTelescope", "TelescopeOptions"]
 
 log = logging.getLogger("virtualstar.alpaca")
 
-SIDEREAL_DEG_S = 15.041067 / 3600.0  # the sidereal rate on the sky (degrees per second)
+SIDEREAL_DEG_S = SIDEREAL_RATE_ARCSEC_S / 3600.0  # ASCOM's guide rates are in degrees/s
 ACTIONS = ("TrackSatellite", "OperationStatus")
 
 # VSS error codes → ASCOM error numbers (the VSS message goes along)

@@ -18,6 +18,8 @@ EARTH_ROTATION_RAD_S = 7.292115e-5
 MAS_PER_RAD = 180.0 / math.pi * 3_600_000.0
 #: Arcseconds per radian.
 ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
+#: The sky's apparent turn (the sidereal rate) in arcseconds per second: 15.04″/s.
+SIDEREAL_RATE_ARCSEC_S = EARTH_ROTATION_RAD_S * ARCSEC_PER_RAD
 #: Hipparcos catalogue epoch (Julian year, TT), ESA SP-1200 vol. 1 §1.2.
 HIPPARCOS_EPOCH_JYEAR = 1991.25
 #: WGS84 reference ellipsoid identifier for erfa.gd2gc.

@@ -24,6 +24,7 @@ import sys
 import xml.etree.ElementTree as ET
 from typing import Any
 
+from virtualstar.astro.constants import SIDEREAL_RATE_ARCSEC_S
 from virtualstar.astro.equatorial import icrs_to_jnow, jnow_to_icrs
 from virtualstar.vss_client import (
     PASSWORD_ENV_VAR,
@@ -43,7 +44,7 @@ log = logging.getLogger("virtualstar.indi")
 DEVICE = "VirtualStar"
 POLL_S = 1.0
 MOTION_RATE_DEG_S = 1.0  # TELESCOPE_MOTION_* hand-pad rate
-GUIDE_RATE_ARCSEC_S = 0.5 * 15.041067
+GUIDE_RATE_ARCSEC_S = 0.5 * SIDEREAL_RATE_ARCSEC_S  # ASCOM's and INDI's usual default
 MOTION_KINDS = frozenset({"slew", "track", "park", "move", "pointing_sample"})
 SITE_TOLERANCE_DEG = 0.01  # a client's location within this of the VSS's site is the same
 TIME_TOLERANCE_S = 60.0  # a client's UTC within this of the mount clock is the same

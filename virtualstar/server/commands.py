@@ -17,6 +17,8 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
+from virtualstar.astro.constants import SIDEREAL_RATE_ARCSEC_S
+
 from .exceptions import BadRequest, TargetUnreachable, UnknownCommand, VssError
 from .operations import Phase
 from .targets import parse_target
@@ -70,7 +72,7 @@ class MoveParams:
 
 
 #: ASCOM's default guide rate: half the sidereal rate (arcseconds of sky per second).
-DEFAULT_GUIDE_RATE_ARCSEC_S = 0.5 * 15.041067
+DEFAULT_GUIDE_RATE_ARCSEC_S = 0.5 * SIDEREAL_RATE_ARCSEC_S
 
 
 @dataclass(frozen=True)
@@ -195,7 +197,6 @@ async def _slew(t: Telescope, p: TargetParams) -> Any:
     target, name, fixed = parse_target(p.target_fields)
     if fixed is not None:
         op = await t.slew_altaz(*fixed, allow_sun=p.allow_sun)
-        return await _result(op, wait_done=False, accepted=p.answer_on_accept)
     else:
         op = await t.follow_target(target, name, kind="slew", allow_sun=p.allow_sun)
     return await _result(op, wait_done=False, accepted=p.answer_on_accept)

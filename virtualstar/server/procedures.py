@@ -40,7 +40,6 @@ from virtualstar.astro import (
     FixedAltAz,
     Satellite,
     UtcTimes,
-    check_places,
     iso_utc,
     observe_mount_times,
     satellite_passes,
@@ -327,8 +326,8 @@ def _move_end(t: Telescope, start: np.ndarray, v: np.ndarray, join_us: int, ramp
     step_s = min(1.0, MOVE_CHECK_STEP_DEG / math.degrees(float(np.max(np.abs(v)))))
     grid_s = np.arange(-ramp_s, max(run_s, 0.0) + stop_s + step_s, step_s)
     t_us = join_us + np.round(grid_s * 1e6).astype(np.int64)
-    hit = check_places(np.mod(start[0] + v[0] * grid_s, 2 * math.pi), start[1] + v[1] * grid_s,
-                       t_us, t.safety.zones(allow_sun=allow_sun), t.config.site, t.eop)
+    hit = t.safety.first_hit(start[0] + v[0] * grid_s, start[1] + v[1] * grid_s, t_us,
+                             allow_sun=allow_sun)
     if hit is not None:
         hit_s = float(grid_s[hit.index]) - step_s - stop_s
         if hit_s < run_s:

@@ -95,12 +95,17 @@ class Safety:
         if hit is not None:
             raise refusal(hit, what)
 
+    def first_hit(self, az_rad: np.ndarray, el_rad: np.ndarray, t_us: np.ndarray, *,
+                  allow_sun: bool = False) -> ZoneHit | None:
+        """Return the first of these directions (encoder angles as the sky's, azimuth in any
+        turn of the cable wrap, at mount times) inside a zone, or None."""
+        return check_places(np.mod(az_rad, 2 * math.pi), el_rad, t_us,
+                            self.zones(allow_sun=allow_sun), self.site, self.eop)
+
     def inside(self, az_rad: float, el_rad: float, t_us: int, *, allow_sun: bool = False) -> bool:
         """Return whether a direction (encoder angles as the sky's) lies inside a zone."""
-        hit = check_places(np.array([az_rad % (2 * math.pi)]), np.array([el_rad]),
-                           np.array([t_us], np.int64), self.zones(allow_sun=allow_sun),
-                           self.site, self.eop)
-        return hit is not None
+        return self.first_hit(np.array([az_rad]), np.array([el_rad]),
+                              np.array([t_us], np.int64), allow_sun=allow_sun) is not None
 
     def first_clear_us(self, az_rad: float, el_rad: float, from_us: int, to_us: int, *,
                        allow_sun: bool = False, step_s: float = 10.0) -> int:

@@ -58,7 +58,7 @@ from .feeder import FeederConfig
 from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, GuideOffsets
 from .motion import Motion
 from .mount_link import MountLink
-from .operations import Operation, Phase
+from .operations import TERMINAL, Operation, Phase
 from .programs import ProgramControl
 from .safety import HOLD_LOOKAHEAD_S, Safety
 from .supervisor import Supervisor
@@ -529,7 +529,7 @@ class Telescope:
                              f"{MAX_GUIDE_STEP_ARCSEC:g}\u2033 a guide pulse may move; slew instead")
         op = self.op
         if (op is None or op.kind not in ("slew", "track") or op.info.get("fixed")
-                or op.phase in (Phase.DONE, Phase.FAILED, Phase.ABORTED, Phase.ENDING)):
+                or op.phase in TERMINAL or op.phase is Phase.ENDING):
             what = "nothing runs" if op is None else f"operation {op.id} ({op.kind}) is " \
                 f"{op.phase.label}"
             raise NotTracking(f"guide: no sky target is being tracked ({what}); a guide pulse "
