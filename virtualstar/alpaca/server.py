@@ -95,7 +95,7 @@ def build_app(device: AlpacaTelescope, *, allowed_origins: tuple[str, ...] | Non
         if not device.knows(name):
             return web.Response(status=404, text=f"{kind}/{number} has no member {name!r} "
                                 "(member names are lower case)")
-        if (request.method, name) not in _methods():
+        if not device.takes(request.method, name):
             return web.Response(status=405, text=f"{name} does not take {request.method}")
         params = await params_of(request)
         client_tid, server_tid = ids(request, params)
@@ -121,12 +121,6 @@ def build_app(device: AlpacaTelescope, *, allowed_origins: tuple[str, ...] | Non
     app.router.add_get("/setup", setup)
     app.router.add_get("/setup/v1/{device_type}/{number}/setup", setup)
     return app
-
-
-def _methods() -> set[tuple[str, str]]:
-    from .telescope import MEMBERS
-
-    return set(MEMBERS)
 
 
 @dataclass

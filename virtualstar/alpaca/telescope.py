@@ -126,7 +126,11 @@ class AlpacaTelescope:
 
     @staticmethod
     def knows(name: str) -> bool:
-        return any(n == name for _m, n in MEMBERS)
+        return name in MEMBER_NAMES
+
+    @staticmethod
+    def takes(method: str, name: str) -> bool:
+        return (method, name) in MEMBERS
 
     async def call(self, cmd: str, params: dict[str, Any] | None = None,
                    timeout_s: float | None = 30.0) -> Any:
@@ -671,3 +675,5 @@ async def _pulse_guide(dev: AlpacaTelescope, p: Params) -> Any:
 
 with contextlib.suppress(NameError):
     del _cmd, _name_, _value, _sync, _slew
+
+MEMBER_NAMES = frozenset(name for _method, name in MEMBERS)
