@@ -3,21 +3,24 @@
 On a driven axis the commanded motion dominates the raw current, so the detectors look
 at what is left once the motion is explained:
 
-    i ≈ c0 + c1·v + c2·a + Σ_s c_s·clip(v/s, −1, 1)      inertia, viscous and dry friction
+    i ≈ c0 + c1·v + c2·a + c3·g(v/v_k)                   inertia, viscous and dry friction
           [+ c·cos(p) + c'·sin(p)]                        gravity imbalance (elevation)
           [+ Σ_k (c_k·cos(kNp) + c'_k·sin(kNp)), k=1,2]   cogging, N periods per revolution
 
 p, v, a: the axis angle (rad), rate (rad/s) and acceleration (rad/s²) of each segment
-(a least-squares parabola through its samples). The friction curve of a real bearing is
-not known, so it is a linear spline in v with knots on a log scale from 10 µrad/s (a
-fraction of the sidereal rate) to 3 mrad/s: any monotone friction curve, Stribeck's
-included, is a sum of such ramps. The cogging's N is an integer (a motor's cogging
-repeats every revolution): the candidates are the highest peaks of a Lomb–Scargle
-periodogram (scipy) of the base model's residual against position at whole N, and the
-one whose full fit explains the reference best wins — the periodogram alone cannot tell
-N from N ± 1 over the short travel of an elevation axis in 15 minutes, the joint fit
-can. Everything is fitted on the reference only, so a fault after it cannot hide in the
-fit, and live detection fits the same model.
+(a least-squares parabola through its samples). Dry friction saturates with speed: g is
+one of three common shapes — a ramp clipped at ±1, tanh, or 1 − e^(−|x|) — and v_k the
+knee speed; the shape and the knee (41 on a log scale, 1 µrad/s to 10 mrad/s) that
+explain the reference best are kept. Sidereal rates sit on that knee, so its shape
+decides the current of a star the reference never tracked; a fixed family with one
+knee extrapolates where a flexible curve (tried: a linear spline with six knots) swung
+by 0.07 A between the speeds the reference held. The cogging's N is an integer (a
+motor's cogging repeats every revolution): the candidates are the highest peaks of a
+Lomb–Scargle periodogram (scipy) of the base model's residual against position at whole
+N, and the one whose full fit explains the reference best wins — the periodogram alone
+cannot tell N from N ± 1 over the short travel of an elevation axis in 15 minutes, the
+joint fit can. Everything is fitted on the reference only, so a fault after it cannot
+hide in the fit, and live detection fits the same model.
 """
 
 from __future__ import annotations
@@ -28,22 +31,38 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import lombscargle
 
-__all__ = ["CurrentModel", "estimate_cogging_periods", "fit_current_model"]
+__all__ = ["CurrentModel", "Friction", "estimate_cogging_periods", "fit_current_model",
+           "fit_friction"]
 
-FRICTION_KNOTS_RAD_S = (1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3)
+FRICTION_SHAPES = ("clip", "tanh", "exp")
+FRICTION_KNEES_RAD_S = tuple(float(x) for x in np.logspace(-6, -2, 41))
 MIN_COGGING_PERIODS = 8  # below: a slow drift of the residual, not a motor property
 MAX_COGGING_PERIODS = 1024
 COGGING_CANDIDATES = 8  # periodogram peaks whose neighbourhoods are fitted in full
 MIN_COGGING_SHARE = 0.1  # the harmonic must explain this share of the residual variance
 MAX_PERIODOGRAM_POINTS = 20_000
-# Relative ridge on the scaled columns: the friction ramps are nearly collinear where
-# the reference holds few speeds, and so are the offset and gravity terms over a few
-# degrees of elevation; unbounded, the fit cancels large coefficients against each
-# other. 1e-5 was chosen on clean VSS nights of the tuning set (docs/anomalies.md): 3e-4
-# (the value of the sine-experiment days) biased the gravity term by 0.015 A on
-# elevation blocks outside the reference's elevations, 1e-7 let the ramps swing by
-# 0.05 A between the speeds the reference held.
-RIDGE = 1e-5
+# Relative ridge on the scaled columns: the offset and gravity terms are nearly collinear
+# over a few degrees of elevation; unbounded, the fit cancels large coefficients against
+# each other. Small: with one friction shape there is little else to tame (3e-4, the
+# value of the sine-experiment days, biased the gravity term by 0.015 A on elevation
+# blocks outside the reference's elevations).
+RIDGE = 1e-7
+
+
+@dataclass(frozen=True)
+class Friction:
+    """The dry-friction shape and its knee speed (rad/s)."""
+
+    shape: str = "clip"
+    knee_rad_s: float = 1e-4
+
+    def __call__(self, v: np.ndarray) -> np.ndarray:
+        x = v / self.knee_rad_s
+        if self.shape == "clip":
+            return np.clip(x, -1.0, 1.0)
+        if self.shape == "tanh":
+            return np.tanh(x)
+        return np.sign(x) * -np.expm1(-np.abs(x))
 
 
 @dataclass(frozen=True)
@@ -55,10 +74,13 @@ class CurrentModel:
     gravity: bool
     cogging_periods: int  # 0: no cogging term
     reference_rms_a: float  # residual RMS on the rows it was fitted on
+    friction: Friction = Friction()
+    segment_s: float = 0.0  # the segments' span (s): the cogging averages over it
 
     def predict(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-        x = _regressors(p, v, a, self.gravity, self.cogging_periods) / self.scales
-        return x @ self.coefficients
+        x = _regressors(p, v, a, self.gravity, self.cogging_periods, self.friction,
+                        self.segment_s)
+        return (x / self.scales) @ self.coefficients
 
     def slope_a_per_rad_s(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """d(current)/d|v| of the model at each motion (A per rad/s): how much the current
@@ -69,13 +91,18 @@ class CurrentModel:
         return np.abs(up - down) / (2 * dv)
 
 
-def _regressors(p, v, a, gravity: bool, cogging_periods: int) -> np.ndarray:
-    cols = [np.ones_like(p), v, a] + [np.clip(v / s, -1.0, 1.0) for s in FRICTION_KNOTS_RAD_S]
+def _regressors(p, v, a, gravity: bool, cogging_periods: int,
+                friction: Friction = Friction(), segment_s: float = 0.0) -> np.ndarray:
+    cols = [np.ones_like(p), v, a, friction(v)]
     if gravity:
         cols += [np.cos(p), np.sin(p)]
     if cogging_periods > 0:
         for k in (1, 2):
-            cols += [np.cos(k * cogging_periods * p), np.sin(k * cogging_periods * p)]
+            w = k * cogging_periods
+            # a segment's mean of cos(w·p) while p moves by v·T: cos(w·p̄)·sinc(w·v·T/2π) —
+            # in a slew the cogging averages out, and a high N cannot fit it there
+            fade = np.sinc(w * v * segment_s / (2 * math.pi))
+            cols += [np.cos(w * p) * fade, np.sin(w * p) * fade]
     return np.stack(cols, axis=1)
 
 
@@ -110,8 +137,22 @@ def _candidates(p: np.ndarray, r: np.ndarray) -> list[int]:
                    if lo <= int(freqs[k]) + d <= MAX_COGGING_PERIODS})
 
 
+def fit_friction(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray, *,
+                 gravity: bool, cogging_periods: int = 0, segment_s: float = 0.0) -> Friction:
+    """Return the friction shape and knee that explain `i` best (see the module docstring)."""
+    best, best_rms = Friction(), math.inf
+    for shape in FRICTION_SHAPES:
+        for knee in FRICTION_KNEES_RAD_S:
+            f = Friction(shape, knee)
+            rms = _rms(_regressors(p, v, a, gravity, cogging_periods, f, segment_s), i)
+            if rms < best_rms:
+                best, best_rms = f, rms
+    return best
+
+
 def estimate_cogging_periods(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray, *,
-                             gravity: bool) -> int:
+                             gravity: bool, friction: Friction = Friction(),
+                             segment_s: float = 0.0) -> int:
     """Return the cogging periods per revolution that best explain `i` (see the module
     docstring), or 0 when none explains MIN_COGGING_SHARE of what the base model leaves
     (or the travel is too short to tell)."""
@@ -119,13 +160,13 @@ def estimate_cogging_periods(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.
     p, v, a, i = p[ok], v[ok], a[ok], i[ok]
     if len(p) < 100 or float(np.ptp(p)) <= 0:
         return 0
-    x0 = _regressors(p, v, a, gravity, 0)
+    x0 = _regressors(p, v, a, gravity, 0, friction)
     coef, scales = _lstsq(x0, i)
     base = i - (x0 / scales) @ coef
     base_var = float(np.mean(base * base))
     best, best_rms = 0, math.inf
     for n in _candidates(p, base):
-        rms = _rms(_regressors(p, v, a, gravity, n), i)
+        rms = _rms(_regressors(p, v, a, gravity, n, friction, segment_s), i)
         if rms < best_rms:
             best, best_rms = n, rms
     if best == 0 or base_var <= 0 or 1.0 - best_rms ** 2 / base_var < MIN_COGGING_SHARE:
@@ -134,15 +175,23 @@ def estimate_cogging_periods(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.
 
 
 def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray,
-                      rows: np.ndarray, *, gravity: bool,
-                      cogging_periods: int | None = None) -> CurrentModel:
-    """Fit the current model on `rows`; `cogging_periods` None estimates N from them."""
+                      rows: np.ndarray, *, gravity: bool, cogging_periods: int | None = None,
+                      segment_s: float = 0.0) -> CurrentModel:
+    """Fit the current model on `rows`; `cogging_periods` None estimates N from them.
+    `segment_s`: the span of a segment (s), over which the cogging averages."""
+    p, v, a, i = p[rows], v[rows], a[rows], i[rows]
+    if len(p) < 10:
+        raise ValueError(f"the current model needs rows to learn from; got {len(p)}")
+    friction = fit_friction(p, v, a, i, gravity=gravity)
     if cogging_periods is None:
-        cogging_periods = estimate_cogging_periods(p[rows], v[rows], a[rows], i[rows],
-                                                   gravity=gravity)
+        cogging_periods = estimate_cogging_periods(p, v, a, i, gravity=gravity,
+                                                   friction=friction, segment_s=segment_s)
     n = int(round(cogging_periods))
-    x = _regressors(p[rows], v[rows], a[rows], gravity, n)
-    coef, scales = _lstsq(x, i[rows])
-    res = i[rows] - (x / scales) @ coef
-    return CurrentModel(coef, scales, gravity, n,
-                        float(np.sqrt(np.mean(res * res))) if len(res) else math.nan)
+    if n:
+        friction = fit_friction(p, v, a, i, gravity=gravity, cogging_periods=n,
+                                segment_s=segment_s)
+    x = _regressors(p, v, a, gravity, n, friction, segment_s)
+    coef, scales = _lstsq(x, i)
+    res = i - (x / scales) @ coef
+    return CurrentModel(coef, scales, gravity, n, float(np.sqrt(np.mean(res * res))),
+                        friction, segment_s)

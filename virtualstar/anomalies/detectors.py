@@ -34,7 +34,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .current_model import CurrentModel, fit_current_model
-from .phases import AXIS_CLASSES, CLASS_NAMES, EXCLUDED, SLEW, MotionPhase, PhaseConfig
+from .phases import (
+    AXIS_CLASSES,
+    CLASS_NAMES,
+    EXCLUDED,
+    FAST,
+    FASTER,
+    REST,
+    SLEW,
+    MotionPhase,
+    PhaseConfig,
+)
 from .reference import ReferenceConfig
 from .robust import robust_center_scale
 from .segments import SEGMENT_SAMPLES, Segments
@@ -57,14 +67,20 @@ class DetectorConfig:
     current_window_s: float = 10.0
     current_floor_a: float = 0.01
     current_ref_factor: float = 2.0  # × the largest deviation of a reference window
-    # a segment is scored by the current detector only within this ratio of a speed its
-    # class held on the reference; its limit widens by coverage_factor × the model's
-    # d(current)/d|v| × the distance to that speed (anomalies.detectors.CurrentDetector)
+    # the current detector scores a segment only when its class held coverage_min_s of
+    # reference within coverage_ratio of its speed; its limit widens by coverage_factor ×
+    # the model's d(current)/d|v| × the distance to their median (CurrentDetector)
     coverage_ratio: float = 1.1
+    coverage_min_s: float = 10.0
     coverage_factor: float = 2.0
     vibration_window_s: float = 30.0
     vibration_floor_ratio: float = 16.0  # power × this at least (amplitude × 4)
-    spike_factor: float = 3.0  # × the largest spike of the class on the reference
+    spike_factor: float = 5.0  # × the largest spike of the class on the reference
+    # At satellite rates and in slews the tracking error jumps where the trajectory's
+    # pieces meet: up to 0.6″ in one sample on the emulator's fastest passes, more than a
+    # reference pass of lower rates shows. An error jump smaller than this is no glitch
+    # there (the current's jumps still count with their own limit).
+    spike_fast_floor_arcsec: float = 1.0
     spike_merge_s: float = 10.0
     temperature_window_s: float = 120.0
     temperature_floor_k_h: float = 3.0
@@ -338,36 +354,38 @@ class CurrentDetector(_Detector):
 
     def use(self, chunk: Chunk) -> np.ndarray:
         _, v, a, _ = self._motion(chunk)
+        at_rest = self.classes(chunk) == REST
         # a segment in which a slew starts or stops crosses the friction's knee: its mean
         # current is no function of its mean speed
         edge = (self.classes(chunk) == SLEW) & (np.abs(a) > self._edge_accel) & \
             (np.abs(v) < np.abs(a) * self.seg_s)
-        return super().use(chunk) & ~edge
+        return super().use(chunk) & ~edge & ~at_rest
 
     def values(self, chunk: Chunk) -> dict[str, np.ndarray]:
         p, v, a, i = self._motion(chunk)
         assert self.model is not None, "fit before scoring"
         resid = i - self.model.predict(p, v, a)
         # Speeds the reference did not hold: below a few hundred arcseconds per second the
-        # friction curve is steep and differs from bearing to bearing, and the model there
-        # is an interpolation between the speeds it saw. A segment farther than
-        # `coverage_ratio` from every speed of its class on the reference is not scored;
-        # a nearer one widens its limit by the model's slope times the distance.
+        # dry friction changes steeply with speed, and the model there is an extrapolation
+        # from the speeds it saw. A segment is scored only when its class held
+        # `coverage_min_s` of reference at speeds within `coverage_ratio` of its own; its
+        # limit widens by coverage_factor × the model's slope × its distance to their
+        # median speed.
         allowance = np.zeros(len(p))
         covered = np.zeros(len(p), bool)
         cls = self.classes(chunk)
+        need = max(1, round(self.cfg.coverage_min_s / self.seg_s))
         for c, speeds in self.ref_speeds.items():
             rows = np.flatnonzero(cls == c)
-            if len(rows) == 0 or len(speeds) == 0:
+            if len(rows) == 0 or len(speeds) < need:
                 continue
             s = np.abs(v[rows])
-            k = np.clip(np.searchsorted(speeds, s), 1, max(1, len(speeds) - 1))
-            lo = speeds[np.minimum(k - 1, len(speeds) - 1)]
-            hi = speeds[np.minimum(k, len(speeds) - 1)]
-            gap = np.minimum(np.abs(s - lo), np.abs(s - hi))
-            tolerance = (self.cfg.coverage_ratio - 1.0) * np.maximum(s, self.rest_rad_s)
-            covered[rows] = gap <= tolerance
-            allowance[rows] = gap * self.model.slope_a_per_rad_s(p[rows], v[rows], a[rows])
+            lo = np.searchsorted(speeds, s / self.cfg.coverage_ratio)
+            hi = np.searchsorted(speeds, s * self.cfg.coverage_ratio, side="right")
+            covered[rows] = hi - lo >= need
+            middle = speeds[np.clip((lo + hi) // 2, 0, len(speeds) - 1)]
+            allowance[rows] = np.abs(s - middle) * \
+                self.model.slope_a_per_rad_s(p[rows], v[rows], a[rows])
         return {"resid": resid, "allowance": allowance, "covered": covered}
 
     def stats(self, arrays, starts):
@@ -378,16 +396,29 @@ class CurrentDetector(_Detector):
     def fit(self, chunk: Chunk, ref: np.ndarray) -> Check:
         p, v, a, i = self._motion(chunk)
         rows = self.use(chunk) & ref
-        self.model = fit_current_model(p, v, a, i, rows, gravity=self.axis == "el",
-                                       cogging_periods=self.cfg.cogging_periods)
+        try:
+            self.model = fit_current_model(p, v, a, i, rows, gravity=self.axis == "el",
+                                           cogging_periods=self.cfg.cogging_periods,
+                                           segment_s=self.seg_s * (SEGMENT_SAMPLES - 1)
+                                           / SEGMENT_SAMPLES)
+        except ValueError as exc:
+            self.plan = {}
+            return Check(self.kind, self.axis, self.signals, False, str(exc))
         cls = self.classes(chunk)
-        self.ref_speeds = {c: np.sort(np.abs(v[rows & (cls == c)])) for c in AXIS_CLASSES}
+        # speeds held steadily (changing by under 10 % within a segment): a run-up
+        # sweeping through a speed says little about the friction there
+        steady = np.abs(a) * self.seg_s <= 0.1 * np.abs(v)
+        self.ref_speeds = {c: np.sort(np.abs(v[rows & steady & (cls == c)]))
+                           for c in AXIS_CLASSES}
         return super().fit(chunk, ref)
 
     def fit_classes(self, stats, cls, seconds):
         mean = stats["mean"]
         held, why = self._held(np.isfinite(mean), cls, seconds)
         self.plan = _class_plan(held, why)
+        self.plan[REST] = (None, "not scored: dry friction holds an axis at rest anywhere "
+                                 "within its breakaway torque, so the holding current says "
+                                 "nothing")
         for c in AXIS_CLASSES:
             m = mean[(cls == c) & np.isfinite(mean)]
             if not held[c] or len(m) == 0:
@@ -413,10 +444,12 @@ class CurrentDetector(_Detector):
         c = super().check()
         if not c.ran:
             return c
-        n = self.model.cogging_periods if self.model else 0
+        m = self.model
+        assert m is not None
         return Check(c.detector, c.axis, c.signals, c.ran,
-                     f"model fitted on the reference: cogging {n} periods/rev, residual "
-                     f"{(self.model.reference_rms_a if self.model else math.nan):.4f} A RMS",
+                     f"model fitted on the reference: dry friction {m.friction.shape} with its "
+                     f"knee at {math.degrees(m.friction.knee_rad_s) * 3600:.3g}″/s, cogging "
+                     f"{m.cogging_periods} periods/rev, residual {m.reference_rms_a:.4f} A RMS",
                      c.classes)
 
 
@@ -559,9 +592,15 @@ class SpikeDetector(_Detector):
         ok = np.all(np.isfinite(x), axis=1)
         held, why = self._held(ok, cls, seconds)
         self.plan = _class_plan(held, why)
+        error = self.roles.index("error_spike_arcsec") if "error_spike_arcsec" in self.roles \
+            else None
         for c in AXIS_CLASSES:
             if held[c]:
-                self.usual[c] = np.max(x[ok & (cls == c)], axis=0)
+                usual = np.max(x[ok & (cls == c)], axis=0)
+                if error is not None and c in (FAST, FASTER, SLEW):
+                    usual[error] = max(usual[error],
+                                       self.cfg.spike_fast_floor_arcsec / self.cfg.spike_factor)
+                self.usual[c] = usual
 
     def window_scores(self, stats, cls):
         x = stats["spikes"]

@@ -42,8 +42,8 @@ import numpy as np
 
 from .segments import Segments
 
-__all__ = ["AXIS_CLASSES", "CLASS_NAMES", "EXCLUDED", "MotionPhase", "PhaseConfig",
-           "PhaseLabeller", "axis_classes"]
+__all__ = ["AXIS_CLASSES", "CLASS_NAMES", "EXCLUDED", "FAST", "FASTER", "REST", "SLEW", "SLOW",
+           "MotionPhase", "PhaseConfig", "PhaseLabeller", "axis_classes"]
 
 
 class MotionPhase(enum.IntEnum):
@@ -66,10 +66,11 @@ _PHASE_LABELS = {MotionPhase.OFF: "powered off", MotionPhase.REST: "at rest",
 
 # Per axis, the class a detector models: the phase, and while tracking, the axis's speed.
 EXCLUDED = -1  # powered off or settling: neither reference nor scored
-REST, SLOW, FAST, SLEW = 0, 1, 2, 3
-AXIS_CLASSES = (REST, SLOW, FAST, SLEW)
-CLASS_NAMES = {REST: "at rest", SLOW: "tracking at sidereal rates",
-               FAST: "tracking at satellite rates", SLEW: "slewing"}
+REST, SLOW, FAST, FASTER, SLEW = 0, 1, 2, 3, 4
+AXIS_CLASSES = (REST, SLOW, FAST, FASTER, SLEW)  # from the quietest to the loudest
+CLASS_NAMES = {REST: "at rest", SLOW: "tracking at sidereal rates (< 0.2°/s)",
+               FAST: "tracking at satellite rates (0.2–1°/s)",
+               FASTER: "tracking at satellite rates (≥ 1°/s)", SLEW: "slewing"}
 
 # The VSS's operation phases (virtualstar/server/operations.py, their labels) and the
 # mount states (mount.state_name) as motion phases; None: this source does not say.
@@ -98,7 +99,9 @@ class PhaseConfig:
     power in the first second after a slew, ×26 at 3–5 s, ×3 at 5–7 s and ×2 at 7–10 s
     (the flagging floor is ×16); 10 s.
     fast_rate_deg_s: tracking faster than this on an axis is "satellite rates": sidereal
-    tracking stays below it except within 1.5° of the zenith.
+    tracking stays below it except within 1.5° of the zenith. faster_rate_deg_s: above it
+    the error's spectrum and its jumps where the trajectory's pieces meet grow with the
+    rate (a pass near the zenith), so it is a regime of its own.
     """
 
     settle_s: float = 10.0
@@ -107,10 +110,7 @@ class PhaseConfig:
     rest_rate_arcsec_s: float = 1.0
     off_current_a: float = 0.002
     fast_rate_deg_s: float = 0.2
-
-    @property
-    def fast_rate_rad_s(self) -> float:
-        return math.radians(self.fast_rate_deg_s)
+    faster_rate_deg_s: float = 1.0
 
 
 def _timeline(events, source: str, table: dict[str, MotionPhase | None],
@@ -264,24 +264,26 @@ class PhaseLabeller:
 def axis_classes(phase: np.ndarray, velocity_rad_s: np.ndarray | None,
                  config: PhaseConfig, acceleration_rad_s2: np.ndarray | None = None
                  ) -> np.ndarray:
-    """Return each segment's class on one axis (REST, SLOW, FAST, SLEW, or EXCLUDED).
+    """Return each segment's class on one axis (REST, SLOW, FAST, FASTER, SLEW, EXCLUDED).
 
-    While the mount slews, an axis that does not move (the other one slews alone) is at
-    rest, not slewing."""
+    While the mount slews, an axis that does not move (the other one slews alone) is
+    neither slewing nor settled — it has often just stopped — and is left out."""
     out = np.full(len(phase), EXCLUDED, dtype=np.int64)
     out[phase == MotionPhase.REST] = REST
     slewing = phase == MotionPhase.SLEWING
     if velocity_rad_s is not None and acceleration_rad_s2 is not None:
         still = (np.abs(velocity_rad_s) < math.radians(config.rest_rate_arcsec_s / 3600.0)) & \
             (np.abs(acceleration_rad_s2) < math.radians(config.slew_accel_deg_s2))
-        out[slewing & still] = REST
         slewing &= ~still
     out[slewing] = SLEW
     tracking = phase == MotionPhase.TRACKING
     if velocity_rad_s is None:
         out[tracking] = SLOW
     else:
-        fast = np.abs(velocity_rad_s) >= config.fast_rate_rad_s
+        speed = np.abs(velocity_rad_s)
+        fast = speed >= math.radians(config.fast_rate_deg_s)
+        faster = speed >= math.radians(config.faster_rate_deg_s)
         out[tracking & ~fast] = SLOW
-        out[tracking & fast] = FAST
+        out[tracking & fast & ~faster] = FAST
+        out[tracking & faster] = FASTER
     return out

@@ -25,7 +25,7 @@ from .reference import (
 )
 from .segments import Segments, axis_signals, reduce_blocks
 
-__all__ = ["AnomalyReport", "detect_anomalies"]
+__all__ = ["AnomalyReport", "detect_anomalies", "read_segments"]
 
 CHUNK_US = 900_000_000  # read 15 minutes at a time: bounded memory over a whole night
 RATE_PROBE_US = 10_000_000
@@ -96,6 +96,21 @@ def _events(reader, a: int, b: int) -> list:
     return [e for e in read() if a <= e.t_us < b]
 
 
+def read_segments(reader, from_t_us: int, to_t_us: int
+                  ) -> tuple[Segments, dict[str, dict[str, str]], float]:
+    """Read [from, to) of a store and reduce it: (segments, {axis: {role: name}}, rate Hz).
+    Raises QueryError when the store records no signal a detector reads."""
+    names_all = [s.name for s in reader.signals()]
+    axes = axis_signals(names_all)
+    if not axes:
+        raise QueryError("no signal to analyse: the detectors read axis.<az|el>.position, "
+                         ".current, .error_arcsec, .temperature; the store holds "
+                         + ", ".join(names_all))
+    names = sorted({n for roles in axes.values() for n in roles.values()})
+    rate = _rate_hz(reader, names, from_t_us, to_t_us)
+    return reduce_blocks(_blocks(reader, names, from_t_us, to_t_us), axes, rate), axes, rate
+
+
 def detect_anomalies(reader, from_t_us: int, to_t_us: int, *,
                      reference: list[tuple[int, int]] | tuple[int, int] | None = None,
                      config: DetectorConfig | None = None) -> AnomalyReport:
@@ -107,15 +122,7 @@ def detect_anomalies(reader, from_t_us: int, to_t_us: int, *,
     """
     cfg = config or DetectorConfig()
     start = time.perf_counter()
-    names_all = [s.name for s in reader.signals()]
-    axes = axis_signals(names_all)
-    if not axes:
-        raise QueryError("no signal to analyse: the detectors read axis.<az|el>.position, "
-                         ".current, .error_arcsec, .temperature; the store holds "
-                         + ", ".join(names_all))
-    names = sorted({n for roles in axes.values() for n in roles.values()})
-    rate = _rate_hz(reader, names, from_t_us, to_t_us)
-    seg: Segments = reduce_blocks(_blocks(reader, names, from_t_us, to_t_us), axes, rate)
+    seg, axes, rate = read_segments(reader, from_t_us, to_t_us)
     events = _events(reader, from_t_us, to_t_us)
     read_s = time.perf_counter() - start
 

@@ -6,7 +6,7 @@ keeps a 12-hour night (43 M rows per signal at 1 kHz) to 170 k rows per feature,
 reshape and one vectorised numpy call. Per segment and axis: the mean time; the
 position, velocity and acceleration (a least-squares parabola through the samples, so
 the encoder's quantisation averages out) and the smallest position step (one encoder
-count, when the axis moves slowly); the mean current and mean squared current; the
+count, when the axis moves slowly); the mean current; the
 power of the tracking error in octave bands (FFT); the largest second difference of
 error and current (a one-sample spike); the mean temperature; and the mean sample
 spacing in mount µs (the clock).
@@ -42,7 +42,7 @@ def axis_signals(names: list[str]) -> dict[str, dict[str, str]]:
 class Segments:
     """Features of consecutive segments (one row each); per-axis features keyed
     ``"<axis>.<feature>"`` (position_rad, velocity_rad_s, acceleration_rad_s2,
-    position_step_rad, current_a, current_sq_a2, current_spike_a, error_band_power,
+    position_step_rad, current_a, current_spike_a, error_band_power,
     error_spike_arcsec, temperature_c)."""
 
     t_first_us: np.ndarray
@@ -82,14 +82,15 @@ def _spike(x: np.ndarray) -> np.ndarray:
 
 def _slope_and_curvature(t_s: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return the rate and twice the quadratic coefficient (the mean acceleration) of a
-    least-squares parabola through each row: with the time centred, t and t² − mean(t²)
-    are orthogonal on evenly spaced samples, so each is one projection."""
-    tc = t_s - t_s.mean(axis=1, keepdims=True)
-    yc = y - y.mean(axis=1, keepdims=True)
+    least-squares parabola through each row of `y` sampled at the times `t_s` (one
+    segment's): with the time centred, t and t² − mean(t²) are orthogonal on evenly
+    spaced samples and sum to zero, so each coefficient is one matrix–vector product.
+    (A segment whose samples are not evenly spaced holds a gap and is left out anyway.)"""
+    tc = t_s - t_s.mean()
     q = tc * tc
-    q -= q.mean(axis=1, keepdims=True)
-    rate = (tc * yc).sum(axis=1) / np.maximum((tc * tc).sum(axis=1), 1e-30)
-    curv = 2.0 * (q * yc).sum(axis=1) / np.maximum((q * q).sum(axis=1), 1e-30)
+    q -= q.mean()
+    rate = (y @ tc) / max(float(tc @ tc), 1e-30)
+    curv = 2.0 * (y @ q) / max(float(q @ q), 1e-30)
     return rate, curv
 
 
@@ -99,7 +100,7 @@ def _reduce(t: np.ndarray, cols: dict[str, np.ndarray], axes: dict[str, dict[str
     m = len(t) // n
     tt = t[: m * n].reshape(m, n)
     feats: dict[str, np.ndarray] = {}
-    t_s = (tt - tt[:, :1]) * 1e-6
+    t_s = np.arange(n) / fs_hz  # the nominal sample times of a segment
     for ax, roles in axes.items():
         def seg(role: str, roles: dict[str, str] = roles) -> np.ndarray:
             return np.asarray(cols[roles[role]][: m * n], dtype=np.float64).reshape(m, n)
@@ -115,7 +116,6 @@ def _reduce(t: np.ndarray, cols: dict[str, np.ndarray], axes: dict[str, dict[str
         if "current" in roles:
             c = seg("current")
             feats[f"{ax}.current_a"] = c.mean(axis=1)
-            feats[f"{ax}.current_sq_a2"] = (c * c).mean(axis=1)
             feats[f"{ax}.current_spike_a"] = _spike(c)
         if "error_arcsec" in roles:
             e = seg("error_arcsec")
