@@ -204,7 +204,7 @@ static int dispatch(ad_link *l, uint8_t *f, size_t n)
         break;
     }
     case AD_LINK_CLOSE:
-        if (chan) close_channel(l, chan, 1000, "", 0);
+        if (chan) close_channel(l, chan, 1000, "", 1); /* the answer frees the channel */
         break;
     case AD_LINK_DATA: {
         ad_session *s = chan ? l->chan[chan] : NULL;
