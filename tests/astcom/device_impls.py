@@ -40,6 +40,9 @@ BUILDS = {"host": DEVICE_DIR / "build" / "host" / "astcom-example",
 SANITIZER_WORDS = ("ERROR: AddressSanitizer", "ERROR: LeakSanitizer", "runtime error:")
 ALL_IMPLS = ["python", "c", "c-relay"]
 C_IMPLS = ["c", "c-relay"]
+# (implementation, URL scheme) pairs of the tests that need a real socket
+SOCKET_IMPLS = [("python", "ws"), ("python", "tcp"), ("c", "tcp"), ("c-relay", "ws")]
+EXAMPLE_GAINS = [1.0, 0.1, 0.01]  # the example device's gains at start, in both languages
 
 
 def c_toolchain_missing() -> str | None:
@@ -211,11 +214,15 @@ class DeviceUnderTest:
 
 
 @contextlib.asynccontextmanager
-async def serve_impl(impl: str, *, socket: bool = False, realtime: bool = False,
+async def serve_impl(impl: str, *, scheme: str | None = None, realtime: bool = False,
                      **config: Any) -> AsyncIterator[DeviceUnderTest]:
-    """Serve the example device of `impl` (see the module docstring) with `config`."""
+    """Serve the example device of `impl` (see the module docstring) with `config`.
+
+    `scheme` ("ws"/"tcp") makes the Python endpoint listen on loopback (else connections
+    are in memory); the C device always listens on TCP, the Relay on ws://.
+    """
     if impl == "python":
-        url = "tcp://127.0.0.1:0" if socket else None
+        url = f"{scheme}://127.0.0.1:0" if scheme else None
         async with served(url, realtime=realtime, **config) as (device, endpoint, bound):
             dut = DeviceUnderTest(impl, bound, endpoint, device)
             try:
