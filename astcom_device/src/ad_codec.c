@@ -116,7 +116,7 @@ int ad_validate(const uint8_t *frame, size_t len, const ad_limits *lim, char *wh
             if (tok.length > lim->max_array_len)
                 ERR(413, "frame exceeds a size limit: %u exceeds max_%s_len(%u)", tok.length,
                     map ? "map" : "array", lim->max_array_len);
-            if (depth + 2 > max_depth)
+            if (depth + 1 > max_depth)
                 ERR(413, "frame nests deeper than %u levels", lim->max_depth);
             if (tok.length) {
                 depth++;

@@ -31,7 +31,7 @@ async def logged_in_peer(dut) -> RawPeer:
 
 @pytest.mark.parametrize("rate_hz", [1e-16, 5e-324, 1e-12, 1000 / MAX_PERIOD_TICKS / 2])
 @pytest.mark.parametrize("impl", ALL_IMPLS)
-def test_a_stream_rate_below_one_sample_per_2_32_ticks_is_refused_and_the_connection_stays(impl: str, 
+def test_a_stream_rate_below_one_sample_per_2_32_ticks_is_refused_and_the_connection_stays(impl: str,
         rate_hz: float) -> None:
     async def main() -> None:
         async with serve_impl(impl) as dut:
