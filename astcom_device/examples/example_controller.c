@@ -9,9 +9,23 @@
 #define ARCSEC_PER_RAD 206264.80624709636
 #define DEG (PI / 180.0)
 
+#ifdef EX_MCU
+/* the MCU build: no doc texts (flash, and LIST fits a 5 KiB reply); only the sixteen
+ * f32 extras are traced (a 20 ms ring of 16 f32 signals at 10 kHz is 12.8 KiB) */
+#define DOC(d) ""
+#define TRACED 0
+#define EXTRA_TYPE "f32"
+typedef float extra_t;
+#else
+#define DOC(d) d
+#define TRACED 1
+#define EXTRA_TYPE "f64"
+typedef double extra_t;
+#endif
 /* ---- the Python example device's variables (astcom_client/example_device.py) -------- */
 static struct {
-    double sine, cosine, diff, extra[EX_MAX_EXTRA];
+    double sine, cosine, diff;
+    extra_t extra[EX_MAX_EXTRA];
     int64_t counter;
     double amplitude, frequency_hz, offset, pair_a, pair_b;
     double gains[3];
@@ -196,7 +210,7 @@ int64_t ex_step(uint64_t tick)
     W.cosine = W.amplitude * cos(phase);
     W.counter = (int64_t)(tick - W.counter_base);
     W.diff = W.pair_a - W.pair_b;
-    for (int i = 0; i < EX_MAX_EXTRA; i++) W.extra[i] = sin(phase + i);
+    for (int i = 0; i < EX_MAX_EXTRA; i++) W.extra[i] = (extra_t)sin(phase + i);
     /* the clock: an armed UTC second is taken at the PPS edge (the host clock's second) */
     int64_t now = mount_time(tick);
     if (F.armed_second) {
@@ -423,12 +437,12 @@ static int fn_now(ad_call *c, void *u)
 }
 
 /* ---- the tables -------------------------------------------------------------------------- */
-#define SIG(n, t, p, un, d) {n, t, AD_SIGNAL, AD_R, 1, 0, 0, 0, 0, un, d, p, 0, NULL}
-#define VAL(n, t, p, un, d) {n, t, AD_SIGNAL, AD_R, 0, 0, 0, 0, 0, un, d, p, 0, NULL}
-#define PAR(n, t, p, un, d) {n, t, AD_PARAMETER, AD_RW, 0, 0, 0, 0, 0, un, d, p, 0, NULL}
-#define RANGED(n, t, p, lo, hi, un, d) {n, t, AD_PARAMETER, AD_RW, 0, 1, 1, lo, hi, un, d, p, 0, NULL}
-#define POSITIVE(n, p, hi, un, d) {n, "f64", AD_PARAMETER, AD_RW, 0, 1, 1, 1e-9, hi, un, d, p, 0, NULL}
-#define TEXT(n, k, a, p, cap, d) {n, "str", k, a, 0, 0, 0, 0, 0, "", d, p, cap, NULL}
+#define SIG(n, t, p, un, d) {n, t, AD_SIGNAL, AD_R, TRACED, 0, 0, 0, 0, un, DOC(d), p, 0, NULL}
+#define VAL(n, t, p, un, d) {n, t, AD_SIGNAL, AD_R, 0, 0, 0, 0, 0, un, DOC(d), p, 0, NULL}
+#define PAR(n, t, p, un, d) {n, t, AD_PARAMETER, AD_RW, 0, 0, 0, 0, 0, un, DOC(d), p, 0, NULL}
+#define RANGED(n, t, p, lo, hi, un, d) {n, t, AD_PARAMETER, AD_RW, 0, 1, 1, lo, hi, un, DOC(d), p, 0, NULL}
+#define POSITIVE(n, p, hi, un, d) {n, "f64", AD_PARAMETER, AD_RW, 0, 1, 1, 1e-9, hi, un, DOC(d), p, 0, NULL}
+#define TEXT(n, k, a, p, cap, d) {n, "str", k, a, 0, 0, 0, 0, 0, "", DOC(d), p, cap, NULL}
 
 static ad_var VARS[] = {
     SIG("wave.sine", "f64", &W.sine, "V", "amplitude*sin(2*pi*frequency_hz*t) + offset"),
@@ -482,7 +496,7 @@ static ad_var VARS[] = {
     VAL("traj.underruns", "i64", &F.underruns, "", "Times the buffer ran dry while following"),
     VAL("traj.late", "i64", &F.late, "", "Points refused because their time had passed"),
     /* extra.sNN come last: the application passes as many as it wants */
-#define EXTRA(i, s) SIG("extra.s" s, "f64", &W.extra[i], "", "sin(2*pi*frequency_hz*t + " #i ")")
+#define EXTRA(i, s) {"extra.s" s, EXTRA_TYPE, AD_SIGNAL, AD_R, 1, 0, 0, 0, 0, "", DOC("sin(2*pi*frequency_hz*t + " #i ")"), &W.extra[i], 0, NULL}
     EXTRA(0, "00"), EXTRA(1, "01"), EXTRA(2, "02"), EXTRA(3, "03"), EXTRA(4, "04"),
     EXTRA(5, "05"), EXTRA(6, "06"), EXTRA(7, "07"), EXTRA(8, "08"), EXTRA(9, "09"),
     EXTRA(10, "10"), EXTRA(11, "11"), EXTRA(12, "12"), EXTRA(13, "13"), EXTRA(14, "14"),
@@ -490,22 +504,22 @@ static ad_var VARS[] = {
 };
 
 static const ad_fn FNS[] = {
-    {"counter.reset", "()->i64", fn_counter_reset, NULL, "Restart the counter at 0; returns the tick it had reached"},
-    {"math.add", "(a:f64,b:f64)->f64", fn_add, NULL, "Return a + b"},
-    {"math.sum", "(x:f64[])->f64", fn_sum, NULL, "Return the sum of an array"},
-    {"device.fail", "()->none", fn_fail, NULL, "Always raise (to test error replies)"},
-    {"device.wait", "(seconds:f64)->f64", fn_wait, NULL, "Sleep without blocking the loop, return the seconds slept"},
-    {"mount.power_on", "()->none", fn_power_on, NULL, "Close the loops of the axes that are off, holding"},
-    {"mount.power_off", "()->none", fn_power_off, NULL, "Cut both drives"},
-    {"mount.stop", "()->none", fn_stop, NULL, "Ramp both axes to rest"},
-    {"mount.slew", "(az_deg:f64,el_deg:f64)->none", fn_slew, NULL, "Slew both axes to (az, el) encoder degrees under the rate/accel limits"},
-    {"traj.init", "()->none", fn_traj_init, NULL, "Empty the trajectory buffer, zero its counters"},
-    {"traj.start", "()->none", fn_traj_start, NULL, "Start following the trajectory buffer"},
-    {"traj.reset", "()->none", fn_traj_reset, NULL, "Abort the trajectory: ramp to rest, empty the buffer"},
-    {"traj.push_rates", "(t_us:i64[],az_rad:f64[],el_rad:f64[],az_rate_rad_s:f64[],el_rate_rad_s:f64[])->u32", fn_traj_push, NULL, "Append points with their rates; returns the accepted count"},
-    {"time.set_utc", "(utc_second:i64)->none", fn_set_utc, NULL, "Arm a UTC second (since 1970): the mount clock takes it at the next PPS edge"},
-    {"time.now_us", "()->i64", fn_now, NULL, "Return the mount clock (µs since 1970 UTC)"},
-    {"safety.reset", "()->none", fn_safety_reset, NULL, "Clear latched faults; faulted axes go to OFF"},
+    {"counter.reset", "()->i64", fn_counter_reset, NULL, DOC("Restart the counter at 0; returns the tick it had reached")},
+    {"math.add", "(a:f64,b:f64)->f64", fn_add, NULL, DOC("Return a + b")},
+    {"math.sum", "(x:f64[])->f64", fn_sum, NULL, DOC("Return the sum of an array")},
+    {"device.fail", "()->none", fn_fail, NULL, DOC("Always raise (to test error replies)")},
+    {"device.wait", "(seconds:f64)->f64", fn_wait, NULL, DOC("Sleep without blocking the loop, return the seconds slept")},
+    {"mount.power_on", "()->none", fn_power_on, NULL, DOC("Close the loops of the axes that are off, holding")},
+    {"mount.power_off", "()->none", fn_power_off, NULL, DOC("Cut both drives")},
+    {"mount.stop", "()->none", fn_stop, NULL, DOC("Ramp both axes to rest")},
+    {"mount.slew", "(az_deg:f64,el_deg:f64)->none", fn_slew, NULL, DOC("Slew both axes to (az, el) encoder degrees under the rate/accel limits")},
+    {"traj.init", "()->none", fn_traj_init, NULL, DOC("Empty the trajectory buffer, zero its counters")},
+    {"traj.start", "()->none", fn_traj_start, NULL, DOC("Start following the trajectory buffer")},
+    {"traj.reset", "()->none", fn_traj_reset, NULL, DOC("Abort the trajectory: ramp to rest, empty the buffer")},
+    {"traj.push_rates", "(t_us:i64[],az_rad:f64[],el_rad:f64[],az_rate_rad_s:f64[],el_rate_rad_s:f64[])->u32", fn_traj_push, NULL, DOC("Append points with their rates; returns the accepted count")},
+    {"time.set_utc", "(utc_second:i64)->none", fn_set_utc, NULL, DOC("Arm a UTC second (since 1970): the mount clock takes it at the next PPS edge")},
+    {"time.now_us", "()->i64", fn_now, NULL, DOC("Return the mount clock (µs since 1970 UTC)")},
+    {"safety.reset", "()->none", fn_safety_reset, NULL, DOC("Clear latched faults; faulted axes go to OFF")},
 };
 
 const ad_var *ex_vars(unsigned n_extra, size_t *n)

@@ -113,6 +113,7 @@ typedef struct ad_config {
     uint32_t max_samplers;         /* (message, rate) sampling groups over all clients */
     uint32_t max_pending_calls;    /* deferred INVOKEs at once (ERR 429 beyond) */
     double flush_interval_s;       /* samples per packet ~ this much time (0.02) */
+    uint32_t max_arg_bytes;        /* array arguments sent as msgpack arrays (0: 2 frames) */
 } ad_config;
 
 /* Fill `cfg` with the defaults of the spec (and of the Python endpoint) for a host. */

@@ -63,8 +63,9 @@ static void plan(const ad_config *c, const ad_var *vars, size_t nv, size_t nf, l
     L->msg_pool_bytes = (uint32_t)up8((size_t)c->max_messages * 24u + (size_t)names * 2u * 8u);
     if (L->msg_pool_bytes > (c->max_messages * 24u + c->max_messages * names * 2u))
         L->msg_pool_bytes = (uint32_t)up8(c->max_messages * 24u + c->max_messages * names * 2u);
-    L->argbuf_bytes = (uint32_t)up8(c->max_frame_bytes < 65536 ? c->max_frame_bytes * 2u
-                                                                : c->max_frame_bytes);
+    L->argbuf_bytes = (uint32_t)up8(c->max_arg_bytes ? c->max_arg_bytes
+                                    : c->max_frame_bytes < 65536 ? c->max_frame_bytes * 2u
+                                    : c->max_frame_bytes);
     L->vrt = off; off += up8(nv * sizeof(ad_var_rt));
     L->frt = off; off += up8(nf * sizeof(ad_fn_rt));
     L->traced = off; off += up8(nt * sizeof(uint16_t));

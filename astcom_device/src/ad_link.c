@@ -47,13 +47,18 @@ struct ad_link {
 };
 
 static size_t cobs_max(size_t n) { return n + n / 254u + 2u; } /* code bytes and the 0x00 */
+/* The send ring holds two replies (one being sent while the next is built); a build for a
+ * small MCU sets AD_LINK_TX_FRAMES 1 and drains synchronously. */
+#ifndef AD_LINK_TX_FRAMES
+#define AD_LINK_TX_FRAMES 2u
+#endif
 static size_t up8(size_t n) { return (n + 7u) & ~(size_t)7u; }
 
 size_t ad_link_bytes(uint32_t max_frame, uint32_t max_reply, uint32_t channels)
 {
     size_t frame_in = (size_t)max_frame + 6u, frame_out = (size_t)max_reply + 6u;
     size_t big = frame_in > frame_out ? frame_in : frame_out;
-    return up8(sizeof(ad_link)) + up8(cobs_max(frame_in)) + up8(2u * cobs_max(frame_out) + 64u)
+    return up8(sizeof(ad_link)) + up8(cobs_max(frame_in)) + up8(AD_LINK_TX_FRAMES * cobs_max(frame_out) + 64u)
            + up8(big) + up8((channels + 1u) * sizeof(ad_session *))
            + up8((channels + 1u) * sizeof(chan_ctx));
 }
@@ -138,7 +143,7 @@ ad_link *ad_link_init(void *mem, size_t mem_bytes, ad_device *dev, uint32_t max_
     size_t big = frame_in > frame_out ? frame_in : frame_out;
     p += up8(sizeof(ad_link));
     l->rx = p; l->rx_cap = cobs_max(frame_in); p += up8(l->rx_cap);
-    l->tx = p; l->tx_cap = 2u * cobs_max(frame_out) + 64u; p += up8(l->tx_cap);
+    l->tx = p; l->tx_cap = AD_LINK_TX_FRAMES * cobs_max(frame_out) + 64u; p += up8(l->tx_cap);
     l->enc = p; p += up8(big);
     l->chan = (ad_session **)p; p += up8((channels + 1u) * sizeof(ad_session *));
     l->ctx = (chan_ctx *)p;
