@@ -206,11 +206,18 @@ int64_t ex_step(uint64_t tick)
     double dt = 1.0 / F.rate_hz;
     /* the wave generator of the Python example device */
     double phase = 2 * PI * W.frequency_hz * (double)tick / F.rate_hz;
+#ifdef EX_MCU /* single precision: the Cortex-M4F's FPU, and no double libm in flash */
+    float ph = (float)(phase - 2 * PI * floor(phase / (2 * PI)));
+    W.sine = W.amplitude * sinf(ph) + W.offset;
+    W.cosine = W.amplitude * cosf(ph);
+    for (int i = 0; i < EX_MAX_EXTRA; i++) W.extra[i] = sinf(ph + (float)i);
+#else
     W.sine = W.amplitude * sin(phase) + W.offset;
     W.cosine = W.amplitude * cos(phase);
+    for (int i = 0; i < EX_MAX_EXTRA; i++) W.extra[i] = (extra_t)sin(phase + i);
+#endif
     W.counter = (int64_t)(tick - W.counter_base);
     W.diff = W.pair_a - W.pair_b;
-    for (int i = 0; i < EX_MAX_EXTRA; i++) W.extra[i] = (extra_t)sin(phase + i);
     /* the clock: an armed UTC second is taken at the PPS edge (the host clock's second) */
     int64_t now = mount_time(tick);
     if (F.armed_second) {
@@ -444,13 +451,17 @@ static int fn_now(ad_call *c, void *u)
 #define POSITIVE(n, p, hi, un, d) {n, "f64", AD_PARAMETER, AD_RW, 0, 1, 1, 1e-9, hi, un, DOC(d), p, 0, NULL}
 #define TEXT(n, k, a, p, cap, d) {n, "str", k, a, 0, 0, 0, 0, 0, "", DOC(d), p, cap, NULL}
 
+#ifdef EX_MCU
+static const ad_var VARS[] = {
+#else
 static ad_var VARS[] = {
+#endif
     SIG("wave.sine", "f64", &W.sine, "V", "amplitude*sin(2*pi*frequency_hz*t) + offset"),
     SIG("wave.cosine", "f64", &W.cosine, "V", "amplitude*cos(2*pi*frequency_hz*t)"),
     SIG("counter", "i64", &W.counter, "", "Tick number"),
     SIG("pair.diff", "f64", &W.diff, "", "pair.a - pair.b: zero while both are written together"),
     RANGED("wave.amplitude", "f64", &W.amplitude, 0.0, 100.0, "V", "Sine amplitude"),
-    RANGED("wave.frequency_hz", "f64", &W.frequency_hz, 0.0, 500.0, "Hz", "Sine frequency"),
+    RANGED("wave.frequency_hz", "f64", &W.frequency_hz, 0.0, 5000.0, "Hz", "Sine frequency"),
     PAR("wave.offset", "f64", &W.offset, "V", "Sine offset"),
     PAR("pair.a", "f64", &W.pair_a, "", "Written together with pair.b"),
     PAR("pair.b", "f64", &W.pair_b, "", "Written together with pair.a"),
@@ -526,9 +537,11 @@ const ad_var *ex_vars(unsigned n_extra, size_t *n)
 {
     if (n_extra > EX_MAX_EXTRA) n_extra = EX_MAX_EXTRA;
     *n = sizeof VARS / sizeof VARS[0] - EX_MAX_EXTRA + n_extra;
+#ifndef EX_MCU /* the MCU's table is in flash: its loop is 10 kHz, the bound 5 kHz */
     /* the frequency's upper bound is half the loop rate, as the Python device says */
     for (size_t i = 0; i < *n; i++)
         if (!strcmp(VARS[i].name, "wave.frequency_hz")) VARS[i].max = F.rate_hz / 2.0;
+#endif
     return VARS;
 }
 

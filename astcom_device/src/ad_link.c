@@ -37,7 +37,6 @@ struct ad_link {
     size_t held_len;
     uint8_t *tx;
     size_t tx_cap, tx_head, tx_tail;   /* ring of encoded bytes */
-    uint8_t *enc;          /* one frame's plain bytes: chan, kind, body, crc */
     ad_session **chan;     /* [channels + 1] */
     chan_ctx *ctx;         /* [channels + 1] */
     ad_link_drain_fn drain;
@@ -57,9 +56,8 @@ static size_t up8(size_t n) { return (n + 7u) & ~(size_t)7u; }
 size_t ad_link_bytes(uint32_t max_frame, uint32_t max_reply, uint32_t channels)
 {
     size_t frame_in = (size_t)max_frame + 6u, frame_out = (size_t)max_reply + 6u;
-    size_t big = frame_in > frame_out ? frame_in : frame_out;
     return up8(sizeof(ad_link)) + up8(cobs_max(frame_in)) + up8(AD_LINK_TX_FRAMES * cobs_max(frame_out) + 64u)
-           + up8(big) + up8((channels + 1u) * sizeof(ad_session *))
+           + up8((channels + 1u) * sizeof(ad_session *))
            + up8((channels + 1u) * sizeof(chan_ctx));
 }
 
@@ -72,24 +70,29 @@ static void tx_put(ad_link *l, uint8_t b)
     l->tx_head++;
 }
 
-/* COBS-encode plain[0..n) plus the 0x00 delimiter into the ring (room was checked). */
-static void tx_frame(ad_link *l, const uint8_t *plain, size_t n)
+/* COBS-encode the pieces (chan and kind, body, crc) plus the 0x00 into the ring. */
+static void tx_frame(ad_link *l, const uint8_t *head, size_t nh, const uint8_t *body, size_t nb,
+                     const uint8_t *tail, size_t nt)
 {
     size_t code_at = l->tx_head;
     uint8_t code = 1;
+    const uint8_t *parts[3] = {head, body, tail};
+    size_t lens[3] = {nh, nb, nt};
     tx_put(l, 0);
-    for (size_t i = 0; i < n; i++) {
-        if (plain[i]) {
-            tx_put(l, plain[i]);
-            code++;
+    for (int p = 0; p < 3; p++)
+        for (size_t i = 0; i < lens[p]; i++) {
+            uint8_t b = parts[p][i];
+            if (b) {
+                tx_put(l, b);
+                code++;
+            }
+            if (!b || code == 0xff) {
+                l->tx[code_at % l->tx_cap] = code;
+                code_at = l->tx_head;
+                code = 1;
+                tx_put(l, 0);
+            }
         }
-        if (!plain[i] || code == 0xff) {
-            l->tx[code_at % l->tx_cap] = code;
-            code_at = l->tx_head;
-            code = 1;
-            tx_put(l, 0);
-        }
-    }
     l->tx[code_at % l->tx_cap] = code;
     tx_put(l, 0);
     l->st.frames_out++;
@@ -100,19 +103,17 @@ static int send_link(ad_link *l, uint8_t chan, uint8_t kind, const uint8_t *body
                      int droppable)
 {
     size_t need = cobs_max(n + 6u);
-    if (n > l->max_reply && n > l->max_frame) return -1;
+    if (need > l->tx_cap) return -1;
     while (tx_free(l) < need) {
         if (droppable || !l->drain) return -1;
         size_t before = tx_used(l);
         l->drain(l->io);
         if (tx_used(l) == before) return -1; /* the wire is gone */
     }
-    l->enc[0] = chan;
-    l->enc[1] = kind;
-    if (n) memmove(l->enc + 2, body, n);
-    uint32_t crc = ad_crc32(0, l->enc, n + 2);
-    for (int k = 0; k < 4; k++) l->enc[n + 2 + k] = (uint8_t)(crc >> (8 * k));
-    tx_frame(l, l->enc, n + 6);
+    uint8_t head[2] = {chan, kind}, tail[4];
+    uint32_t crc = ad_crc32(ad_crc32(0, head, 2), body, n);
+    for (int k = 0; k < 4; k++) tail[k] = (uint8_t)(crc >> (8 * k));
+    tx_frame(l, head, 2, body, n, tail, 4);
     return 0;
 }
 
@@ -121,7 +122,9 @@ static size_t sink_room(void *ctx)
     chan_ctx *c = (chan_ctx *)ctx;
     size_t f = tx_free(c->link);
     size_t over = 8u + f / 254u;
-    return f > over ? f - over : 0;
+    /* replies wait for the wire (drain) instead of needing room kept free for them, so the
+     * reserve the library keeps for a reply is granted here */
+    return (f > over ? f - over : 0) + c->link->max_reply;
 }
 
 static int sink_send(void *ctx, const uint8_t *frame, size_t len, int droppable)
@@ -140,11 +143,9 @@ ad_link *ad_link_init(void *mem, size_t mem_bytes, ad_device *dev, uint32_t max_
     memset(mem, 0, ad_link_bytes(max_frame, max_reply, channels));
     ad_link *l = (ad_link *)p;
     size_t frame_in = (size_t)max_frame + 6u, frame_out = (size_t)max_reply + 6u;
-    size_t big = frame_in > frame_out ? frame_in : frame_out;
     p += up8(sizeof(ad_link));
     l->rx = p; l->rx_cap = cobs_max(frame_in); p += up8(l->rx_cap);
     l->tx = p; l->tx_cap = AD_LINK_TX_FRAMES * cobs_max(frame_out) + 64u; p += up8(l->tx_cap);
-    l->enc = p; p += up8(big);
     l->chan = (ad_session **)p; p += up8((channels + 1u) * sizeof(ad_session *));
     l->ctx = (chan_ctx *)p;
     l->dev = dev;
