@@ -42,6 +42,8 @@ import numpy as np
 
 from catalogs import bright_stars, load_tle_file, sample_tle_path
 from virtualstar.anomalies import DetectorConfig, detect_anomalies
+from virtualstar.anomalies.phases import MotionPhase, PhaseConfig, PhaseLabeller
+from virtualstar.anomalies.report import read_segments
 from virtualstar.anomalies.scoring import InjectedFault, matches
 from virtualstar.astro import (
     EarthOrientation,
@@ -67,6 +69,7 @@ NIGHT_MINUTES = 40.0
 SIGNALS = tuple(f"axis.{ax}.{s}" for ax in ("az", "el")
                 for s in ("position", "current", "error_arcsec", "temperature"))
 GLITCH_BURST_S = 60.0
+SETTLE_BINS_S = (0, 1, 2, 3, 5, 7, 10, 15, 20, 30, 60)
 WHERE = ("slew", "pass", "tracking")
 CFG = DetectorConfig()
 # a flag may begin up to one of its detector's windows before the injection
@@ -260,6 +263,10 @@ class Tally:
     true: dict[str, int]
     clean_nights: int = 0
     clean_flags: int = 0
+    settling: dict[int, list[float]] = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        self.settling = {} if self.settling is None else self.settling
 
     @classmethod
     def empty(cls) -> Tally:
@@ -289,6 +296,39 @@ class Tally:
         return (t / n if n else 1.0), (fd / f if f else 1.0), t, n, fd, f
 
 
+def settling(store: Path, into: dict[int, list[float]]) -> None:
+    """Add, per bin of seconds since a slew ended, the loudest error band's power above its
+    usual level while tracking (log10, per axis, median over the bin's segments): what the
+    settle time must leave out (anomalies.phases.PhaseConfig.settle_s)."""
+    reader = ParquetStoreReader(store)
+    a, b = reader.time_range()
+    seg, axes, _ = read_segments(reader, a, b + 1)
+    phase = PhaseLabeller(axes, reader.events(), config=PhaseConfig(settle_s=0.0)).label(seg)
+    slew = phase == MotionPhase.SLEWING
+    since = np.full(len(seg), np.inf)
+    for e in np.flatnonzero(slew[:-1] & ~slew[1:]) + 1:
+        nxt = np.flatnonzero(slew[e:])
+        stop = e + (int(nxt[0]) if len(nxt) else len(seg) - e)
+        since[e:stop] = (seg.t_first_us[e:stop] - seg.t_first_us[e]) * 1e-6
+    calm = (phase == MotionPhase.TRACKING) | (phase == MotionPhase.REST)
+    for ax in axes:
+        logp = np.log10(seg.features[f"{ax}.error_band_power"][:, 1:] + 1e-30)
+        usual = np.median(logp[calm & (since > 60)], axis=0)
+        for k in range(len(SETTLE_BINS_S) - 1):
+            rows = calm & (since >= SETTLE_BINS_S[k]) & (since < SETTLE_BINS_S[k + 1])
+            if rows.any():
+                into.setdefault(k, []).append(float(np.max(np.median(logp[rows], axis=0)
+                                                           - usual)))
+
+
+def print_settling(profile: dict[int, list[float]]) -> None:
+    print("\nafter a slew ends (tracking or at rest; loudest error band above its usual power, "
+          "median over the clean nights' slews and axes):")
+    for k, values in sorted(profile.items()):
+        print(f"  {SETTLE_BINS_S[k]:>3}–{SETTLE_BINS_S[k + 1]:<3} s  "
+              f"×{10 ** np.median(values):>10,.1f}   (worst ×{10 ** max(values):,.1f})")
+
+
 def run_set(name: str, seeds, sky: Sky, work: Path, keep: Path | None) -> Tally:
     tally = Tally.empty()
     print(f"\n== {name} nights (seeds {', '.join(map(str, seeds))})")
@@ -299,6 +339,7 @@ def run_set(name: str, seeds, sky: Sky, work: Path, keep: Path | None) -> Tally:
         wall = record(plan, clean)
         report, end_us = _detect(clean)
         n, _ = tally.add(report.anomalies, None)
+        settling(clean, tally.settling)
         ref_end = report.reference.stretches[-1][1]
         blocks = ", ".join(b["target"] for b in plan["blocks"])
         print(f"{f'seed {seed} clean ({blocks})'[:66]:<66} {n:>5} {0:>5}  "
@@ -345,6 +386,8 @@ def print_tally(name: str, tally: Tally) -> None:
         r = f"{tally.found[kind] / tally.faults[kind]:.3f}" if tally.faults[kind] else "-"
         print(f"  {kind:<12} {p:>10} {r:>8}   ({true}/{flags} flags, "
               f"{tally.found[kind]}/{tally.faults[kind]} faults)")
+    if tally.settling:
+        print_settling(tally.settling)
 
 
 def main() -> None:

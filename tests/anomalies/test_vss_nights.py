@@ -83,8 +83,12 @@ def test_a_clean_vss_night_with_slews_and_passes_raises_no_anomaly(nights):
 def test_each_degradation_is_found_when_injected_during_a_slew_and_a_pass(nights, where,
                                                                           name):
     at_us = nights["moments"].slew_us if where == "slew" else nights["moments"].pass_us
-    # the emulator says what the mount was doing when the fault began
+    # the emulator says what the mount was doing when the fault began, and when it began
     assert _state_at(nights[where], at_us) == ("SLEWING" if where == "slew" else "TRACKING")
+    first_write = DEGRADATIONS[name][2][0][0]
+    written = [e.t_us for e in ParquetStoreReader(nights[where]).events()
+               if e.kind == "param" and e.fields.get("name") == first_write]
+    assert len(written) == 1 and 0 <= written[0] - at_us < 1000
     report, end_us = _detect(nights[where])
     kind, axis, _ = DEGRADATIONS[name]
     fault = InjectedFault(kind, axis, at_us, end_us)

@@ -13,18 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .detectors import (
-    Anomaly,
-    Check,
-    Chunk,
-    DetectorConfig,
-    ScoreTrace,
-    SpikeDetector,
-    Window,
-    build_detectors,
-)
+from .current_detector import CurrentDetector
+from .detectors import Anomaly, Check, Chunk, Detector, DetectorConfig, ScoreTrace, Window
 from .phases import axis_classes
 from .segments import SEGMENT_SAMPLES, Segments
+from .spikes import SpikeDetector
+from .trends import ClockDetector, TemperatureDetector
+from .vibration import VibrationDetector
 
 __all__ = ["Detection", "segment_validity"]
 
@@ -35,6 +30,44 @@ def segment_validity(seg: Segments, rate_hz: float) -> np.ndarray:
     """True for the segments without a recording gap or a clock step inside."""
     nominal_us = 1e6 / rate_hz
     return np.abs(seg.spacing_us - nominal_us) <= VALID_SPACING * nominal_us
+
+
+def build_detectors(axes: dict[str, dict[str, str]], cfg: DetectorConfig, seg_s: float
+                    ) -> tuple[list[Detector], list[Check]]:
+    """Return the detectors the recorded signals allow (spikes first: the others leave
+    out the segments a spike is in) and a Check for each that cannot run, with why."""
+    dets: list[Detector] = []
+    missing: list[Check] = []
+    for axis, names in axes.items():
+        roles = tuple(r for r, role in (("error_spike_arcsec", "error_arcsec"),
+                                        ("current_spike_a", "current")) if role in names)
+        sigs = tuple(names[role] for role in ("error_arcsec", "current") if role in names)
+        if roles:
+            dets.append(SpikeDetector(axis, sigs, cfg, seg_s, roles))
+        else:
+            missing.append(Check("spike", axis, (), False,
+                                 f"needs axis.{axis}.error_arcsec or axis.{axis}.current; "
+                                 "the store records neither"))
+        if {"position", "current"} <= names.keys():
+            dets.append(CurrentDetector(axis, (names["position"], names["current"]), cfg,
+                                        seg_s))
+        else:
+            lack = [f"axis.{axis}.{r}" for r in ("position", "current") if r not in names]
+            missing.append(Check("current", axis, (), False,
+                                 f"needs axis.{axis}.position and axis.{axis}.current; the "
+                                 f"store has no {' and no '.join(lack)}"))
+        if "error_arcsec" in names:
+            dets.append(VibrationDetector(axis, (names["error_arcsec"],), cfg, seg_s))
+        else:
+            missing.append(Check("vibration", axis, (), False,
+                                 f"needs axis.{axis}.error_arcsec; the store has none"))
+        if "temperature" in names:
+            dets.append(TemperatureDetector(axis, (names["temperature"],), cfg, seg_s))
+        else:
+            missing.append(Check("temperature", axis, (), False,
+                                 f"needs axis.{axis}.temperature; the store has none"))
+    dets.append(ClockDetector("", ("t_us",), cfg, seg_s))
+    return dets, missing
 
 
 class _Open:

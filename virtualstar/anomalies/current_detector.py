@@ -1,0 +1,144 @@
+"""The current detector: the current minus its motion model, per class and speed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .current_model import CurrentModel, fit_current_model
+from .detectors import Check, Chunk, Detector, class_plan
+from .phases import AXIS_CLASSES, CLASS_NAMES, REST, SLEW
+from .robust import robust_center_scale
+from .segments import SEGMENT_SAMPLES
+from .windows import window_mean
+
+__all__ = ["CurrentDetector"]
+
+class CurrentDetector(Detector):
+    """Flag windows whose current departs from the motion model (friction, winding)."""
+
+    kind = "current"
+
+    def _window_s(self) -> float:
+        return self.cfg.current_window_s
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.model: CurrentModel | None = None
+        self._edge_accel = 0.5 * math.radians(self.cfg.phases.slew_accel_deg_s2)
+        self.rest_rad_s = math.radians(self.cfg.phases.rest_rate_arcsec_s / 3600.0)
+        self.ref_speeds: dict[int, np.ndarray] = {}
+        self.center: dict[int, float] = {}
+        self.limit: dict[int, float] = {}
+
+    def _motion(self, chunk: Chunk):
+        f = chunk.seg.features
+        ax = self.axis
+        return (f[f"{ax}.position_rad"], f[f"{ax}.velocity_rad_s"],
+                f[f"{ax}.acceleration_rad_s2"], f[f"{ax}.current_a"])
+
+    def _arrays(self, chunk: Chunk) -> dict[str, np.ndarray]:
+        arrays = super()._arrays(chunk)
+        arrays["use"] = arrays["use"] & arrays["covered"]
+        return arrays
+
+    def use(self, chunk: Chunk) -> np.ndarray:
+        _, v, a, _ = self._motion(chunk)
+        at_rest = self.classes(chunk) == REST
+        # a segment in which a slew starts or stops crosses the friction's knee: its mean
+        # current is no function of its mean speed
+        edge = (self.classes(chunk) == SLEW) & (np.abs(a) > self._edge_accel) & \
+            (np.abs(v) < np.abs(a) * self.seg_s)
+        return super().use(chunk) & ~edge & ~at_rest
+
+    def values(self, chunk: Chunk) -> dict[str, np.ndarray]:
+        p, v, a, i = self._motion(chunk)
+        assert self.model is not None, "fit before scoring"
+        resid = i - self.model.predict(p, v, a)
+        # Speeds the reference did not hold: below a few hundred arcseconds per second the
+        # dry friction changes steeply with speed, and the model there is an extrapolation
+        # from the speeds it saw. A segment is scored only when its class held
+        # `coverage_min_s` of reference at speeds within `coverage_ratio` of its own; its
+        # limit widens by coverage_factor × the model's slope × its distance to their
+        # median speed.
+        allowance = np.zeros(len(p))
+        covered = np.zeros(len(p), bool)
+        cls = self.classes(chunk)
+        need = max(1, round(self.cfg.coverage_min_s / self.seg_s))
+        for c, speeds in self.ref_speeds.items():
+            rows = np.flatnonzero(cls == c)
+            if len(rows) == 0 or len(speeds) < need:
+                continue
+            s = np.abs(v[rows])
+            lo = np.searchsorted(speeds, s / self.cfg.coverage_ratio)
+            hi = np.searchsorted(speeds, s * self.cfg.coverage_ratio, side="right")
+            covered[rows] = hi - lo >= need
+            middle = speeds[np.clip((lo + hi) // 2, 0, len(speeds) - 1)]
+            allowance[rows] = np.abs(s - middle) * \
+                self.model.slope_a_per_rad_s(p[rows], v[rows], a[rows])
+        return {"resid": resid, "allowance": allowance, "covered": covered}
+
+    def stats(self, arrays, starts):
+        return {"mean": window_mean(arrays["resid"], starts, arrays["use"], need=self.need),
+                "allowance": window_mean(arrays["allowance"], starts, arrays["use"],
+                                         need=self.need)}
+
+    def fit(self, chunk: Chunk, ref: np.ndarray) -> Check:
+        p, v, a, i = self._motion(chunk)
+        rows = self.use(chunk) & ref
+        try:
+            self.model = fit_current_model(p, v, a, i, rows, gravity=self.axis == "el",
+                                           cogging_periods=self.cfg.cogging_periods,
+                                           segment_s=self.seg_s * (SEGMENT_SAMPLES - 1)
+                                           / SEGMENT_SAMPLES)
+        except ValueError as exc:
+            self.plan = {}
+            return Check(self.kind, self.axis, self.signals, False, str(exc))
+        cls = self.classes(chunk)
+        # speeds held steadily (changing by under 10 % within a segment): a run-up
+        # sweeping through a speed says little about the friction there
+        steady = np.abs(a) * self.seg_s <= 0.1 * np.abs(v)
+        self.ref_speeds = {c: np.sort(np.abs(v[rows & steady & (cls == c)]))
+                           for c in AXIS_CLASSES}
+        return super().fit(chunk, ref)
+
+    def fit_classes(self, stats, cls, seconds):
+        mean = stats["mean"]
+        held, why = self._held(np.isfinite(mean), cls, seconds)
+        self.plan = class_plan(held, why)
+        self.plan[REST] = (None, "not scored: dry friction holds an axis at rest anywhere "
+                                 "within its breakaway torque, so the holding current says "
+                                 "nothing")
+        for c in AXIS_CLASSES:
+            m = mean[(cls == c) & np.isfinite(mean)]
+            if not held[c] or len(m) == 0:
+                continue
+            med, sigma = robust_center_scale(m)
+            widest = float(np.max(np.abs(m - med)))
+            self.center[c] = float(med)
+            self.limit[c] = max(self.cfg.threshold * float(sigma),
+                                self.cfg.current_ref_factor * widest, self.cfg.current_floor_a)
+
+    def window_scores(self, stats, cls):
+        center = self._lookup(self.center, cls)
+        limit = self._lookup(self.limit, cls) + self.cfg.coverage_factor * stats["allowance"]
+        dev = stats["mean"] - center
+        score = np.abs(dev) / limit
+        details = [f"current {dev[k]:+.3f} A off its motion model while "
+                   f"{CLASS_NAMES.get(int(cls[k]), '?')} (limit {limit[k]:.3f} A)"
+                   if np.isfinite(score[k]) and score[k] >= 1.0 else ""
+                   for k in range(len(score))]
+        return score, details
+
+    def check(self) -> Check:
+        c = super().check()
+        if not c.ran:
+            return c
+        m = self.model
+        assert m is not None
+        return Check(c.detector, c.axis, c.signals, c.ran,
+                     f"model fitted on the reference: dry friction {m.friction.shape} with its "
+                     f"knee at {math.degrees(m.friction.knee_rad_s) * 3600:.3g}″/s, cogging "
+                     f"{m.cogging_periods} periods/rev, residual {m.reference_rms_a:.4f} A RMS",
+                     c.classes)
