@@ -101,6 +101,9 @@ def test_each_degradation_is_found_when_injected_during_a_slew_and_a_pass(nights
 
 def test_phases_from_the_events_agree_with_the_phases_from_the_signals(nights):
     reader = ParquetStoreReader(nights["clean"])
+    # `vs run --emulator --record` keeps the VSS's log beside the emulator's
+    assert {(e.source, e.kind) for e in reader.events()} >= {("vss", "phase"),
+                                                              ("emulator", "state")}
     a, b = reader.time_range()
     seg, axes, _ = read_segments(reader, a, b + 1)
     from_events = PhaseLabeller(axes, reader.events()).label(seg)
@@ -141,7 +144,7 @@ def test_live_detection_raises_the_same_anomalies_as_the_offline_run(nights):
     reader = ParquetStoreReader(store)
     events = sorted(reader.events(), key=lambda e: e.t_us)
     live = LiveAnomalies([s.name for s in reader.signals()], 1000.0, lambda a: None)
-    k = 0
+    k, held = 0, []
     for block in reader.iter_blocks(batch_rows=7_777):  # odd sizes: segments span blocks
         end = int(block.t_us[-1])
         first = k
@@ -149,8 +152,14 @@ def test_live_detection_raises_the_same_anomalies_as_the_offline_run(nights):
             k += 1
         live.feed_events(events[first:k])  # the events stored by then, as a recorder does
         live.feed(block)
+        if live.reference is not None:
+            held.append(live.held_segments)
     live.feed_events(events[k:])
     live.finish()
+    # incremental: once fitted, it holds no more than the lag (plus a block) and one open
+    # window per detector, early or late in the night
+    bound = round((60 + 8) / 0.256) + sum(d.per for d in live.detection.detectors)
+    assert held and max(held) <= bound < 8000 / 4
 
     def key(a):
         return a.kind, a.axis, a.start_us, a.end_us, round(a.score, 9)

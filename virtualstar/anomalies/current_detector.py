@@ -8,12 +8,16 @@ import numpy as np
 
 from .current_model import CurrentModel, fit_current_model
 from .detectors import Check, Chunk, Detector, class_plan
-from .phases import AXIS_CLASSES, CLASS_NAMES, REST, SLEW
+from .phases import AXIS_CLASSES, CLASS_NAMES, REST
 from .robust import robust_center_scale
 from .segments import SEGMENT_SAMPLES
 from .windows import window_mean
 
 __all__ = ["CurrentDetector"]
+
+# below this an axis's speed changes too slowly to cross the knee within a segment (the
+# sidereal rates change by ~1e-8 rad/s²); it keeps noise at rest from counting as a start
+EDGE_ACCEL_RAD_S2 = 1e-5
 
 class CurrentDetector(Detector):
     """Flag windows whose current departs from the motion model (friction, winding)."""
@@ -26,7 +30,6 @@ class CurrentDetector(Detector):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.model: CurrentModel | None = None
-        self._edge_accel = 0.5 * math.radians(self.cfg.phases.slew_accel_deg_s2)
         self.rest_rad_s = math.radians(self.cfg.phases.rest_rate_arcsec_s / 3600.0)
         self.ref_speeds: dict[int, np.ndarray] = {}
         self.center: dict[int, float] = {}
@@ -46,10 +49,10 @@ class CurrentDetector(Detector):
     def use(self, chunk: Chunk) -> np.ndarray:
         _, v, a, _ = self._motion(chunk)
         at_rest = self.classes(chunk) == REST
-        # a segment in which a slew starts or stops crosses the friction's knee: its mean
-        # current is no function of its mean speed
-        edge = (self.classes(chunk) == SLEW) & (np.abs(a) > self._edge_accel) & \
-            (np.abs(v) < np.abs(a) * self.seg_s)
+        # a segment in which the axis starts, stops or turns crosses the friction's knee:
+        # its mean current is no function of its mean speed. Whatever its class: the
+        # events that say a slew began are stamped up to a block late
+        edge = (np.abs(a) > EDGE_ACCEL_RAD_S2) & (np.abs(v) < np.abs(a) * self.seg_s)
         return super().use(chunk) & ~edge & ~at_rest
 
     def values(self, chunk: Chunk) -> dict[str, np.ndarray]:

@@ -80,6 +80,14 @@ class LiveAnomalies:
         """True when the recorded signals feed at least one detector."""
         return bool(self.axes)
 
+    @property
+    def held_segments(self) -> int:
+        """Segments held for later: waiting for their label, for the reference, or in a
+        window not yet closed. Once the reference is in it stays below a bound set by
+        the lag and the longest window, however long the night: the work is incremental."""
+        held = sum(len(s) for s in self._unlabelled) + sum(len(s) for s, _ in self._labelled)
+        return held + sum(d.cutter.pending for d in self.detection.detectors)
+
     def feed_events(self, events) -> None:
         """Take events stored beside the samples (phases, mount states, faults)."""
         events = list(events)

@@ -77,6 +77,11 @@ class WindowCutter:
         self.per = max(1, int(per))
         self._pending: dict[str, np.ndarray] | None = None
 
+    @property
+    def pending(self) -> int:
+        """Segments of the open window, waiting for the next chunk."""
+        return 0 if self._pending is None else len(self._pending["cls"])
+
     def push(self, arrays: dict[str, np.ndarray] | None, *, final: bool = False
              ) -> tuple[dict[str, np.ndarray], np.ndarray, int]:
         """`arrays` None: nothing new (with `final`, close what is pending)."""
