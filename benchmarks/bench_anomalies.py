@@ -31,6 +31,7 @@ store once with pyarrow (the I/O floor), in the same run.
 from __future__ import annotations
 
 import argparse
+import json
 import random
 import shutil
 import tempfile
@@ -159,20 +160,24 @@ def program_text(sky: Sky, rng: random.Random, start_us: int, end_us: int) -> st
 
 
 def make_plan(sky: Sky, seed: int, minutes: float, workdir: Path) -> dict:
-    """The plan of pattern `seed`: a July 2021 night, starting 4–8 min before a pass."""
+    """The plan of pattern `seed`: a July 2021 night, starting 4–8 min before a pass, whose
+    blocks fill it (a window the program cannot fill — twilight, few stars up — is drawn
+    again: the run ends with its last block)."""
     rng = random.Random(seed)
-    day = f"2021-07-{rng.randint(15, 30):02d}"
-    evening = _us(day + "T19:30:00Z")
-    rises = [t for t, _ in _passes(sky, evening, 8.0)]
-    start = rng.choice(rises) - rng.randint(240, 480) * 1_000_000
-    start = start // 60_000_000 * 60_000_000
-    end = start + round(minutes * 60e6)
     workdir.mkdir(parents=True, exist_ok=True)
     shutil.copy(sky.tle, workdir / "visual.tle")
-    (workdir / "program.toml").write_text(program_text(sky, rng, start, end))
-    plan = plan_program(PlanRequest(load_program(workdir / "program.toml"), start, end,
-                                    sky.site), sky.eop)
-    return plan.as_dict()
+    for _ in range(20):
+        day = f"2021-07-{rng.randint(15, 30):02d}"
+        rises = [t for t, _ in _passes(sky, _us(day + "T19:30:00Z"), 8.0)]
+        start = rng.choice(rises) - rng.randint(240, 480) * 1_000_000
+        start = start // 60_000_000 * 60_000_000
+        end = start + round(minutes * 60e6)
+        (workdir / "program.toml").write_text(program_text(sky, rng, start, end))
+        plan = plan_program(PlanRequest(load_program(workdir / "program.toml"), start, end,
+                                        sky.site), sky.eop).as_dict()
+        if plan["blocks"] and plan["blocks"][-1]["end_us"] >= start + 0.85 * (end - start):
+            return plan
+    raise RuntimeError(f"pattern {seed}: no window in 20 draws that the program fills")
 
 
 def record(plan: dict, store: Path, writes=()) -> float:
@@ -362,17 +367,35 @@ def run_set(name: str, seeds, sky: Sky, work: Path, keep: Path | None) -> Tally:
                 if a not in hits:
                     print(f"      false: {a.kind} {a.axis} {utc_text(a.start_us)[11:19]} "
                           f"{a.detail}")
-            _keep_or_drop(store, keep)
+            _keep_or_drop(store, keep, case)
         _keep_or_drop(clean, keep)
     return tally
 
 
-def _keep_or_drop(store: Path, keep: Path | None) -> None:
+def _keep_or_drop(store: Path, keep: Path | None, case: Case | None = None) -> None:
     if keep is not None:
+        (store / "bench-case.json").write_text(json.dumps(
+            {"label": case.label, **case.fault.__dict__} if case else {"label": "clean"}))
         keep.mkdir(parents=True, exist_ok=True)
         shutil.move(str(store), keep / store.name)
     else:
         shutil.rmtree(store, ignore_errors=True)
+
+
+def rescore(directory: Path) -> Tally:
+    """Score the stores of an earlier --keep run again with the detectors as they are now."""
+    tally = Tally.empty()
+    for case_file in sorted(directory.glob("*/bench-case.json")):
+        doc = json.loads(case_file.read_text())
+        fault = None if doc["label"] == "clean" else InjectedFault(
+            doc["kind"], doc["axis"], doc["start_us"], doc["end_us"])
+        report, _ = _detect(case_file.parent)
+        n, t = tally.add(report.anomalies, fault)
+        print(f"{case_file.parent.name + ': ' + doc['label']:<66} {n:>5} {t:>5}")
+        for a in report.anomalies:
+            if fault is None or not matches(a, fault, round(EARLY_S[a.kind] * 1e6)):
+                print(f"      false: {a.kind} {a.axis} {utc_text(a.start_us)[11:19]} {a.detail}")
+    return tally
 
 
 def print_tally(name: str, tally: Tally) -> None:
@@ -400,7 +423,13 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, default=None, help="keep the stores here")
     parser.add_argument("--sets", default="tuning,check,night",
                         help="what to run: tuning, check, night (comma-separated)")
+    parser.add_argument("--rescore", type=Path, default=None,
+                        help="score the stores a --keep run left in this directory again "
+                             "(after a change to the detectors) instead of recording")
     args = parser.parse_args()
+    if args.rescore is not None:
+        print_tally(f"stores in {args.rescore}", rescore(args.rescore))
+        return
     sets = set(args.sets.split(","))
     sky = Sky(load_site(), EarthOrientation.from_astropy_iers_data(), sample_tle_path("visual"))
     work = Path(tempfile.mkdtemp(prefix="bench-anomalies-"))
