@@ -26,6 +26,9 @@ from virtualstar.cli.main import app
 from virtualstar.recorder.parquet_store import ParquetStoreReader
 
 WINDOW_US = 30_000_000  # a flag may begin up to one detector window before the injection
+# The module's three nights take ~45 s of CPU; on a loaded machine several minutes, and a
+# module fixture's setup counts toward its first test's timeout (300 s by default).
+pytestmark = pytest.mark.timeout(1800)
 
 
 @pytest.fixture(scope="module")
