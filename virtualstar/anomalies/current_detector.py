@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from .current_model import CurrentModel, fit_current_model
-from .detectors import Check, Chunk, Detector, class_plan
+from .detectors import POOLED, Check, Chunk, Detector, class_plan
 from .phases import AXIS_CLASSES, CLASS_NAMES, REST
 from .robust import robust_center_scale
 from .segments import SEGMENT_SAMPLES
@@ -32,6 +32,9 @@ class CurrentDetector(Detector):
         self.model: CurrentModel | None = None
         self.rest_rad_s = math.radians(self.cfg.phases.rest_rate_arcsec_s / 3600.0)
         self.ref_speeds: dict[int, np.ndarray] = {}
+        self.saturated_rad_s = math.inf
+        self.ref_angles = (-math.inf, math.inf)
+        self.cogging_a = 0.0
         self.center: dict[int, float] = {}
         self.limit: dict[int, float] = {}
 
@@ -61,12 +64,14 @@ class CurrentDetector(Detector):
         resid = i - self.model.predict(p, v, a)
         # Speeds the reference did not hold: below a few hundred arcseconds per second the
         # dry friction changes steeply with speed, and the model there is an extrapolation
-        # from the speeds it saw. A segment is scored only when its class held
-        # `coverage_min_s` of reference at speeds within `coverage_ratio` of its own; its
+        # from the speeds it saw. A segment is scored when its class held
+        # `coverage_min_s` of reference at speeds within `coverage_ratio` of its own (its
         # limit widens by coverage_factor × the model's slope × its distance to their
-        # median speed.
+        # median speed), or when it is as fast as the saturated friction the reference
+        # showed (`saturated_rad_s`): there the friction is flat and only the viscous
+        # term grows, linearly.
         allowance = np.zeros(len(p))
-        covered = np.zeros(len(p), bool)
+        covered = np.abs(v) >= self.saturated_rad_s
         cls = self.classes(chunk)
         need = max(1, round(self.cfg.coverage_min_s / self.seg_s))
         for c, speeds in self.ref_speeds.items():
@@ -76,10 +81,16 @@ class CurrentDetector(Detector):
             s = np.abs(v[rows])
             lo = np.searchsorted(speeds, s / self.cfg.coverage_ratio)
             hi = np.searchsorted(speeds, s * self.cfg.coverage_ratio, side="right")
-            covered[rows] = hi - lo >= need
+            near = hi - lo >= need
             middle = speeds[np.clip((lo + hi) // 2, 0, len(speeds) - 1)]
-            allowance[rows] = np.abs(s - middle) * \
-                self.model.slope_a_per_rad_s(p[rows], v[rows], a[rows])
+            allowance[rows] = np.where(near, np.abs(s - middle) * self.model.slope_a_per_rad_s(
+                p[rows], v[rows], a[rows]), 0.0)
+            covered[rows] |= near
+        # Beyond the angles the reference travelled, a cogging period off by one (over a
+        # short travel the fit cannot always tell N from N ± 1) puts the cogging term out
+        # of phase: up to its amplitude, growing with the distance (rad) from that travel.
+        beyond = np.maximum(self.ref_angles[0] - p, p - self.ref_angles[1]).clip(min=0.0)
+        allowance += self.cogging_a * np.minimum(1.0, beyond)
         return {"resid": resid, "allowance": allowance, "covered": covered}
 
     def stats(self, arrays, starts):
@@ -99,11 +110,24 @@ class CurrentDetector(Detector):
             self.plan = {}
             return Check(self.kind, self.axis, self.signals, False, str(exc))
         cls = self.classes(chunk)
+        self.ref_angles = (float(np.min(p[rows])), float(np.max(p[rows])))
+        self.cogging_a = self.model.cogging_amplitude_a()
         # speeds held steadily (changing by under 10 % within a segment): a run-up
         # sweeping through a speed says little about the friction there
         steady = np.abs(a) * self.seg_s <= 0.1 * np.abs(v)
         self.ref_speeds = {c: np.sort(np.abs(v[rows & steady & (cls == c)]))
                            for c in AXIS_CLASSES}
+        # Where the friction is saturated: three knees above its knee, and no lower than
+        # the lowest speed the reference held steadily for coverage_min_s (a knee fitted
+        # on speeds all above it is a guess); trusted when the reference held that long
+        # at such speeds.
+        held = np.sort(np.abs(v[rows & steady]))
+        need = max(1, round(self.cfg.coverage_min_s / self.seg_s))
+        self.saturated_rad_s = math.inf
+        if len(held) >= need:
+            start = max(3.0 * self.model.friction.knee_rad_s, float(held[need - 1]))
+            if np.sum(held >= start) >= need:
+                self.saturated_rad_s = start
         return super().fit(chunk, ref)
 
     def fit_classes(self, stats, cls, seconds):
@@ -113,6 +137,22 @@ class CurrentDetector(Detector):
         self.plan[REST] = (None, "not scored: dry friction holds an axis at rest anywhere "
                                  "within its breakaway torque, so the holding current says "
                                  "nothing")
+        # The model is one for every motion: a class the reference holds too little of
+        # (often the slews of an axis that moved little between targets) is scored against
+        # all the reference's windows together, with twice the floor.
+        pooled = mean[np.isfinite(mean) & (cls != REST) & (cls >= 0)]
+        if len(pooled) >= self.cfg.min_windows:
+            med, sigma = robust_center_scale(pooled)
+            self.center[POOLED] = float(med)
+            self.limit[POOLED] = max(self.cfg.threshold * float(sigma),
+                                     self.cfg.current_ref_factor * float(
+                                         np.max(np.abs(pooled - med))),
+                                     2.0 * self.cfg.current_floor_a)
+            for c, (basis, note) in list(self.plan.items()):
+                if basis is None and c != REST:
+                    self.plan[c] = (POOLED, "scored against all the reference's windows with "
+                                    "twice the floor (" + note.removeprefix("not scored: ")
+                                    + ")")
         for c in AXIS_CLASSES:
             m = mean[(cls == c) & np.isfinite(mean)]
             if not held[c] or len(m) == 0:

@@ -82,6 +82,14 @@ class CurrentModel:
                         self.segment_s)
         return (x / self.scales) @ self.coefficients
 
+    def cogging_amplitude_a(self) -> float:
+        """The largest current the cogging terms can add (A): the sum of both harmonics'
+        amplitudes (0 without a cogging term)."""
+        if not self.cogging_periods:
+            return 0.0
+        c = self.coefficients[-4:] / self.scales[-4:]
+        return float(math.hypot(c[0], c[1]) + math.hypot(c[2], c[3]))
+
     def slope_a_per_rad_s(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """d(current)/d|v| of the model at each motion (A per rad/s): how much the current
         changes with the speed there (the friction curve's steepness)."""

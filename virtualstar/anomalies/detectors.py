@@ -38,8 +38,12 @@ from .reference import ReferenceConfig
 from .segments import Segments
 from .windows import WindowCutter, class_window_starts
 
-__all__ = ["Anomaly", "Check", "Chunk", "Detector", "DetectorConfig", "ScoreTrace", "Window",
-           "class_plan"]
+__all__ = ["POOLED", "Anomaly", "Check", "Chunk", "Detector", "DetectorConfig", "ScoreTrace",
+           "Window", "class_plan"]
+
+# the reference's windows of every class together: what a detector may score a class
+# against that the reference holds too little of, when it has no louder class to use
+POOLED = max(AXIS_CLASSES) + 1
 
 
 @dataclass(frozen=True)
@@ -290,7 +294,7 @@ class Detector:
 
     def _basis(self, cls: np.ndarray) -> np.ndarray:
         """Per window, the class whose reference it is scored against (-1: none)."""
-        table = np.full(max(AXIS_CLASSES) + 2, -1, dtype=np.int64)
+        table = np.full(POOLED + 2, -1, dtype=np.int64)
         for c, (b, _) in self.plan.items():
             table[c] = -1 if b is None else b
         return np.where(cls >= 0, table[np.maximum(cls, 0)], -1)
@@ -299,7 +303,7 @@ class Detector:
                 ) -> np.ndarray:
         """Per window, the value of `per_class` for the class it is scored against (NaN
         where none): a table indexed at once, not a loop over windows."""
-        shape = (max(AXIS_CLASSES) + 2,) + (() if k is None else (k,))
+        shape = (POOLED + 2,) + (() if k is None else (k,))
         table = np.full(shape, np.nan)
         for c, value in per_class.items():
             table[c] = value

@@ -65,7 +65,7 @@ class VibrationDetector(Detector):
         q_rad = float(np.nanpercentile(step[rows], 10)) if step is not None and \
             np.isfinite(step[rows]).any() else 0.0
         self.count_arcsec = q_rad * ARCSEC_PER_RAD
-        bound = 2.0 * SEGMENT_SAMPLES / 12.0 * self.count_arcsec ** 2
+        bound = SEGMENT_SAMPLES / 12.0 * self.count_arcsec ** 2
         self.quantisation_log = math.log10(bound) if bound > 0 else -math.inf
         # a band silent on the reference has no usual level to compare with
         self.bands = np.flatnonzero(np.median(bp[rows], axis=0) > 0) if rows.any() \
