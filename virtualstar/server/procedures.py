@@ -192,6 +192,7 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
                       guard=t.safety.guard(op.target, allow_sun=allow_sun),
                       offsets=t.guide_offsets(op))
     ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun)
+    t.on_target.follow(target, op.target, model=t.model, from_us=ramp.join_us, op_id=op.id)
 
     async def on_path() -> dict[str, Any]:
         settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
@@ -226,10 +227,11 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
                else "stopped before entering the exclusion zone")
         result = {"ended": f"{why}: {exc}", "tracking_to_us": await t.motion.mount_time_us()}
     op.info["feeder"] = feeder.stats.as_dict()
+    t.on_target.end(result["tracking_to_us"])
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
     s = t.errors.stats(op.info["tracking_from_us"], result["tracking_to_us"])
-    return {**result, **tracking_figures(s)}
+    return {**result, **tracking_figures(t, op, s)}
 
 
 async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, *,
@@ -419,6 +421,8 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
     path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
     ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
                                  allow_sun=allow_sun)
+    t.on_target.follow(sat, sat.name, model=t.model, from_us=ramp.join_us, op_id=op.id,
+                       planned=["keyhole"] if plan.keyhole_limited else None)
 
     async def on_path() -> int:
         await t.motion.wait_until(ramp.join_us)
@@ -431,10 +435,11 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
 
     track_to = await run_beside(on_path(), feeder)
     op.info["feeder"] = feeder.stats.as_dict()
+    t.on_target.end(track_to)
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
     s = t.errors.stats(op.info["tracking_from_us"], track_to)
-    return {"ended": "the pass ended", "tracking_to_us": track_to, **tracking_figures(s)}
+    return {"ended": "the pass ended", "tracking_to_us": track_to, **tracking_figures(t, op, s)}
 
 
 # ---------------------------------------------------------------------- helpers
@@ -456,10 +461,9 @@ def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, 
 
 
 
-def tracking_figures(s) -> dict[str, Any]:
-    return {"tracking_rms_arcsec": s.rms_arcsec, "tracking_peak_arcsec": s.peak_arcsec,
-            "on_sky_rms_arcsec": s.on_sky_rms_arcsec, "on_sky_peak_arcsec": s.on_sky_peak_arcsec,
-            "clock_error_peak_arcsec": s.clock_error_peak_arcsec}
+def tracking_figures(t: Telescope, op: Operation, s) -> dict[str, Any]:
+    """A finished track's figures: on target (the truth), following, planned, the outcome."""
+    return s.track_summary(t.config.degraded_after_s, t.on_target.planned_for(op.id))
 
 
 def _observed_deg(t: Telescope, target: Any, t_us: int) -> tuple[float, float]:

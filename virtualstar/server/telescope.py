@@ -40,6 +40,7 @@ from virtualstar.astro import (
     check_places,
     iso_utc,
 )
+from virtualstar.astro.constants import ARCSEC_PER_RAD
 
 from . import procedures
 from .clock import MountClock, PacedClock
@@ -58,6 +59,7 @@ from .feeder import FeederConfig
 from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, GuideOffsets
 from .motion import Motion
 from .mount_link import MountLink
+from .on_target import OnTarget
 from .operations import TERMINAL, Operation, Phase
 from .programs import ProgramControl
 from .safety import HOLD_LOOKAHEAD_S, Safety
@@ -105,6 +107,8 @@ class TelescopeConfig:
     active: bool = True
     timesync_period_s: float = 10.0
     arrival_tolerance_arcsec: float = 5.0
+    off_target_arcsec: float = 5.0  # the boresight farther than this from the target is off it
+    degraded_after_s: float = 1.0  # a track off target longer than this is `degraded`
     max_tle_age_days: float = 14.0
     resume_timeout_s: float = 60.0  # wall seconds an interrupted track waits for the mount
     zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
@@ -150,7 +154,7 @@ class Telescope:
         self.clock = clock or PacedClock(config.speed)
         self.emit = emit or (lambda kind, data: None)
         self.codes = link.mapping.state_codes
-        self.errors = TrackingErrorHistory()
+        self.errors = TrackingErrorHistory(off_target_arcsec=config.off_target_arcsec)
         self.timesync = TimeSync(link, self.clock, simulated=config.simulated,
                                  period_s=config.timesync_period_s,
                                  on_offset=self.errors.note_clock_offset)
@@ -161,6 +165,7 @@ class Telescope:
         self.limits = MountLimits()
         self.track_rate_limit_deg_s = 6.0
         self.eop = EarthOrientation.from_astropy_iers_data()
+        self.on_target = OnTarget(config.site, self.eop)  # the target followed, for the truth
         self.motion = Motion(link, self.clock)
         self.safety = Safety(config.zones, config.site, self.eop, lambda: self.limits)
         self.supervisor = Supervisor(link, self.motion, emit=lambda k, d: self.emit(k, d),
@@ -264,18 +269,25 @@ class Telescope:
 
     async def _start_error_stream(self) -> None:
         link = self.link
-        stream = await link.stream(["az_error", "el_error", "el_position", "mount_state"],
-                                   self.config.error_rate_hz)
-        az_name, el_name, pos_name, state_name = stream.names
-        s_az, s_el, s_pos = (link.scale("az_error"), link.scale("el_error"),
-                             link.scale("el_position"))
+        stream = await link.stream(["az_error", "el_error", "az_position", "el_position",
+                                    "mount_state"], self.config.error_rate_hz)
+        az_name, el_name, az_pos_name, el_pos_name, state_name = stream.names
+        s_az, s_el, s_az_pos, s_el_pos = (link.scale("az_error"), link.scale("el_error"),
+                                          link.scale("az_position"), link.scale("el_position"))
         fault = self.codes["fault"]
 
         def on_packet(packet) -> None:
             if len(packet.t_us):
                 self.last_mount_us = int(packet.t_us[-1])
-            self.errors.add(packet.t_us, packet.column(az_name) * s_az,
-                            packet.column(el_name) * s_el, packet.column(pos_name) * s_pos)
+            az_err, el_err = packet.column(az_name) * s_az, packet.column(el_name) * s_el
+            enc_az = packet.column(az_pos_name) * s_az_pos
+            enc_el = packet.column(el_pos_name) * s_el_pos
+            # the demand is where the encoders are plus what they miss of it
+            truth = self.on_target.measure(packet.t_us, enc_az, enc_el,
+                                           enc_az + az_err / ARCSEC_PER_RAD,
+                                           enc_el + el_err / ARCSEC_PER_RAD)
+            self.errors.add(packet.t_us, az_err, el_err, enc_el,
+                            *(truth if truth is not None else ()))
             states = packet.column(state_name)
             if len(states):
                 self._saw_state(int(states[-1]) if not np.any(states == fault) else fault)
@@ -417,7 +429,13 @@ class Telescope:
             if check is not None:
                 await check()
 
-        op = await self.supervisor.start(kind, name, procedure, resumable=resumable, check=checks)
+        async def run(op: Operation) -> dict[str, Any]:
+            try:
+                return await procedure(op)
+            finally:  # ended early (stopped, replaced, failed): its target is no longer followed
+                self.on_target.end(self.last_mount_us or 0, op_id=op.id)
+
+        op = await self.supervisor.start(kind, name, run, resumable=resumable, check=checks)
         if allow_sun:
             op.info["allow_sun"] = True
             log.warning("safety override: operation %s (%s %s) may point inside the Sun and "
@@ -541,6 +559,7 @@ class Telescope:
                               "being scheduled")
         pulse = offsets.add(north_arcsec, east_arcsec, rate_arcsec_s, now,
                             self.feeder_config().step_us)
+        self.on_target.note_planned("guide offsets")
         north, east = offsets.total_arcsec()
         return {"id": op.id, "start_us": pulse.start_us, "end_us": pulse.end_us,
                 "start_utc": iso_utc(pulse.start_us, 3), "end_utc": iso_utc(pulse.end_us, 3),
@@ -650,8 +669,19 @@ class Telescope:
             "buffer": {"free_points": int(v["free_points"]),
                        "points": v.get("buffered_points"), "underruns": v.get("underruns"),
                        "late_points": v.get("late_points")},
+            "on_target": self._on_target_now(t_us, obs_az, obs_el),
         })
         return out
+
+    def _on_target_now(self, t_us: int, obs_az_deg: float, obs_el_deg: float):
+        """The boresight against the followed target's true place at the status's mount time,
+        with the newest sample's on-target error and planned deviation (docs/vss-api.md)."""
+        now = self.on_target.now(t_us, obs_az_deg % 360.0, obs_el_deg)
+        if now is not None:
+            e = self.errors
+            now["last_sample"] = {"t_us": e.last_t_us, "on_target_arcsec": e.last_on_target_arcsec,
+                                  "planned_deviation_arcsec": e.last_deviation_arcsec}
+        return now
 
     def _safety_doc(self) -> dict[str, Any]:
         return self.safety.zones().as_dict()
