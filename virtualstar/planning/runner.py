@@ -262,6 +262,9 @@ class ProgramRunner:
         now = await self.api.now_us()
         rec.end_us = min(now, block.end_us) if ended is None else min(
             info.get("tracking_to_us") or now, block.end_us)
+        if (isinstance(ended, _EndedEarly) and op.get("phase") == "done"
+                and block.end_us - rec.end_us <= self.late_s * 1e6):
+            ended = None  # it ended by itself at the block's end (a pass setting, a zone)
         if began is not None:
             rec.start_us = max(int(began), block.start_us)
             rec.delay_s = max(0.0, (int(began) - block.start_us) / 1e6)
