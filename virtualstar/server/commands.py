@@ -380,6 +380,12 @@ ENDS_PROGRAM = frozenset({"slew", "track", "stop", "reset_faults", "park", "poin
                           "set_mode", "move"})
 
 
+# commands whose answer waits for mount time to pass (an operation landing or ending, the
+# mount at rest, a program's end): `vs server --emulator --speed max` runs ahead only then
+AWAITS_MOUNT_TIME = frozenset({"slew", "track", "move", "park", "pointing_sample", "wait",
+                               "run_plan", "stop", "reset_faults"})
+
+
 async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any], *,
                    ends_program: bool = True) -> Any:
     """Check parameters and run one command; raise VssError subclasses for the client.
@@ -393,7 +399,10 @@ async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any], *,
     checked = _check(command.params, params, cmd)
     if ends_program and cmd in ENDS_PROGRAM and telescope.programs.running:
         await telescope.programs.cancel(f"ended by a client's {cmd}")
-    return await command.handler(telescope, checked)
+    if cmd not in AWAITS_MOUNT_TIME:
+        return await command.handler(telescope, checked)
+    with telescope.clock.awaited():  # a client waits: lockstep time may run ahead meanwhile
+        return await command.handler(telescope, checked)
 
 
 async def execute(telescope: Telescope, cmd: str, params: dict[str, Any]) -> Any:

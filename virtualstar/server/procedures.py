@@ -108,7 +108,7 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
                   end_us: int | None = None, allow_sun: bool = False) -> tuple[RampIn, Feeder]:
     """Slew to the run-up of `path` and start following it; return the run-up and its feeder."""
     cfg = t.config
-    lead_s = cfg.start_lead_s
+    lead_s = t.margins.start_lead_s
     plan = 0
     while plan < MAX_JOIN_PLANS:
         here = await t.motion.position()
@@ -137,9 +137,10 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         t.motion.verify_at(pos, rest_az, rest_el, cfg.arrival_tolerance_arcsec,
                            f"slew to the run-up of {op.target}")
         if pos.t_us + int(lead_s * 1e6) < ramp.begin_us:
-            if ramp.begin_us - pos.t_us > cfg.feed_lead_s * 1e6:
+            feed_lead_s = t.margins.feed_lead_s
+            if ramp.begin_us - pos.t_us > feed_lead_s * 1e6:
                 t.supervisor.phase(op, Phase.WAITING, start_utc=iso_utc(ramp.begin_us))
-                await t.motion.wait_until(ramp.begin_us - int((cfg.feed_lead_s - lead_s) * 1e6),
+                await t.motion.wait_until(ramp.begin_us - int((feed_lead_s - lead_s) * 1e6),
                                           op.info)
             feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
                                                      on_points=t.note_points)
@@ -153,7 +154,7 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         op.info["join_plans"] = plan + 1
         lead_s *= 1.5
     raise TargetUnreachable(f"could not join {op.target} after {MAX_JOIN_PLANS} plans: the host "
-                            f"cannot keep up with ×{t.config.speed:g} simulated time")
+                            f"cannot keep up with ×{t.clock.speed:g} simulated time")
 
 
 async def goto_safely(t: Telescope, op: Operation, az_rad: float, el_rad: float, what: str, *,
@@ -281,7 +282,7 @@ async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_ra
     v = np.radians([az_rate_deg_s, el_rate_deg_s])
     accel = np.radians([lim.az_max_accel_deg_s2, lim.el_max_accel_deg_s2])
     ramp_s = max(cfg.ramp_s, 2.0 * float(np.max(np.abs(v) / accel)))
-    lead_s = cfg.start_lead_s
+    lead_s = t.margins.start_lead_s
     join_us = here.t_us + int((lead_s + ramp_s) * 1e6)
     start = np.array([here.az_rad, here.el_rad]) + 0.5 * v * ramp_s
     end_us, why = _move_end(t, start, v, join_us, ramp_s, allow_sun)
@@ -418,7 +419,7 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
                        max_az_rate_deg_s=plan.max_az_rate_deg_s)
     t.supervisor.begun(op)
     # run out to rest after set, and hold: stopping a little late costs nothing
-    path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
+    path = RampOut(plan.path, cfg.ramp_s, t.margins.hold_after_run_out_s)
     ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
                                  allow_sun=allow_sun)
     t.on_target.follow(sat, sat.name, model=t.model, from_us=ramp.join_us, op_id=op.id,
@@ -509,7 +510,7 @@ def _choose_pass(t: Telescope, sat: Satellite, here):
         o = observe_mount_times(sat, np.array([join_us], np.int64), cfg.site, t.eop)
         to_az = float(unwrap_azimuth(o.az_rad, limits=t.limits, current_az_rad=here.az_rad)[0])
         slew_s = t.motion.plan_slew_s(here, to_az, float(o.el_rad[0]), t.limits)
-        return slew_s * SLEW_MARGIN + 3.0 + cfg.start_lead_s + cfg.ramp_s
+        return slew_s * SLEW_MARGIN + 3.0 + t.margins.start_lead_s + cfg.ramp_s
 
     with _sgp4_errors(sat, here.t_us):
         choice = choose_pass(windows_from_passes(passes), here.t_us, prepare_s=prepare_s,

@@ -43,7 +43,7 @@ from virtualstar.astro import (
 from virtualstar.astro.constants import ARCSEC_PER_RAD
 
 from . import procedures
-from .clock import MountClock, PacedClock
+from .clock import Margins, MountClock, PacedClock
 from .exceptions import (
     BadRequest,
     MappingError,
@@ -82,7 +82,6 @@ _LIMIT_ROLES = ("az_slew_rate_limit", "el_slew_rate_limit", "az_slew_accel_limit
                 "el_max")
 WATCH_S = 1.0  # mount seconds between the slow polls of the mount state
 STALL_WALL_S = 5.0  # paced time: a mount clock standing this long (wall) is a lost mount
-LOCKSTEP_LEAD_S = 30.0  # mount seconds of trajectory buffered in lockstep
 SUN_WATCH_US = 60_000_000  # a mount at rest is checked against the zones once a mount minute
 
 
@@ -91,11 +90,9 @@ class TelescopeConfig:
     """How the VSS drives the mount (mount seconds unless the name says otherwise)."""
 
     site: Site
-    speed: float = 1.0  # mount seconds per wall second (paced), shown in the status
-    simulated: bool = False
-    lockstep: bool = False  # the VSS and the embedded emulator share a LockstepClock
+    simulated: bool = False  # the mount's UTC truth is UTC (an emulator), not the host clock
     point_rate_hz: float = 20.0
-    lead_s: float | None = None  # None: 5 s; 3 s of wall time in paced time; 30 s in lockstep
+    lead_s: float | None = None  # None: from the clock (clock.Margins)
     error_rate_hz: float = 1000.0
     ramp_s: float = 2.0
     settle_s: float = 1.0
@@ -114,35 +111,6 @@ class TelescopeConfig:
     zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
     hold_lookahead_s: float = HOLD_LOOKAHEAD_S  # a fixed hold must stay out of the zones this long
 
-    @property
-    def margin_speed(self) -> float:
-        """The speed margins are sized for: 1 in lockstep (the VSS is never late)."""
-        return 1.0 if self.lockstep else self.speed
-
-    @property
-    def start_lead_s(self) -> float:
-        """Mount time kept between "now" and the first point pushed (covers request delays)."""
-        return max(1.0, 0.25 * self.margin_speed)
-
-    @property
-    def feed_lead_s(self) -> float:
-        """Mount time of points kept buffered ahead of the mount clock.
-
-        In paced simulated time the same mount lead is a shorter wall time, and an
-        event loop stalled by a loaded host must not drain the buffer: keep at least
-        3 s of wall time. In lockstep nothing is ever late, and longer batches cost
-        less (each one computes the target's place once): 30 s.
-        """
-        if self.lead_s is not None:
-            return self.lead_s
-        return LOCKSTEP_LEAD_S if self.lockstep else max(5.0, 3.0 * self.margin_speed)
-
-    @property
-    def time_mode(self) -> str:
-        if self.lockstep:
-            return "lockstep"
-        return "paced" if self.simulated else "real time"
-
 
 class Telescope:
     """Drive one mount through a `MountLink`; emit events through `emit(kind, data)`."""
@@ -151,7 +119,8 @@ class Telescope:
                  emit: Callable[[str, dict[str, Any]], None] | None = None) -> None:
         self.link = link
         self.config = config
-        self.clock = clock or PacedClock(config.speed)
+        self.clock = clock or PacedClock()
+        self.margins = Margins.for_clock(self.clock, config.lead_s)  # the time mode's margins
         self.emit = emit or (lambda kind, data: None)
         self.codes = link.mapping.state_codes
         self.errors = TrackingErrorHistory(off_target_arcsec=config.off_target_arcsec)
@@ -191,6 +160,14 @@ class Telescope:
     @property
     def op(self) -> Operation | None:
         return self.supervisor.op
+
+    @property
+    def time_mode(self) -> str:
+        """lockstep (one clock with the embedded emulator), paced (a simulated mount running
+        by itself) or real time: from the clock and the mount."""
+        if self.clock.lockstep:
+            return "lockstep"
+        return "paced" if self.config.simulated else "real time"
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
@@ -389,8 +366,8 @@ class Telescope:
 
     def feeder_config(self) -> FeederConfig:
         cfg = self.config
-        return FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=cfg.feed_lead_s,
-                            min_lead_s=min(0.5, cfg.start_lead_s / 2))
+        return FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=self.margins.feed_lead_s,
+                            min_lead_s=min(0.5, self.margins.start_lead_s / 2))
 
     # ------------------------------------------------------------------ commands
     def _check_can_move(self) -> None:
@@ -637,8 +614,8 @@ class Telescope:
         cfg = self.config
         out: dict[str, Any] = {"connected": self.link.connected, "url": self.link.config.url,
                                "mode": "active" if self.active else "passive",
-                               "simulated": cfg.simulated, "time_mode": cfg.time_mode,
-                               "speed": None if cfg.lockstep and cfg.speed <= 0 else cfg.speed,
+                               "simulated": cfg.simulated, "time_mode": self.time_mode,
+                               "speed": self.clock.pace,
                                "pointing_model": self.model_source or None,
                                "site": {k: getattr(cfg.site, k) for k in _SITE_KEYS},
                                "operation": self.op.as_dict() if self.op else None,
