@@ -50,7 +50,7 @@ def run(
 ) -> None:
     """Run a plan block by block through the VSS API: each block's start and end, how late, slew
     time, the error on target (the boresight against the target's true place: RMS, peak, time
-    off target), the planned deviation apart (a keyhole, guide offsets), the encoders' following
+    off target), the planned deviation apart (a keyhole), the encoders' following
     error and the on-sky error. A block off target for over 1 s is `degraded`; one that begins
     over 10 s late is `late`. The rest of the night is planned again after a missed, late or
     faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on.

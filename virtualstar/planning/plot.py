@@ -93,7 +93,7 @@ _ERROR_BARS = (("on_target", "on target (boresight vs target)", "tab:green"),
 def plot_run(run: dict, path: str | Path) -> Path:
     """Write a run's PNG: planned and observed blocks per target against UTC (coloured by
     outcome, re-plans marked), and each block's error on target, following error and
-    on-sky error, with the peak planned deviation apart (a keyhole, guide offsets)."""
+    on-sky error, with the peak planned deviation apart (a keyhole)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -144,7 +144,7 @@ def plot_run(run: dict, path: str | Path) -> Path:
     planned = [r.get("planned_deviation_peak_arcsec") or np.nan for r in observed]
     if np.any(np.asarray(planned) > 0.01):
         bottom.plot(x, planned, "D", mfc="none", color="tab:red",
-                    label="planned deviation peak (keyhole, offsets), apart")
+                    label="planned deviation peak (a keyhole), apart")
     bottom.set_yscale("log")
     bottom.set_ylabel("error [arcsec]")
     bottom.set_xticks(x, labels, rotation=45, ha="right", fontsize=8)

@@ -7,9 +7,10 @@ a guide or user offset). From the same samples this module gives, per sample:
 
 * **on target**: the encoders against the target's true place — the target
   observed at that mount time (`virtualstar.astro`, checked against astropy and
-  skyfield in the tests) taken through the loaded pointing model into the encoder
-  frame, as the VSS knows the mount's geometry (no model: the encoders are the
-  observed place);
+  skyfield in the tests), moved by the guide offsets the observer gave (the guider
+  measured the star there; they are reported apart as `guide_offset_arcsec`), taken
+  through the loaded pointing model into the encoder frame, as the VSS knows the
+  mount's geometry (no model: the encoders are the observed place);
 * **planned deviation**: the demand (encoders + following error) against the same
   true place: what the VSS chose to send, shown apart.
 
@@ -61,16 +62,25 @@ class TargetTruth:
     to_us: int | None = None
     op_id: int | None = None  # the operation that follows it
     planned: list[str] = field(default_factory=list)  # what the VSS chose to send apart
+    offsets: Any = None  # GuideOffsets: the intended place moves with them
     _chunk: tuple[np.ndarray, ...] | None = None  # t_us, az, el, az rate, el rate
+    _chunk_offsets: Any = None  # the offsets the chunk was computed with
     failed: str = ""
 
     def grid(self, first_us: int, last_us: int) -> tuple[np.ndarray, ...]:
         """The true place on the grid around [first_us, last_us]: (t_us, az, el, az rate,
         el rate) in the encoder frame (rad, rad/s), the azimuth continuous."""
         c = self._chunk
-        if c is None or first_us < c[0][0] or last_us > c[0][-1]:
+        if (c is None or first_us < c[0][0] or last_us > c[0][-1]
+                or self._offsets_now() != self._chunk_offsets):
             c = self._chunk = self._compute(first_us, last_us)
+            self._chunk_offsets = self._offsets_now()
         return c
+
+    def _offsets_now(self) -> Any:
+        o = self.offsets
+        return None if o is None else (len(o.pulses), o.end_us, o.base_north_rad,
+                                       o.base_east_rad)
 
     def _compute(self, first_us: int, last_us: int) -> tuple[np.ndarray, ...]:
         start = first_us // GRID_US * GRID_US
@@ -79,8 +89,10 @@ class TargetTruth:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the feeder has already said it (EOP, TLE age)
             o = observe_mount_times(self.target, t, self.site, self.eop)
-        az, el, v_az, v_el = observed_to_encoder(self.model, np.unwrap(o.az_rad), o.el_rad,
-                                                 o.az_rate_rad_s, o.el_rate_rad_s)
+        place = (o.az_rad, o.el_rad, o.az_rate_rad_s, o.el_rate_rad_s)
+        if self.offsets is not None:
+            place = self.offsets.offset(t, *place, math.radians(self.site.lat_deg))
+        az, el, v_az, v_el = observed_to_encoder(self.model, np.unwrap(place[0]), *place[1:])
         return t, np.unwrap(az), el, v_az, v_el
 
 
@@ -130,11 +142,12 @@ class OnTarget:
         return ref if ref is not None and ref.to_us is None else None
 
     def follow(self, target, name: str, *, model, from_us: int, op_id: int | None = None,
-               planned: list[str] | None = None) -> TargetTruth:
-        """From mount time `from_us` the boresight should be on `target` (ends the one before)."""
+               planned: list[str] | None = None, offsets=None) -> TargetTruth:
+        """From mount time `from_us` the boresight should be on `target`, moved by the guide
+        `offsets` if any (ends the one before)."""
         self.end(from_us)
         ref = TargetTruth(target, name, self.site, self.eop, model, int(from_us),
-                          op_id=op_id, planned=list(planned or []))
+                          op_id=op_id, planned=list(planned or []), offsets=offsets)
         self._refs = [*self._refs[-KEEP_ENDED:], ref]
         return ref
 
@@ -151,12 +164,6 @@ class OnTarget:
             if ref.op_id == op_id:
                 return list(ref.planned)
         return []
-
-    def note_planned(self, what: str) -> None:
-        """Say why the demand leaves the target now (e.g. "guide offsets")."""
-        ref = self.current
-        if ref is not None and what not in ref.planned:
-            ref.planned.append(what)
 
     def measure(self, t_us: np.ndarray, enc_az: np.ndarray, enc_el: np.ndarray,
                 dem_az: np.ndarray, dem_el: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -191,10 +198,14 @@ class OnTarget:
         ref = self.current
         if ref is None or t_us < ref.from_us:
             return None
+        t = np.array([t_us], np.int64)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            o = observe_mount_times(ref.target, np.array([t_us], np.int64), self.site, self.eop)
-        az, el = float(o.az_rad[0]), float(o.el_rad[0])
+            o = observe_mount_times(ref.target, t, self.site, self.eop)
+        place = (o.az_rad, o.el_rad, o.az_rate_rad_s, o.el_rate_rad_s)
+        if ref.offsets is not None:
+            place = ref.offsets.offset(t, *place, math.radians(self.site.lat_deg))
+        az, el = float(place[0][0]), float(place[1][0])
         sep = float(erfa.seps(math.radians(obs_az_deg), math.radians(obs_el_deg), az, el))
         return {"target": ref.name, "since_us": ref.from_us, "at_us": int(t_us),
                 "az_deg": math.degrees(az) % 360.0, "el_deg": math.degrees(el),

@@ -193,7 +193,8 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
                       guard=t.safety.guard(op.target, allow_sun=allow_sun),
                       offsets=t.guide_offsets(op))
     ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun)
-    t.on_target.follow(target, op.target, model=t.model, from_us=ramp.join_us, op_id=op.id)
+    t.on_target.follow(target, op.target, model=t.model, from_us=ramp.join_us, op_id=op.id,
+                       offsets=t.guide_offsets(op))
 
     async def on_path() -> dict[str, Any]:
         settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
@@ -463,8 +464,14 @@ def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, 
 
 
 def tracking_figures(t: Telescope, op: Operation, s) -> dict[str, Any]:
-    """A finished track's figures: on target (the truth), following, planned, the outcome."""
-    return s.track_summary(t.config.degraded_after_s, t.on_target.planned_for(op.id))
+    """A finished track's figures: on target (the truth), following, planned, the outcome;
+    the guide offsets in force apart (the place on target moved with them)."""
+    figures = s.track_summary(t.config.degraded_after_s, t.on_target.planned_for(op.id))
+    offsets = t.guide_offsets(op)
+    if offsets.any:
+        north, east = offsets.total_arcsec()
+        figures["guide_offset_arcsec"] = {"north": north, "east": east}
+    return figures
 
 
 def _observed_deg(t: Telescope, target: Any, t_us: int) -> tuple[float, float]:

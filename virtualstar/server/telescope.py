@@ -536,7 +536,6 @@ class Telescope:
                               "being scheduled")
         pulse = offsets.add(north_arcsec, east_arcsec, rate_arcsec_s, now,
                             self.feeder_config().step_us)
-        self.on_target.note_planned("guide offsets")
         north, east = offsets.total_arcsec()
         return {"id": op.id, "start_us": pulse.start_us, "end_us": pulse.end_us,
                 "start_utc": iso_utc(pulse.start_us, 3), "end_utc": iso_utc(pulse.end_us, 3),
