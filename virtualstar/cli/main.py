@@ -61,8 +61,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
         "of the night is planned again after a missed, late or faulted block. Ctrl-C (or "
         "`vs stop`) ends it; --resume goes on."),
     "demo": ("virtualstar.cli.demo", "demo",
-        "Run the demo in one process (well under a minute) and print slew times and "
-        "tracking errors."),
+        "Run the demo in one process (well under a minute) and print slew times and errors."),
     "pointing-run": ("virtualstar.cli.pointing_run", "pointing_run",
         "Slew to N stars, measure each with the guide camera, write a TPOINT data file."),
     "mode": ("virtualstar.cli.mode", "mode",

@@ -48,12 +48,14 @@ def run(
                         "from (password: ASTCOM_PASSWORD).", show_default=False)] = None,
     as_json: JsonOpt = False,
 ) -> None:
-    """Run a plan block by block through the VSS API: each block's start and end, how late, slew
-    time, the error on target (the boresight against the target's true place: RMS, peak, time
-    off target), the planned deviation apart (a keyhole), the encoders' following
-    error and the on-sky error. A block off target for over 1 s is `degraded`; one that begins
-    over 10 s late is `late`. The rest of the night is planned again after a missed, late or
-    faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on.
+    """Run a plan block by block through the VSS API: each block's start, delay and slew, the
+    error on target (boresight vs the target's true place) with the planned deviation apart,
+    and the outcome (done, degraded, late, missed, faulted); the rest of the night is planned
+    again after a missed, late or faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on.
+
+    Per block: the error on target (RMS, peak, seconds off target), the planned deviation (a
+    keyhole), the encoders' following error and the on-sky error. A block off target for over
+    1 s is `degraded`; one that begins over 10 s late is `late`.
 
     --record NAME records mount signals for the whole run into --store (read with vs data)."""
 

@@ -40,7 +40,7 @@ from virtualstar.astro.constants import ARCSEC_PER_RAD
 
 from .trajectories import observed_to_encoder
 
-__all__ = ["OnTarget", "TargetTruth"]
+__all__ = ["OnTarget", "TargetTruth", "warm_up"]
 
 log = logging.getLogger("virtualstar.server")
 
@@ -125,6 +125,15 @@ def _distances(t, enc_az, enc_el, dem_az, dem_el, i0, i1, g_t, grid_us, az, el, 
         te = h00 * el[k] + h10 * v_el[k] + h01 * el[k + 1] + h11 * v_el[k + 1]
         on[i] = _sep_arcsec(enc_az[i], enc_el[i], ta, te)
         dev[i] = _sep_arcsec(dem_az[i], dem_el[i], ta, te)
+
+
+def warm_up() -> None:
+    """Compile the kernel (or load it from numba's cache) now, not in the middle of a session:
+    a first compile holds the event loop for seconds on a loaded host."""
+    t = np.zeros(2, np.int64)
+    x = np.zeros(2)
+    _distances(t, x, x, x, x, 0, 2, np.array([0, GRID_US], np.int64), GRID_US, x, x, x, x,
+               x.copy(), x.copy())
 
 
 class OnTarget:

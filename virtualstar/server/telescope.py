@@ -42,7 +42,7 @@ from virtualstar.astro import (
 )
 from virtualstar.astro.constants import ARCSEC_PER_RAD
 
-from . import procedures
+from . import on_target, procedures, tracking_errors
 from .clock import Margins, MountClock, PacedClock
 from .exceptions import (
     BadRequest,
@@ -172,6 +172,8 @@ class Telescope:
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
         """Connect to the mount and start the background tasks."""
+        tracking_errors.warm_up()  # compiled kernels ready before any client or sample comes
+        on_target.warm_up()
         self.link.on_event = self._on_link_event
         self.link.start()
         self._spawn(self._watch(), "vss-watch")

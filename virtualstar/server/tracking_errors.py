@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-__all__ = ["ErrorStats", "TrackingErrorHistory"]
+__all__ = ["ErrorStats", "TrackingErrorHistory", "warm_up"]
 
 DEFAULT_BIN_US = 100_000  # 0.1 s of mount time
 DEFAULT_MAX_BINS = 36_000  # one hour of mount time at 0.1 s
@@ -307,6 +307,12 @@ class TrackingErrorHistory:
             out["planned_deviation_arcsec"].append(max(b[_PEAK_DEV] for b in group) if n_t
                                                    else None)
         return out
+
+
+def warm_up() -> None:
+    """Compile the kernel (or load it from numba's cache) before the first packet arrives."""
+    x = np.zeros(2)
+    _bin_rows(np.zeros(2, np.int64), x, x, x, x, x, DEFAULT_BIN_US, 1.0, 1000.0)
 
 
 @numba.njit(cache=True, nogil=True)
