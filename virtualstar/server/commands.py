@@ -30,7 +30,6 @@ from virtualstar.astro.constants import SIDEREAL_RATE_ARCSEC_S
 from virtualstar.files import FileRefused, read_text_file_async
 
 from .exceptions import BadRequest, TargetUnreachable, UnknownCommand, VssError
-from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC
 from .operations import Phase
 from .targets import parse_target
 from .telescope import Operation, Telescope
@@ -143,11 +142,11 @@ DEFAULT_GUIDE_RATE_ARCSEC_S = 0.5 * SIDEREAL_RATE_ARCSEC_S
 
 @dataclass(frozen=True)
 class GuideParams:
-    north_arcsec: float = within(-MAX_GUIDE_STEP_ARCSEC, MAX_GUIDE_STEP_ARCSEC, "arcsec",
-                                 default=0.0)
-    east_arcsec: float = within(-MAX_GUIDE_STEP_ARCSEC, MAX_GUIDE_STEP_ARCSEC, "arcsec",
-                                default=0.0)
-    rate_arcsec_s: float = within(0.0, MAX_GUIDE_RATE_ARCSEC_S, "arcsec/s", above=True,
+    # the telescope checks the pulse against MAX_GUIDE_STEP_ARCSEC and MAX_GUIDE_RATE_ARCSEC_S
+    # before anything moves (a guide pulse ends nothing); these only bound absurd values
+    north_arcsec: float = within(-1e6, 1e6, "arcsec", default=0.0)
+    east_arcsec: float = within(-1e6, 1e6, "arcsec", default=0.0)
+    rate_arcsec_s: float = within(0.0, 1e6, "arcsec/s", above=True,
                                   default=DEFAULT_GUIDE_RATE_ARCSEC_S)
 
 
