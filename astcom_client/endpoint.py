@@ -69,8 +69,8 @@ class EndpointConfig:
     `http(s)://host[:port]`, "loopback" for the default set, or "*" for any page.
     Other pages get HTTP 403 with the reason.
 
-    Before a connection has authenticated it may send frames of `max_pending_frame_bytes`
-    at most (larger ones close it), and its password attempts are throttled per address
+    Before a connection has authenticated it may send `max_pending_frames` frames of
+    `max_pending_frame_bytes` at most (more, or larger, close it), and its password attempts are throttled per address
     and overall by `throttle` (astcom_client/throttle.py): held a moment, or refused
     unchecked with ERR 429. A peer that does not read its replies is not read either:
     each request is answered before the next is read.
@@ -90,6 +90,7 @@ class EndpointConfig:
     max_streams_per_client: int = 64
     auth_timeout_s: float = 10.0
     max_pending_frame_bytes: int = 4096  # before authentication
+    max_pending_frames: int = 16  # frames a connection may send before it has authenticated
     throttle: ThrottlePolicy = ThrottlePolicy()
     queue_packets: int = 256  # per client; the oldest stream packet is dropped beyond it
     flush_interval_s: float = 0.02  # a stream packet holds about this much time of samples
@@ -109,7 +110,8 @@ class EndpointConfig:
                 "max_streams_per_client": self.max_streams_per_client,
                 "auth_timeout_s": self.auth_timeout_s, "queue_packets": self.queue_packets,
                 "max_clients": self.max_clients, "max_pending": self.max_pending,
-                "max_pending_frame_bytes": self.max_pending_frame_bytes}
+                "max_pending_frame_bytes": self.max_pending_frame_bytes,
+                "max_pending_frames": self.max_pending_frames}
 
 
 # Who sent the request a device function or setter is running for: (client name, role
@@ -294,6 +296,7 @@ class Endpoint:
         if self._options.gate_auth:
             _limit_frames(transport, self.config.max_pending_frame_bytes)
         announced = False
+        frames_before_auth = 0
         try:
             while conn.state is not ServerState.CLOSED and not writer.done():
                 try:
@@ -304,6 +307,13 @@ class Endpoint:
                     break
                 if data is None:
                     break
+                if not conn.role:
+                    frames_before_auth += 1
+                    if frames_before_auth > self.config.max_pending_frames:
+                        conn.close(TooMany.code, f"more than {self.config.max_pending_frames} "
+                                   "frames before authenticating")
+                        await self._send_pending(conn, transport)
+                        break
                 for event in conn.receive_frame(data):
                     if isinstance(event, RequestReceived):
                         await self._execute(conn, event)

@@ -120,12 +120,16 @@ class Flood:
 
 
 def flood_never_read(url: str, count: int, *, give_up_s: float = 5.0,
-                     text: str = '{"id": 1, "cmd": "ping"}') -> tuple[socket.socket, Flood]:
+                     text: str | bytes = '{"id": 1, "cmd": "ping"}', opcode: int = 1,
+                     first: bytes = b"") -> tuple[socket.socket, Flood]:
     """Write `count` requests on a fresh connection without ever reading; stop when the
     socket has taken nothing for `give_up_s` (the server stopped reading it). Returns
-    the socket, still open, and how many whole requests went out."""
+    the socket, still open, and how many whole requests went out. `first`: a frame to
+    send before the flood (an ASTCom HELLO)."""
     sock, _ = ws_open(url)
-    frame = ws_frame(text)
+    if first:
+        sock.sendall(first)
+    frame = ws_frame(text, opcode=opcode)
     data = frame * count
     sock.setblocking(False)
     sent, idle_since = 0, time.monotonic()
