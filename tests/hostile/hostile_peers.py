@@ -117,6 +117,7 @@ class Flood:
 
     sent: int  # requests written into the socket before it stopped taking more
     wanted: int
+    closed: bool = False  # the server closed the connection (e.g. not authenticated in time)
 
 
 def flood_never_read(url: str, count: int, *, give_up_s: float = 5.0,
@@ -132,7 +133,7 @@ def flood_never_read(url: str, count: int, *, give_up_s: float = 5.0,
     frame = ws_frame(text, opcode=opcode)
     data = frame * count
     sock.setblocking(False)
-    sent, idle_since = 0, time.monotonic()
+    sent, idle_since, closed = 0, time.monotonic(), False
     while sent < len(data):
         try:
             n = sock.send(data[sent:sent + 65536])
@@ -141,9 +142,12 @@ def flood_never_read(url: str, count: int, *, give_up_s: float = 5.0,
                 break
             time.sleep(0.01)
             continue
+        except (ConnectionResetError, BrokenPipeError):
+            closed = True
+            break
         sent += n
         idle_since = time.monotonic()
-    return sock, Flood(sent // len(frame), count)
+    return sock, Flood(sent // len(frame), count, closed)
 
 
 @dataclass
