@@ -78,6 +78,7 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
                          url: str = "ws://127.0.0.1:0", az_deg: float = 0.0, el_deg: float = 20.0,
                          params: dict[str, float] | None = None,
                          password: str | None = None,
+                         observer_password: str | None = None,
                          geometry_arcsec: dict[str, float] | None = None,
                          seeing_arcsec: float | None = None,
                          clock: Any = None) -> EmbeddedEmulator:
@@ -105,9 +106,12 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
         start_us = clock.now_us
         # in lockstep nobody waits for a packet in wall time: fewer, longer packets
         extra["stream_flush_s"] = LOCKSTEP_STREAM_FLUSH_S
+    if observer_password and not password:
+        raise ValueError("an observer password needs an operator password too")
+    passwords = {role: pw for role, pw in (("operator", password),
+                                           ("observer", observer_password)) if pw}
     config = EmulatorConfig(speed=speed, start_us=start_us, az_deg=az_deg, el_deg=el_deg,
-                            params=dict(params or {}),
-                            passwords={"operator": password} if password else None, **extra)
+                            params=dict(params or {}), passwords=passwords or None, **extra)
     emulator = MountEmulator(config)
     bound = await emulator.start(url, run_loop=clock is None)
     if clock is not None:
@@ -133,7 +137,8 @@ class EmbeddedVss:
 @contextlib.asynccontextmanager
 async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int | None = None,
                        site: Any = None, listen: str | None = None,
-                       password: str | None = None, emulator_url: str = "ws://127.0.0.1:0",
+                       password: str | None = None, observer_password: str | None = None,
+                       emulator_url: str = "ws://127.0.0.1:0",
                        geometry_arcsec: dict[str, float] | None = None,
                        seeing_arcsec: float | None = None,
                        emulator_params: dict[str, float] | None = None,
@@ -145,11 +150,13 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
     through an in-memory ASTCom connection; otherwise through `emulator_url` at
     `speed`. `listen` (ws://HOST:PORT) also serves the VSS API on a socket. The block
     starts once the VSS is connected and has its first tracking-error samples.
+    `password` (the VSS uses it) and `observer_password` guard the emulator's endpoint.
     """
     from virtualstar.server import build_server
 
     emu = await start_emulator(speed=speed, start_us=start_us, url=emulator_url,
                                params=emulator_params, password=password,
+                               observer_password=observer_password,
                                geometry_arcsec=geometry_arcsec, seeing_arcsec=seeing_arcsec,
                                clock=clock)
     connector = None
