@@ -184,10 +184,12 @@ class VssServer:
         self.telescope.log_event("info", "connection", f"client {peer} connected", client=peer)
         writer = asyncio.get_running_loop().create_task(self._writer(client))
         tasks: set[asyncio.Task] = set()
-        client.queue.put_nowait(Event("hello", {
-            "server": "virtualstar", "api_version": API_VERSION, "commands": sorted([*COMMANDS, "auth"]),
-            "heartbeat_s": self.heartbeat_s, "auth": client.session.hello()},
-            next(self._seq)).to_json())
+        hello = {"server": "virtualstar", "api_version": API_VERSION,
+                 "commands": sorted([*COMMANDS, "auth"]), "heartbeat_s": self.heartbeat_s,
+                 "auth": client.session.hello()}
+        if client.session.may_watch:  # no password needed: say where the mount answers ASTCom
+            hello["mount_endpoint"] = self.telescope.config.mount_endpoint or None
+        client.queue.put_nowait(Event("hello", hello, next(self._seq)).to_json())
         try:
             async for message in ws:
                 task = asyncio.get_running_loop().create_task(self._handle(client, message))
@@ -222,11 +224,19 @@ class VssServer:
 
     def _log_refusal(self, client: _Client, cmd: str, exc: VssError) -> None:
         """A command the server refused or that failed (a bad target, the Sun zone, not
-        arrived...): a warning with the code, beside the command's own info line."""
+        arrived...): a warning with the code, beside the command's own info line. An
+        operation that a `stop` or a newer command ended was neither: an info line saying
+        how it ended (`outcome`: stopped or aborted)."""
         if cmd in QUIET_COMMANDS:
             return
         peer = _peer(client.ws)
         role = client.session.role.label if client.session.role else "none"
+        if exc.code == "aborted":
+            outcome = "stopped" if getattr(exc, "stopped", False) else "aborted"
+            self.telescope.log_event("info", "command", f"{cmd} from {peer} ({role}) ended: "
+                                     f"{exc} [{outcome}]", command=cmd, client=peer,
+                                     role=role, code=exc.code, outcome=outcome)
+            return
         self.telescope.log_event("warning", "command", f"{cmd} from {peer} ({role}) refused: "
                                  f"{exc} [{exc.code}]", command=cmd, client=peer, role=role,
                                  code=exc.code)
