@@ -20,6 +20,7 @@ from panel_helpers import (
     CHROMIUM,
     PANEL_DIR,
     PASSWORD,
+    ensure_browser_ready,
     ensure_panel_built,
     node,
     start_emulator,
@@ -123,8 +124,7 @@ async def _run(emulator_url: str, panel_url: str, result_path) -> tuple[dict, di
 
 @pytest.fixture(scope="module")
 def e2e(emulator, panel_url, tmp_path_factory):
-    if not CHROMIUM.is_file():
-        pytest.fail(f"{CHROMIUM} is missing: run `bash setup/30-panel.sh` (installs Debian's chromium)")
+    ensure_browser_ready()
     result_path = tmp_path_factory.mktemp("e2e") / "result.json"
     result, got = asyncio.run(_run(emulator.url, panel_url, result_path))
     assert result.get("ok"), result.get("error", "") + "\n" + result["log"]
@@ -260,7 +260,8 @@ def test_every_tab_saves_its_state_and_loads_it_back(e2e):
     assert states["Compute"]["state"]["expressions"][0]["name"] == "az_err_arcsec"
     assert states["Compute"]["state"]["expressions"][0]["unit"] == "arcsec"
     assert states["Log"]["state"] == {"filters": {"from": "", "to": "", "level": "debug", "source": "",
-                                                  "kind": "", "text": ""}, "following": True}
+                                                  "kind": "", "text": ""}, "following": True,
+                                      "show_routine": False, "wrap_fields": False}
 
 
 def test_an_injected_fault_turns_its_diagnostics_card_and_board_row_red(e2e):
