@@ -156,6 +156,16 @@ export async function disconnect() {
   await closeLinks();
 }
 
+/**
+ * Why this page may not write or call on the endpoint now ('' when it may): the reason a
+ * WRITE/INVOKE button is disabled, shown beside it (ASTCom: only operators write and call).
+ */
+export function writeBlocked() {
+  if (session.status !== 'connected') return 'connect on the Board tab first';
+  if (session.grantedRole !== 'operator') return `operator only (this connection is ${session.grantedRole})`;
+  return '';
+}
+
 export function requireControl() {
   if (!links.control) throw new Error('not connected: connect on the Board tab first');
   return links.control;

@@ -227,6 +227,10 @@ def test_observer_buttons_are_disabled_and_say_operator_only(trust):
         assert buttons and all(b["disabled"] for b in buttons)
         assert all(b["title"].startswith("operator only") for b in buttons)
         assert page["observer"]["hint"].startswith("operator only")
+        # the Board's link as observer too: Parameters and Input say the same
+        for where in ("observerParameters", "observerInput"):
+            assert len(page[where]) >= 3, where
+            assert all(b["disabled"] and b["title"].startswith("operator only") for b in page[where]), where
 
 
 def test_after_sigkill_every_value_cell_looks_stale_with_its_age(trust):
@@ -235,6 +239,7 @@ def test_after_sigkill_every_value_cell_looks_stale_with_its_age(trust):
         assert killed["notStale"] == [], (killed["size"], killed["notStale"])
         for field in ("phase", "mount-link", "encoder-az", "ra", "tick", "mount-time"):
             assert field in killed["fields"]
+        assert any(f.startswith("diagnostics:") for f in killed["fields"])
         assert re.fullmatch(r"stale: last update \d+ s ago \(\d\d:\d\d:\d\d UTC by this computer's clock\)",
                             killed["notes"]["vss"])
         assert killed["notes"]["astcom"].startswith("stale: last update")

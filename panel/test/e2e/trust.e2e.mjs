@@ -83,12 +83,14 @@ async function pressStop(page) {
 
 /** The value cells of both boards: those without the stale look (colour and italics). */
 const notStale = (page) => page.evaluate(() => {
-  const cells = [...document.querySelectorAll('[data-testid=telescope-board] [data-field], [data-testid=astcom-board] [data-field], table.watch td[data-field]')];
+  const cells = [...document.querySelectorAll(['[data-testid=telescope-board] [data-field]', '[data-testid=astcom-board] [data-field]',
+    'table.watch td[data-field]', '#tab-Diagnostics .diag-cards td.num', '#tab-Parameters td[data-param-value]'].join(', '))];
+  const name = (c) => c.dataset.field || (c.dataset.paramValue && `param:${c.dataset.paramValue}`) || `diagnostics:${c.closest('[data-group]')?.dataset.group}`;
   const stale = (el) => {
     const cs = getComputedStyle(el);
     return cs.color === 'rgb(138, 143, 153)' && cs.fontStyle === 'italic';
   };
-  return { checked: cells.length, fields: cells.map((c) => c.dataset.field), notStale: cells.filter((c) => !stale(c)).map((c) => `${c.dataset.field}=${c.textContent.trim()}`) };
+  return { checked: cells.length, fields: cells.map(name), notStale: cells.filter((c) => !stale(c)).map((c) => `${name(c)}=${c.textContent.trim()}`) };
 });
 
 async function onePage(page, out) {
@@ -185,6 +187,12 @@ async function onePage(page, out) {
     disabled: await page.$$eval('[data-testid=telescope-controls] button', (bs) => bs.map((b) => ({ text: b.textContent.trim(), disabled: b.disabled, title: b.title }))),
     hint: (await page.textContent('[data-testid=controls-hint]')).trim(),
   };
+  // the Board's link as observer: what would write or call is disabled, saying why
+  await tab(page, 'Parameters');
+  p.observerParameters = await page.$$eval('#tab-Parameters button[data-set], #tab-Parameters button.write-all', (bs) => bs.map((b) => ({ disabled: b.disabled, title: b.title })));
+  await tab(page, 'Input');
+  p.observerInput = await page.$$eval('#tab-Input button[class^=quick-], #tab-Input button.run-trajectory', (bs) => bs.map((b) => ({ disabled: b.disabled, title: b.title })));
+  await tab(page, 'Telescope');
   p.stopBox.beforeRefused = await box(page);
   p.refusedStopOutcome = await pressStop(page);
   p.stopBox.afterRefused = await box(page);
