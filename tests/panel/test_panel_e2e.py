@@ -181,6 +181,19 @@ def test_every_y_axis_has_several_ticks_labelled_alike_and_the_unit_from_list(e2
         assert all(len(x) <= 10 for x in labels), labels  # no "-0.008274955"
 
 
+def test_an_angle_can_be_plotted_in_arcseconds_on_its_own_axis(e2e):
+    result, _ = e2e
+    chosen = result["unitChosen"]
+    # stacked: the first plot's axis (axis.az.error, LIST says rad) now reads arcsec
+    assert "0:arcsec" in chosen["axes"] and "0:rad" not in chosen["axes"]
+    drawn = chosen["drawn"]["axis.az.error"]
+    assert drawn["unit"] == "arcsec" and drawn["points"] > 50
+    assert drawn["factor"] == pytest.approx(180 / math.pi * 3600, rel=1e-12)
+    assert drawn["departure"] == 0
+    other = chosen["drawn"]["axis.az.position_deg"]
+    assert (other["unit"], other["factor"], other["departure"]) == ("deg", 1, 0)
+
+
 def test_csv_export_holds_every_sample_of_the_visible_window_with_units(e2e):
     result, _ = e2e
     lines = Path(result["csvPath"]).read_text().splitlines()

@@ -124,8 +124,11 @@ def test_a_killed_endpoint_leaves_its_values_marked_stale_while_the_panel_retrie
     assert killed["astcom"] == "reconnecting" and "ASTCom: reconnecting" in killed["headerAstcom"]
     assert killed["astcomStaleClass"] and killed["astcomStaleNote"].startswith("stale: last update")
     assert "connection lost" in killed["log"]
-    # the VSS is still up and says it has lost its mount
+    # the VSS is still up and says it has lost its mount; the last known place stays, marked
     assert killed["vss"] == "connected" and killed["mountLink"] == "disconnected"
+    assert killed["encoderAz"] not in ("", "—") and killed["encoderAzKept"]
+    assert killed["encoderAzColor"] == "rgb(138, 143, 153)"  # the stale grey
+    assert killed["placeKept"].startswith("mount away: last known place")
 
 
 def test_the_restarted_endpoint_is_found_again_and_its_stream_resumes(reconnect):
@@ -135,6 +138,7 @@ def test_the_restarted_endpoint_is_found_again_and_its_stream_resumes(reconnect)
     assert back["samples"] > 20  # counted on the new stream
     assert "reconnected to mount-emulator" in back["log"]
     assert back["mountLink"] == "connected"  # the VSS found its mount again too
+    assert not back["encoderAzKept"] and back["placeKept"] == ""
 
 
 def test_a_killed_vss_leaves_the_telescope_board_stale_then_fresh_after_restart(reconnect):

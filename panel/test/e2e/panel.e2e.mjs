@@ -110,6 +110,13 @@ try {
   result.allInOneAxes = await page.evaluate(() => ({ ...window.panelProbe.probe.yAxes }));
   await page.screenshot({ path: join(ARTIFACTS, 'plot-all-in-one.png') });
   await page.check('input[name=stacked]');
+  // an angle shown in another unit: the axis says it, the samples drawn are converted
+  await page.selectOption('select[name="unit:axis.az.error"]', 'arcsec');
+  await redrawn();
+  result.unitChosen = await page.evaluate(() => ({ axes: Object.keys(window.panelProbe.probe.yAxes), drawn: window.panelProbe.probe.drawn }));
+  await page.screenshot({ path: join(ARTIFACTS, 'plot-arcsec.png') });
+  await page.selectOption('select[name="unit:axis.az.error"]', 'rad');
+  await redrawn();
   // Export the visible window as CSV: every sample, with units in the header.
   await page.click('button.pause');
   const [csvFile] = await Promise.all([page.waitForEvent('download'), page.click('button.export-csv')]);
