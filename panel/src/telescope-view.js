@@ -80,7 +80,7 @@ export function trackingView(state) {
 // Error codes that mean the server refused the command before it did anything
 // (docs/vss-api.md, "Error codes"); others mean it was tried and failed.
 const REFUSALS = new Set(['bad_request', 'unknown_command', 'passive', 'unauthorized', 'forbidden',
-  'mount_offline', 'unreachable', 'stale_tle', 'exclusion_zone', 'not_tracking', 'mapping']);
+  'mount_offline', 'unreachable', 'stale_tle', 'exclusion_zone', 'not_tracking', 'mapping', 'throttled']);
 
 /**
  * Style of each command outcome: `sent` (waiting for the answer), `started` (under way),
