@@ -12,11 +12,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["EmbeddedEmulator", "EmbeddedVss", "embedded_vss", "hidden_geometry_arcsec",
-           "start_emulator"]
+__all__ = ["DEFAULT_ENDPOINT_PORT", "EmbeddedEmulator", "EmbeddedVss", "EndpointUnavailable",
+           "embedded_vss", "hidden_geometry_arcsec", "start_emulator"]
 
+# `vs server --emulator` serves its emulator's ASTCom endpoint on this port unless told
+# otherwise, so that after a restart clients (the panel) find it where it was: beside the
+# VSS's own 8740.
+DEFAULT_ENDPOINT_PORT = 8741
 IN_MEMORY_QUEUE = 256  # frames in flight per direction of an in-process connection
 LOCKSTEP_STREAM_FLUSH_S = 0.2  # mount seconds of samples per stream packet in lockstep
+
+
+class EndpointUnavailable(OSError):
+    """The embedded emulator's ASTCom endpoint cannot listen where it was asked to."""
 
 
 @dataclass
@@ -113,7 +121,11 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
     config = EmulatorConfig(speed=speed, start_us=start_us, az_deg=az_deg, el_deg=el_deg,
                             params=dict(params or {}), passwords=passwords or None, **extra)
     emulator = MountEmulator(config)
-    bound = await emulator.start(url, run_loop=clock is None)
+    try:
+        bound = await emulator.start(url, run_loop=clock is None)
+    except OSError as exc:
+        raise EndpointUnavailable(exc.errno, f"the emulator's ASTCom endpoint cannot listen on "
+                                  f"{url}: {exc.strerror or exc}") from None
     if clock is not None:
         clock.add_driver(emulator.run_until)
     return EmbeddedEmulator(bound, emulator)
@@ -165,6 +177,7 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
             return await emu.connect_in_memory(password=password, name="virtualstar-server")
     server = None
     try:  # from here on the emulator runs: it stops however the block ends, a refused set-up too
+        server_options.setdefault("mount_endpoint", emu.url)  # told to clients (status, hello)
         server = build_server(mount_url=emu.url if clock is None else "in-process emulator",
                               password=password, speed=speed, site=site, clock=clock,
                               connector=connector, **server_options)

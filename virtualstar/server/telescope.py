@@ -52,6 +52,7 @@ from .exceptions import (
     NotActive,
     NotTracking,
     OperationAborted,
+    StoppedByClient,
     TargetUnreachable,
     VssError,
 )
@@ -110,6 +111,7 @@ class TelescopeConfig:
     resume_timeout_s: float = 60.0  # wall seconds an interrupted track waits for the mount
     zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
     hold_lookahead_s: float = HOLD_LOOKAHEAD_S  # a fixed hold must stay out of the zones this long
+    mount_endpoint: str = ""  # where ASTCom clients reach the mount ('' unknown or nowhere)
 
     @property
     def margin_speed(self) -> float:
@@ -574,7 +576,7 @@ class Telescope:
             state = await self.motion.state()
             result["mount_state"] = self.link.mapping.state_name(state)
 
-        await self.supervisor.stop("stopped by a client", then=to_rest)
+        await self.supervisor.stop(StoppedByClient("stopped by a client"), then=to_rest)
         return result
 
     async def set_mode(self, mode: str) -> dict[str, Any]:
@@ -619,6 +621,7 @@ class Telescope:
         """Return encoder and observed positions, RA/Dec, states, mount time, error statistics."""
         cfg = self.config
         out: dict[str, Any] = {"connected": self.link.connected, "url": self.link.config.url,
+                               "mount_endpoint": cfg.mount_endpoint or None,
                                "mode": "active" if self.active else "passive",
                                "simulated": cfg.simulated, "time_mode": cfg.time_mode,
                                "speed": None if cfg.lockstep and cfg.speed <= 0 else cfg.speed,
