@@ -32,8 +32,10 @@ def build_server(*, mount_url: str, password: str | None = None,
     free-running simulated emulator); simulated defaults to speed != 1.
     clock: a `virtualstar.lockstep.LockstepClock` shared with an embedded emulator
     (lockstep simulated time: `speed` is ignored, the clock has its pace), with
-    `connector` opening the in-memory connection to it. The time mode and the
-    margins follow from the clock (`clock.Margins`). access: the API's passwords and allowed
+    `connector` opening the in-memory connection to it. The time mode and the margins
+    follow from the clock (`clock.Margins`). mount_endpoint (a telescope option): the
+    ASTCom URL clients are told the mount answers at (default `mount_url` when it is
+    one). access: the API's passwords and allowed
     origins (default: none, loopback pages only). Raises MappingError, BadRequest.
     """
     mapping = load_mapping(mapping_path)
@@ -41,6 +43,8 @@ def build_server(*, mount_url: str, password: str | None = None,
     clock = clock or PacedClock(speed)
     if simulated is None:
         simulated = clock.lockstep or clock.speed != 1.0
+    if "://" in mount_url:
+        telescope_options.setdefault("mount_endpoint", mount_url)
     config = TelescopeConfig(site=site or load_site(), simulated=simulated, active=active,
                              **telescope_options)
     telescope = Telescope(link, config, clock)
