@@ -124,7 +124,7 @@ export function commandOutcome(cmd, { result, error } = {}) {
  * Program block outcomes in the order shown, with their style; counts of outcomes not
  * listed are shown after them, neutral (a server newer than the page).
  */
-export const PROGRAM_OUTCOMES = [['done', 'done'], ['late', 'warn'], ['missed', 'warn'], ['faulted', 'bad'], ['stopped', 'ended']];
+export const PROGRAM_OUTCOMES = [['done', 'done'], ['degraded', 'warn'], ['late', 'warn'], ['missed', 'warn'], ['faulted', 'bad'], ['stopped', 'ended']];
 
 // summary keys that are integers but not outcome counts
 const NOT_OUTCOMES = new Set(['blocks']);
@@ -143,10 +143,20 @@ export function programOutcomes(summary) {
  * Figures of an operation's `info` shown on the Operation card: [label, key, format] with
  * format(value, info) -> text. A key absent from `info` is not shown.
  */
+const arcsecText = (v, decimals) => `${Number(v).toFixed(decimals)}″`;
 export const OPERATION_INFO_ROWS = [
   ['Slew time', 'slew_time_s', (v) => `${Number(v).toFixed(1)} s`],
   ['Left', 'seconds_left', (v) => `${Number(v).toFixed(0)} s`],
   ['Resumes', 'resumes', (v) => String(v)],
+  // a finished track (docs/vss-api.md, "Operation object"): the error on target is the truth;
+  // what the server chose to send apart from the target is shown apart
+  ['On target RMS', 'tracking_rms_arcsec', (v) => arcsecText(v, 3)],
+  ['On target peak', 'tracking_peak_arcsec', (v) => arcsecText(v, 3)],
+  ['Off target', 'off_target_s', (v, info) => `${Number(v).toFixed(1)} s beyond ${info.off_target_threshold_arcsec ?? 5}″`],
+  ['Planned deviation', 'planned_deviation_peak_arcsec',
+    (v, info) => `${arcsecText(v, 1)}${info.planned_deviation?.length ? ` (${info.planned_deviation.join(', ')})` : ''}`],
+  ['Following RMS', 'following_rms_arcsec', (v) => arcsecText(v, 3)],
+  ['Outcome', 'outcome', (v) => (v === 'degraded' ? 'degraded: off target' : String(v))],
 ];
 
 /** Return [{label, text, key}] of the OPERATION_INFO_ROWS present in `op.info`. */

@@ -146,6 +146,7 @@ def test_board_shows_vega_tracked_where_the_catalogue_puts_it(track_stop):
     assert abs(deg(board["observed-el"]) - deg(board["encoder-el"])) <= DISPLAY_DEG
     assert 30 < deg(board["encoder-el"]) < 60
     assert 0 <= float(board["rms-1s"]) < 1 and 0 <= float(board["on-sky-rms-1s"]) < 1
+    assert 0 <= float(board["on-target-rms-1s"]) < 1 and float(board["planned-1s"]) < 0.01
     assert re.fullmatch(r"-?\d+", board["clock-offset"])
     assert re.fullmatch(r"2024-05-18 21:\d\d:\d\d\.\d{3}", board["mount-time"])  # the one time format
 

@@ -103,9 +103,12 @@ def test_a_guide_pulse_moves_the_track_by_the_offset_on_the_sky(north, east):
         await clock.sleep((pulse["end_us"] - await vss.server.telescope.motion.mount_time_us())
                           / 1e6 + 3.0)
         reads = [await encoders(vss) for _ in range(4)]
-        return pulse, reads
+        return pulse, reads, await c.request("status")
 
-    pulse, reads = run_lockstep_scenario(START, scenario)
+    pulse, reads, status = run_lockstep_scenario(START, scenario)
+    # on target is the place the guider moved the star to: the offset is not an error
+    assert status["on_target"]["error_arcsec"] < 0.3
+    assert status["tracking_error"]["10s"]["off_target_s"] == 0.0
     assert pulse["end_us"] - pulse["start_us"] == pytest.approx(
         math.hypot(north, east) / 7.5205 * 1e6, rel=1e-3)
     assert pulse["offset_arcsec"]["north"] == pytest.approx(north)

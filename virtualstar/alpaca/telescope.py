@@ -151,10 +151,15 @@ class AlpacaTelescope:
             self.quiet_ops.add(int(op["id"]))
         return op
 
-    async def track_here(self, st: dict[str, Any]) -> None:
-        """Track the sky where the telescope points (Tracking on; after an abort or a move)."""
+    async def track_here(self, st: dict[str, Any], *, quiet: bool = True) -> None:
+        """Track the sky where the telescope points (Tracking on; after an abort or a move).
+
+        `quiet`: not a slew (Tracking set on: ASCOM does not count it as one). After an
+        abort the track *is* part of stopping: until it has joined the sky and settled,
+        RA/Dec still drift, so Slewing stays true (quiet=False).
+        """
         await self.begin("track", {"ra_deg": st["radec"]["ra_deg"],
-                                   "dec_deg": st["radec"]["dec_deg"]}, quiet=True)
+                                   "dec_deg": st["radec"]["dec_deg"]}, quiet=quiet)
 
     async def status(self) -> dict[str, Any]:
         st = await self.call("status")
@@ -587,7 +592,12 @@ async def _slew_altaz_async(dev: AlpacaTelescope, p: Params) -> Any:
 
 @member("PUT", "abortslew")
 async def _abort(dev: AlpacaTelescope, p: Params) -> Any:
-    """Stop a slew or a hand-pad move; tracking returns to what it was before (ASCOM)."""
+    """Stop a slew or a hand-pad move; tracking returns to what it was before (ASCOM).
+
+    With tracking, the mount comes to rest and then tracks the sky where it stopped;
+    Slewing stays true until that track has joined the sky and settled (the VSS's
+    arrival check: within 5″), so RA/Dec hold still once Slewing reads false.
+    """
     st = await dev.refuse_if_parked("AbortSlew")
     if not dev.is_slewing(st):
         return  # nothing moves: nothing to abort (tracking goes on)
@@ -596,7 +606,7 @@ async def _abort(dev: AlpacaTelescope, p: Params) -> Any:
               else dev.is_tracking(st))  # an equatorial slew needed Tracking on
     await dev.call("stop")
     if resume:
-        await dev.track_here(await dev.status())
+        await dev.track_here(await dev.status(), quiet=False)
 
 
 @member("PUT", "park")

@@ -146,8 +146,11 @@ def server(
             if pace != 1.0:
                 from virtualstar.lockstep import LockstepClock
 
+                # --speed max: as fast as the CPU allows while a client waits for an
+                # operation, real time otherwise (docs/vss.md, "Time modes")
                 clock = LockstepClock(start_us if start_us is not None
-                                      else time.time_ns() // 1000, pace=pace)
+                                      else time.time_ns() // 1000, pace=pace,
+                                      idle_pace=1.0 if pace is None else None)
             serve = _serve_embedded(clock, start_us, password, listen, the_site, mapping,
                                     pointing_model, passive, geometry_arcsec, zones, access,
                                     f"ws://127.0.0.1:{endpoint_port}")
@@ -233,8 +236,9 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
                             pointing_model=pointing_model, zones=zones, access=access) as vss:
         if clock is None:
             mode = "real time"
-        elif clock.pace is None:
-            mode = "lockstep simulated time, as fast as the CPU allows"
+        elif clock.busy_pace is None:
+            mode = ("lockstep simulated time, as fast as the CPU allows while a client waits "
+                    "for an operation, real time otherwise")
         else:
             mode = f"lockstep simulated time, up to x{clock.pace:g}"
         typer.echo(f"VirtualStar Server on {vss.url} (mount: embedded emulator, {mode}; its "

@@ -139,12 +139,16 @@ def render_status(st: dict[str, Any]) -> Table:
     op = st.get("operation")
     if op:
         t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
+    now = st.get("on_target")
+    if now:
+        last = now.get("last_sample") or {}
+        planned = ", ".join(now.get("planned") or []) or "none planned"
+        t.add_row("on target", f"{now['target']}: the boresight is "
+                  f"{_f(now['error_arcsec'], '.3f', '″')} from its true place (az "
+                  f"{now['az_deg']:.5f}°, el {now['el_deg']:.5f}°); planned deviation "
+                  f"{_f(last.get('planned_deviation_arcsec'), '.3f', '″')} ({planned})")
     for window, s in st.get("tracking_error", {}).items():
-        t.add_row(f"tracking error {window}",
-                  f"encoders RMS {_f(s['rms_arcsec'], '.3f', '″')}, peak "
-                  f"{_f(s['peak_arcsec'], '.3f', '″')}; on the sky RMS "
-                  f"{_f(s.get('on_sky_rms_arcsec'), '.3f', '″')}, peak "
-                  f"{_f(s.get('on_sky_peak_arcsec'), '.3f', '″')}")
+        t.add_row(f"errors, last {window}", _window_text(s))
     ts = st.get("time_sync", {})
     t.add_row("clock offset", f"{_f(ts.get('offset_us'), 'd', ' µs')} (mount − UTC, from the "
                               f"{ts.get('offset_source') or '-'}; {ts.get('syncs')} PPS syncs, "
@@ -152,6 +156,24 @@ def render_status(st: dict[str, Any]) -> Table:
     if st.get("last_fault"):
         t.add_row("last fault", f"[red]{st['last_fault']}")
     return t
+
+
+def _window_text(s: dict[str, Any]) -> str:
+    """One window of the status's error figures: on target first (the truth), then the
+    planned deviation, the encoders' following error and the on-sky figure."""
+    if s.get("target_samples"):
+        on = (f"on target RMS {_f(s.get('on_target_rms_arcsec'), '.3f', '″')}, peak "
+              f"{_f(s.get('on_target_peak_arcsec'), '.3f', '″')}"
+              + (f", [red]{s['off_target_s']:.1f} s off target[/]" if s.get("off_target_s")
+                 else "")
+              + f"; planned deviation peak {_f(s.get('planned_deviation_peak_arcsec'), '.3f', '″')}"
+              "; ")
+    else:
+        on = "no target followed; "
+    return (on + f"following RMS {_f(s['rms_arcsec'], '.3f', '″')}, peak "
+            f"{_f(s['peak_arcsec'], '.3f', '″')}; on the sky RMS "
+            f"{_f(s.get('on_sky_rms_arcsec'), '.3f', '″')}, peak "
+            f"{_f(s.get('on_sky_peak_arcsec'), '.3f', '″')}")
 
 
 def _time_mode(st: dict[str, Any]) -> str:

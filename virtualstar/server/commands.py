@@ -205,6 +205,9 @@ class Command:
     doc: str
     role: Role = Role.OPERATOR  # the lowest role that may send it
     ends_program: bool = False  # a client's command ends a running program first
+    # its answer waits for mount time to pass (an operation landing or ending, the mount at
+    # rest, a program's end): `vs server --emulator --speed max` runs ahead only then
+    awaits_mount_time: bool = False
 
 
 def _check(cls: type, params: dict[str, Any], cmd: str) -> Any:
@@ -442,30 +445,30 @@ COMMANDS: dict[str, Command] = {
                       role=Role.OBSERVER),
     "slew": Command(TargetParams, _slew, "Slew to a target; sky targets are then tracked. "
                     "Answers when landed.",
-                    ends_program=True),
+                    ends_program=True, awaits_mount_time=True),
     "track": Command(TrackParams, _track, "Track a sky target or a satellite pass; answers "
                      "when tracking has begun (satellite: when the pass is planned), or at the "
                      "end with wait=true.",
-                     ends_program=True),
+                     ends_program=True, awaits_mount_time=True),
     "pointing_sample": Command(SampleParams, _pointing_sample, "Point at a target, hold, and "
                                "measure the star's offset with the guide camera (needs the "
                                "guide_measure role); answers with star, encoder, offset and "
                                "on-axis places.",
-                               ends_program=True),
+                               ends_program=True, awaits_mount_time=True),
     "move": Command(MoveParams, _move, "Turn the axes at az_rate_deg_s / el_rate_deg_s (a hand "
                     "pad) until stop, another command, or just before a limit or zone; answers "
                     "once moving.",
-                    ends_program=True),
+                    ends_program=True, awaits_mount_time=True),
     "guide": Command(GuideParams, _guide, "A guide pulse: offset the sky target being tracked "
                      "by north_arcsec / east_arcsec at rate_arcsec_s; answers with when the pulse "
                      "runs (mount µs) and the total offset."),
     "stop": Command(StopParams, _stop, "Stop the operation, bring the mount to rest; "
                     "reset_faults=true also clears latched faults.",
-                    ends_program=True),
+                    ends_program=True, awaits_mount_time=True),
     "reset_faults": Command(NoParams, _reset, "Stop and clear the mount's latched faults.",
-                            ends_program=True),
+                            ends_program=True, awaits_mount_time=True),
     "park": Command(ParkParams, _park, "Slew to the park position and power off.",
-                    ends_program=True),
+                    ends_program=True, awaits_mount_time=True),
     "set_mode": Command(ModeParams, _mode, "mode=active (commands move the mount) or passive "
                         "(watch only).",
                         ends_program=True),
@@ -476,10 +479,11 @@ COMMANDS: dict[str, Command] = {
                       "window; series=true adds per-bin values.",
                       role=Role.OBSERVER),
     "wait": Command(WaitParams, _wait, "Wait until the running operation ends; return its summary.",
-                    role=Role.OBSERVER),
+                    role=Role.OBSERVER, awaits_mount_time=True),
     "run_plan": Command(RunPlanParams, _run_plan, "Run a plan (vs plan's JSON) block by block, "
                         "re-planning after a missed, late or faulted block; answers when it "
-                        "has begun, or at its end with wait=true."),
+                        "has begun, or at its end with wait=true.",
+                        awaits_mount_time=True),
     "program": Command(NoParams, _program, "The program run: state, current block, the "
                        "blocks done with their tracking figures, re-plans, the plan.",
                        role=Role.OBSERVER),
@@ -488,6 +492,7 @@ COMMANDS: dict[str, Command] = {
                    "their client and role, connections, failed logins; {events, last_seq, dropped}.",
                    role=Role.OBSERVER),
 }
+
 
 
 async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any], *,
@@ -503,7 +508,10 @@ async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any], *,
     checked = _check(command.params, params, cmd)
     if ends_program and command.ends_program and telescope.programs.running:
         await telescope.programs.cancel(f"ended by a client's {cmd}")
-    return await command.handler(telescope, checked)
+    if not command.awaits_mount_time:
+        return await command.handler(telescope, checked)
+    with telescope.clock.awaited():  # a client waits: lockstep time may run ahead meanwhile
+        return await command.handler(telescope, checked)
 
 
 async def execute(telescope: Telescope, cmd: str, params: dict[str, Any]) -> Any:

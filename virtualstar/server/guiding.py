@@ -21,7 +21,8 @@ import numpy as np
 
 from virtualstar.astro.constants import ARCSEC_PER_RAD
 
-__all__ = ["GuideOffsets", "GuidePulse", "MAX_GUIDE_RATE_ARCSEC_S", "MAX_GUIDE_STEP_ARCSEC"]
+__all__ = ["GuideOffsets", "GuidePulse", "MAX_GUIDE_RATE_ARCSEC_S", "MAX_GUIDE_STEP_ARCSEC",
+           "offset_observed"]
 
 MAX_GUIDE_RATE_ARCSEC_S = 150.0  # ten times the sidereal rate: a guide rate, not a slew
 MAX_GUIDE_STEP_ARCSEC = 600.0  # one pulse moves at most ten arcminutes
@@ -104,16 +105,32 @@ class GuideOffsets:
         if self.sampled_until_us is None or t[-1] > self.sampled_until_us:
             self.sampled_until_us = int(t[-1])
             self._fold()
-        if not self.pulses and self.base_north_rad == 0.0 and self.base_east_rad == 0.0:
+        return self.offset(t, az_rad, el_rad, az_rate, el_rate, lat_rad)
+
+    @property
+    def any(self) -> bool:
+        return bool(self.pulses) or self.base_north_rad != 0.0 or self.base_east_rad != 0.0
+
+    def offset(self, t_us: np.ndarray, az_rad: np.ndarray, el_rad: np.ndarray,
+               az_rate: np.ndarray, el_rate: np.ndarray, lat_rad: float) -> tuple[np.ndarray, ...]:
+        """`apply` without noting the times as sampled (for readers other than the feeder)."""
+        if not self.any:
             return az_rad, el_rad, az_rate, el_rate
-        north, east, north_rate, east_rate = self.sky_offsets(t)
-        ha, dec = erfa.ae2hd(np.mod(az_rad, 2 * math.pi), el_rad, lat_rad)
-        q = erfa.hd2pa(ha, dec, lat_rad)
-        cos_q, sin_q = np.cos(q), np.sin(q)
-        cos_el = np.maximum(np.cos(el_rad), 1e-6)
-        d_el = north * cos_q + east * sin_q
-        d_az = (north * sin_q - east * cos_q) / cos_el
-        r_el = north_rate * cos_q + east_rate * sin_q
-        r_az = (north_rate * sin_q - east_rate * cos_q) / cos_el
-        return (np.mod(az_rad + d_az, 2 * math.pi), el_rad + d_el, az_rate + r_az,
-                el_rate + r_el)
+        return offset_observed(*self.sky_offsets(np.asarray(t_us, np.int64)), az_rad, el_rad,
+                               az_rate, el_rate, lat_rad)
+
+
+def offset_observed(north: np.ndarray, east: np.ndarray, north_rate: np.ndarray,
+                    east_rate: np.ndarray, az_rad: np.ndarray, el_rad: np.ndarray,
+                    az_rate: np.ndarray, el_rate: np.ndarray, lat_rad: float) -> tuple[np.ndarray, ...]:
+    """Move observed places (and rates) by sky offsets north/east (radians, rad/s)."""
+    ha, dec = erfa.ae2hd(np.mod(az_rad, 2 * math.pi), el_rad, lat_rad)
+    q = erfa.hd2pa(ha, dec, lat_rad)
+    cos_q, sin_q = np.cos(q), np.sin(q)
+    cos_el = np.maximum(np.cos(el_rad), 1e-6)
+    d_el = north * cos_q + east * sin_q
+    d_az = (north * sin_q - east * cos_q) / cos_el
+    r_el = north_rate * cos_q + east_rate * sin_q
+    r_az = (north_rate * sin_q - east_rate * cos_q) / cos_el
+    return (np.mod(az_rad + d_az, 2 * math.pi), el_rad + d_el, az_rate + r_az,
+            el_rate + r_el)

@@ -108,7 +108,7 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
                   end_us: int | None = None, allow_sun: bool = False) -> tuple[RampIn, Feeder]:
     """Slew to the run-up of `path` and start following it; return the run-up and its feeder."""
     cfg = t.config
-    lead_s = cfg.start_lead_s
+    lead_s = t.margins.start_lead_s
     plan = 0
     while plan < MAX_JOIN_PLANS:
         here = await t.motion.position()
@@ -137,9 +137,10 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         t.motion.verify_at(pos, rest_az, rest_el, cfg.arrival_tolerance_arcsec,
                            f"slew to the run-up of {op.target}")
         if pos.t_us + int(lead_s * 1e6) < ramp.begin_us:
-            if ramp.begin_us - pos.t_us > cfg.feed_lead_s * 1e6:
+            feed_lead_s = t.margins.feed_lead_s
+            if ramp.begin_us - pos.t_us > feed_lead_s * 1e6:
                 t.supervisor.phase(op, Phase.WAITING, start_utc=iso_utc(ramp.begin_us))
-                await t.motion.wait_until(ramp.begin_us - int((cfg.feed_lead_s - lead_s) * 1e6),
+                await t.motion.wait_until(ramp.begin_us - int((feed_lead_s - lead_s) * 1e6),
                                           op.info)
             feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
                                                      on_points=t.note_points)
@@ -153,7 +154,7 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         op.info["join_plans"] = plan + 1
         lead_s *= 1.5
     raise TargetUnreachable(f"could not join {op.target} after {MAX_JOIN_PLANS} plans: the host "
-                            f"cannot keep up with ×{t.config.speed:g} simulated time")
+                            f"cannot keep up with ×{t.clock.speed:g} simulated time")
 
 
 async def goto_safely(t: Telescope, op: Operation, az_rad: float, el_rad: float, what: str, *,
@@ -192,6 +193,8 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
                       guard=t.safety.guard(op.target, allow_sun=allow_sun),
                       offsets=t.guide_offsets(op))
     ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun)
+    t.on_target.follow(target, op.target, model=t.model, from_us=ramp.join_us, op_id=op.id,
+                       offsets=t.guide_offsets(op))
 
     async def on_path() -> dict[str, Any]:
         settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
@@ -226,10 +229,11 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
                else "stopped before entering the exclusion zone")
         result = {"ended": f"{why}: {exc}", "tracking_to_us": await t.motion.mount_time_us()}
     op.info["feeder"] = feeder.stats.as_dict()
+    t.on_target.end(result["tracking_to_us"])
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
     s = t.errors.stats(op.info["tracking_from_us"], result["tracking_to_us"])
-    return {**result, **tracking_figures(s)}
+    return {**result, **tracking_figures(t, op, s)}
 
 
 async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, *,
@@ -279,7 +283,7 @@ async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_ra
     v = np.radians([az_rate_deg_s, el_rate_deg_s])
     accel = np.radians([lim.az_max_accel_deg_s2, lim.el_max_accel_deg_s2])
     ramp_s = max(cfg.ramp_s, 2.0 * float(np.max(np.abs(v) / accel)))
-    lead_s = cfg.start_lead_s
+    lead_s = t.margins.start_lead_s
     join_us = here.t_us + int((lead_s + ramp_s) * 1e6)
     start = np.array([here.az_rad, here.el_rad]) + 0.5 * v * ramp_s
     end_us, why = _move_end(t, start, v, join_us, ramp_s, allow_sun)
@@ -416,9 +420,11 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
                        max_az_rate_deg_s=plan.max_az_rate_deg_s)
     t.supervisor.begun(op)
     # run out to rest after set, and hold: stopping a little late costs nothing
-    path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
+    path = RampOut(plan.path, cfg.ramp_s, t.margins.hold_after_run_out_s)
     ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
                                  allow_sun=allow_sun)
+    t.on_target.follow(sat, sat.name, model=t.model, from_us=ramp.join_us, op_id=op.id,
+                       planned=["keyhole"] if plan.keyhole_limited else None)
 
     async def on_path() -> int:
         await t.motion.wait_until(ramp.join_us)
@@ -431,10 +437,11 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
 
     track_to = await run_beside(on_path(), feeder)
     op.info["feeder"] = feeder.stats.as_dict()
+    t.on_target.end(track_to)
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
     s = t.errors.stats(op.info["tracking_from_us"], track_to)
-    return {"ended": "the pass ended", "tracking_to_us": track_to, **tracking_figures(s)}
+    return {"ended": "the pass ended", "tracking_to_us": track_to, **tracking_figures(t, op, s)}
 
 
 # ---------------------------------------------------------------------- helpers
@@ -456,10 +463,15 @@ def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, 
 
 
 
-def tracking_figures(s) -> dict[str, Any]:
-    return {"tracking_rms_arcsec": s.rms_arcsec, "tracking_peak_arcsec": s.peak_arcsec,
-            "on_sky_rms_arcsec": s.on_sky_rms_arcsec, "on_sky_peak_arcsec": s.on_sky_peak_arcsec,
-            "clock_error_peak_arcsec": s.clock_error_peak_arcsec}
+def tracking_figures(t: Telescope, op: Operation, s) -> dict[str, Any]:
+    """A finished track's figures: on target (the truth), following, planned, the outcome;
+    the guide offsets in force apart (the place on target moved with them)."""
+    figures = s.track_summary(t.config.degraded_after_s, t.on_target.planned_for(op.id))
+    offsets = t.guide_offsets(op)
+    if offsets.any:
+        north, east = offsets.total_arcsec()
+        figures["guide_offset_arcsec"] = {"north": north, "east": east}
+    return figures
 
 
 def _observed_deg(t: Telescope, target: Any, t_us: int) -> tuple[float, float]:
@@ -505,7 +517,7 @@ def _choose_pass(t: Telescope, sat: Satellite, here):
         o = observe_mount_times(sat, np.array([join_us], np.int64), cfg.site, t.eop)
         to_az = float(unwrap_azimuth(o.az_rad, limits=t.limits, current_az_rad=here.az_rad)[0])
         slew_s = t.motion.plan_slew_s(here, to_az, float(o.el_rad[0]), t.limits)
-        return slew_s * SLEW_MARGIN + 3.0 + cfg.start_lead_s + cfg.ramp_s
+        return slew_s * SLEW_MARGIN + 3.0 + t.margins.start_lead_s + cfg.ramp_s
 
     with _sgp4_errors(sat, here.t_us):
         choice = choose_pass(windows_from_passes(passes), here.t_us, prepare_s=prepare_s,

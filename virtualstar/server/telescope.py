@@ -40,9 +40,10 @@ from virtualstar.astro import (
     check_places,
     iso_utc,
 )
+from virtualstar.astro.constants import ARCSEC_PER_RAD
 
-from . import procedures
-from .clock import MountClock, PacedClock
+from . import on_target, procedures, tracking_errors
+from .clock import Margins, MountClock, PacedClock
 from .event_log import KEPT_APART
 from .exceptions import (
     BadRequest,
@@ -60,6 +61,7 @@ from .feeder import FeederConfig
 from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, GuideOffsets
 from .motion import Motion
 from .mount_link import MountLink
+from .on_target import OnTarget
 from .operations import TERMINAL, Operation, Phase
 from .programs import ProgramControl
 from .safety import HOLD_LOOKAHEAD_S, Safety
@@ -82,7 +84,6 @@ _LIMIT_ROLES = ("az_slew_rate_limit", "el_slew_rate_limit", "az_slew_accel_limit
                 "el_max")
 WATCH_S = 1.0  # mount seconds between the slow polls of the mount state
 STALL_WALL_S = 5.0  # paced time: a mount clock standing this long (wall) is a lost mount
-LOCKSTEP_LEAD_S = 30.0  # mount seconds of trajectory buffered in lockstep
 SUN_WATCH_US = 60_000_000  # a mount at rest is checked against the zones once a mount minute
 
 
@@ -91,11 +92,9 @@ class TelescopeConfig:
     """How the VSS drives the mount (mount seconds unless the name says otherwise)."""
 
     site: Site
-    speed: float = 1.0  # mount seconds per wall second (paced), shown in the status
-    simulated: bool = False
-    lockstep: bool = False  # the VSS and the embedded emulator share a LockstepClock
+    simulated: bool = False  # the mount's UTC truth is UTC (an emulator), not the host clock
     point_rate_hz: float = 20.0
-    lead_s: float | None = None  # None: 5 s; 3 s of wall time in paced time; 30 s in lockstep
+    lead_s: float | None = None  # None: from the clock (clock.Margins)
     error_rate_hz: float = 1000.0
     ramp_s: float = 2.0
     settle_s: float = 1.0
@@ -107,40 +106,13 @@ class TelescopeConfig:
     active: bool = True
     timesync_period_s: float = 10.0
     arrival_tolerance_arcsec: float = 5.0
+    off_target_arcsec: float = 5.0  # the boresight farther than this from the target is off it
+    degraded_after_s: float = 1.0  # a track off target longer than this is `degraded`
     max_tle_age_days: float = 14.0
     resume_timeout_s: float = 60.0  # wall seconds an interrupted track waits for the mount
     zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
     hold_lookahead_s: float = HOLD_LOOKAHEAD_S  # a fixed hold must stay out of the zones this long
     mount_endpoint: str = ""  # where ASTCom clients reach the mount ('' unknown or nowhere)
-
-    @property
-    def margin_speed(self) -> float:
-        """The speed margins are sized for: 1 in lockstep (the VSS is never late)."""
-        return 1.0 if self.lockstep else self.speed
-
-    @property
-    def start_lead_s(self) -> float:
-        """Mount time kept between "now" and the first point pushed (covers request delays)."""
-        return max(1.0, 0.25 * self.margin_speed)
-
-    @property
-    def feed_lead_s(self) -> float:
-        """Mount time of points kept buffered ahead of the mount clock.
-
-        In paced simulated time the same mount lead is a shorter wall time, and an
-        event loop stalled by a loaded host must not drain the buffer: keep at least
-        3 s of wall time. In lockstep nothing is ever late, and longer batches cost
-        less (each one computes the target's place once): 30 s.
-        """
-        if self.lead_s is not None:
-            return self.lead_s
-        return LOCKSTEP_LEAD_S if self.lockstep else max(5.0, 3.0 * self.margin_speed)
-
-    @property
-    def time_mode(self) -> str:
-        if self.lockstep:
-            return "lockstep"
-        return "paced" if self.simulated else "real time"
 
 
 class Telescope:
@@ -150,10 +122,11 @@ class Telescope:
                  emit: Callable[[str, dict[str, Any]], None] | None = None) -> None:
         self.link = link
         self.config = config
-        self.clock = clock or PacedClock(config.speed)
+        self.clock = clock or PacedClock()
+        self.margins = Margins.for_clock(self.clock, config.lead_s)  # the time mode's margins
         self.emit = emit or (lambda kind, data: None)
         self.codes = link.mapping.state_codes
-        self.errors = TrackingErrorHistory()
+        self.errors = TrackingErrorHistory(off_target_arcsec=config.off_target_arcsec)
         self.timesync = TimeSync(link, self.clock, simulated=config.simulated,
                                  period_s=config.timesync_period_s,
                                  on_offset=self.errors.note_clock_offset)
@@ -164,6 +137,7 @@ class Telescope:
         self.limits = MountLimits()
         self.track_rate_limit_deg_s = 6.0
         self.eop = EarthOrientation.from_astropy_iers_data()
+        self.on_target = OnTarget(config.site, self.eop)  # the target followed, for the truth
         self.motion = Motion(link, self.clock)
         self.safety = Safety(config.zones, config.site, self.eop, lambda: self.limits)
         self.supervisor = Supervisor(link, self.motion, emit=lambda k, d: self.emit(k, d),
@@ -190,9 +164,19 @@ class Telescope:
     def op(self) -> Operation | None:
         return self.supervisor.op
 
+    @property
+    def time_mode(self) -> str:
+        """lockstep (one clock with the embedded emulator), paced (a simulated mount running
+        by itself) or real time: from the clock and the mount."""
+        if self.clock.lockstep:
+            return "lockstep"
+        return "paced" if self.config.simulated else "real time"
+
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
         """Connect to the mount and start the background tasks."""
+        tracking_errors.warm_up()  # compiled kernels ready before any client or sample comes
+        on_target.warm_up()
         self.link.on_event = self._on_link_event
         self.link.start()
         self._spawn(self._watch(), "vss-watch")
@@ -267,18 +251,25 @@ class Telescope:
 
     async def _start_error_stream(self) -> None:
         link = self.link
-        stream = await link.stream(["az_error", "el_error", "el_position", "mount_state"],
-                                   self.config.error_rate_hz)
-        az_name, el_name, pos_name, state_name = stream.names
-        s_az, s_el, s_pos = (link.scale("az_error"), link.scale("el_error"),
-                             link.scale("el_position"))
+        stream = await link.stream(["az_error", "el_error", "az_position", "el_position",
+                                    "mount_state"], self.config.error_rate_hz)
+        az_name, el_name, az_pos_name, el_pos_name, state_name = stream.names
+        s_az, s_el, s_az_pos, s_el_pos = (link.scale("az_error"), link.scale("el_error"),
+                                          link.scale("az_position"), link.scale("el_position"))
         fault = self.codes["fault"]
 
         def on_packet(packet) -> None:
             if len(packet.t_us):
                 self.last_mount_us = int(packet.t_us[-1])
-            self.errors.add(packet.t_us, packet.column(az_name) * s_az,
-                            packet.column(el_name) * s_el, packet.column(pos_name) * s_pos)
+            az_err, el_err = packet.column(az_name) * s_az, packet.column(el_name) * s_el
+            enc_az = packet.column(az_pos_name) * s_az_pos
+            enc_el = packet.column(el_pos_name) * s_el_pos
+            # the demand is where the encoders are plus what they miss of it
+            truth = self.on_target.measure(packet.t_us, enc_az, enc_el,
+                                           enc_az + az_err / ARCSEC_PER_RAD,
+                                           enc_el + el_err / ARCSEC_PER_RAD)
+            self.errors.add(packet.t_us, az_err, el_err, enc_el,
+                            *(truth if truth is not None else ()))
             states = packet.column(state_name)
             if len(states):
                 self._saw_state(int(states[-1]) if not np.any(states == fault) else fault)
@@ -380,8 +371,8 @@ class Telescope:
 
     def feeder_config(self) -> FeederConfig:
         cfg = self.config
-        return FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=cfg.feed_lead_s,
-                            min_lead_s=min(0.5, cfg.start_lead_s / 2))
+        return FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=self.margins.feed_lead_s,
+                            min_lead_s=min(0.5, self.margins.start_lead_s / 2))
 
     # ------------------------------------------------------------------ commands
     def _check_can_move(self) -> None:
@@ -420,7 +411,13 @@ class Telescope:
             if check is not None:
                 await check()
 
-        op = await self.supervisor.start(kind, name, procedure, resumable=resumable, check=checks)
+        async def run(op: Operation) -> dict[str, Any]:
+            try:
+                return await procedure(op)
+            finally:  # ended early (stopped, replaced, failed): its target is no longer followed
+                self.on_target.end(self.last_mount_us or 0, op_id=op.id)
+
+        op = await self.supervisor.start(kind, name, run, resumable=resumable, check=checks)
         if allow_sun:
             op.info["allow_sun"] = True
             log.warning("safety override: operation %s (%s %s) may point inside the Sun and "
@@ -623,8 +620,8 @@ class Telescope:
         out: dict[str, Any] = {"connected": self.link.connected, "url": self.link.config.url,
                                "mount_endpoint": cfg.mount_endpoint or None,
                                "mode": "active" if self.active else "passive",
-                               "simulated": cfg.simulated, "time_mode": cfg.time_mode,
-                               "speed": None if cfg.lockstep and cfg.speed <= 0 else cfg.speed,
+                               "simulated": cfg.simulated, "time_mode": self.time_mode,
+                               "speed": self.clock.pace,
                                "pointing_model": self.model_source or None,
                                "site": {k: getattr(cfg.site, k) for k in _SITE_KEYS},
                                "operation": self.op.as_dict() if self.op else None,
@@ -655,8 +652,19 @@ class Telescope:
             "buffer": {"free_points": int(v["free_points"]),
                        "points": v.get("buffered_points"), "underruns": v.get("underruns"),
                        "late_points": v.get("late_points")},
+            "on_target": self._on_target_now(t_us, obs_az, obs_el),
         })
         return out
+
+    def _on_target_now(self, t_us: int, obs_az_deg: float, obs_el_deg: float):
+        """The boresight against the followed target's true place at the status's mount time,
+        with the newest sample's on-target error and planned deviation (docs/vss-api.md)."""
+        now = self.on_target.now(t_us, obs_az_deg % 360.0, obs_el_deg)
+        if now is not None:
+            e = self.errors
+            now["last_sample"] = {"t_us": e.last_t_us, "on_target_arcsec": e.last_on_target_arcsec,
+                                  "planned_deviation_arcsec": e.last_deviation_arcsec}
+        return now
 
     def _safety_doc(self) -> dict[str, Any]:
         return self.safety.zones().as_dict()

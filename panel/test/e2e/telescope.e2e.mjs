@@ -19,7 +19,8 @@ const step = (result, name) => {
 };
 const field = (page, name) => page.textContent(`#tab-Telescope [data-field="${name}"]`).then((t) => t.trim());
 const BOARD_FIELDS = ['target', 'kind', 'phase', 'mode', 'mount-state', 'encoder-az', 'encoder-el', 'observed-az',
-  'observed-el', 'ra', 'dec', 'mount-time', 'rms-1s', 'on-sky-rms-1s', 'pointing-model', 'clock-offset', 'mount-link'];
+  'observed-el', 'ra', 'dec', 'mount-time', 'rms-1s', 'on-sky-rms-1s', 'on-target-rms-1s', 'planned-1s',
+  'pointing-model', 'clock-offset', 'mount-link'];
 const readBoard = async (page) => Object.fromEntries(await Promise.all(BOARD_FIELDS.map(async (f) => [f, await field(page, f)])));
 /** Wait until the board has drawn a status polled after this moment. */
 async function nextPoll(page) {
