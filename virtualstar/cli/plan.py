@@ -19,7 +19,8 @@ def plan(
              "example is catalogs/data/program-example.toml.", show_default=False)],
     night: Annotated[str | None, typer.Option(
         "--night", help="The night that begins on this date (site's local evening), e.g. "
-                        "2024-05-18: from sunset to sunrise.")] = None,
+                        "2024-05-18: from sunset to sunrise as almanacs give them (the Sun's upper limb "
+                        "on a sea-level horizon with standard refraction: its centre 50' below).")] = None,
     start: Annotated[str | None, typer.Option(
         "--from", help="Start of the planning window, UTC ISO 8601 (instead of --night).")] = None,
     end: Annotated[str | None, typer.Option(

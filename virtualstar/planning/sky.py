@@ -33,7 +33,7 @@ from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
 from .exceptions import ProgramError
 from .program import ProgramTarget
 
-__all__ = ["NightGrid", "TargetSky", "night_window", "target_skies"]
+__all__ = ["SUNSET_SUN_EL_DEG", "NightGrid", "TargetSky", "night_window", "target_skies"]
 
 DEFAULT_STEP_S = 60.0
 SCAN_STEP_S = 10.0  # satellites: the step of the search for passes above min_el
@@ -92,8 +92,19 @@ class TargetSky:
         return ok
 
 
+#: Sunset and sunrise: the Sun's upper limb on the horizon with standard refraction, i.e. its
+#: centre's geometric elevation at −(16′ semi-diameter + 34′ refraction) (USNO, skyfield's
+#: almanac). The site's own refraction model is not used for it: at the horizon no model
+#: is good to a few arcminutes, and the almanac's sunset is the one people compare with.
+SUNSET_SUN_EL_DEG = -50.0 / 60.0
+
+
 def night_window(date_text: str, site: Site, eop: EarthOrientation) -> tuple[int, int]:
-    """Return (sunset, sunrise) in µs of the night that begins on a local calendar date."""
+    """Return (sunset, sunrise) in µs of the night that begins on a local calendar date.
+
+    Sunset and sunrise as in the almanacs: SUNSET_SUN_EL_DEG (the upper limb touching the
+    horizon through standard refraction), for a sea-level horizon (no dip for the height).
+    """
     try:
         day = UtcTimes.from_iso([f"{date_text}T12:00:00Z"])
     except Exception as exc:
@@ -105,7 +116,8 @@ def night_window(date_text: str, site: Site, eop: EarthOrientation) -> tuple[int
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        events = find_events(SolarSystemBody("sun"), site, noon, 36 * 3600.0, eop=eop)
+        events = find_events(SolarSystemBody("sun"), site.without_refraction(), noon,
+                             36 * 3600.0, horizon_deg=SUNSET_SUN_EL_DEG, eop=eop)
     sets = [e for e in events if e.kind == "set"]
     if not sets:
         raise ProgramError(f"--night {date_text}: the Sun does not set at this site (polar "
