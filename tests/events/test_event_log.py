@@ -215,6 +215,28 @@ def test_vs_log_follows_a_running_vss():
         rig.close()
 
 
+def test_vs_log_without_follow_prints_the_whole_vss_log_once_and_ends():
+    rig = Rig(start_us=START_US + 22 * 3_600_000_000).start()
+    try:
+        async def toggle() -> None:
+            for i in range(600):  # more than one page (1000 events) of the server's log
+                await rig.server.call("set_mode", {"mode": "passive" if i % 2 else "active"})
+
+        rig.run(toggle())
+        held = rig.server.telescope.log.since(0)
+        assert len(held) > 1000
+        result = CliRunner().invoke(app, ["log", rig.url, "--json"])
+        table = CliRunner().invoke(app, ["log", rig.url, "--kind", "mode"])
+    finally:
+        rig.close()
+    assert result.exit_code == 0, result.output
+    shown = json.loads(result.stdout)  # one JSON list: read once, then the command ended
+    assert [d["seq"] for d in shown][: len(held)] == [e.seq for e in held]
+    assert table.exit_code == 0
+    modes = [x for x in table.stdout.splitlines() if "mode passive" in x or "mode active" in x]
+    assert len(modes) == sum(e.kind == "mode" for e in held)
+
+
 def test_a_command_the_server_refuses_is_logged_as_a_warning_with_its_code():
     from virtualstar.vss_client import VssRequestError, call_server
 
