@@ -7,15 +7,13 @@ import sys
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from virtualstar.cli.store_warnings import reports_damage
-from virtualstar.recorder import RecorderError
-from virtualstar.recorder.export import write_csv, write_mat
-from virtualstar.recorder.parquet_store import ParquetStoreReader, utc_text
-from virtualstar.recorder.stores import open_reader
-from virtualstar.recorder.timeparse import parse_time_bound
+from virtualstar.recorder.exceptions import RecorderError
+from virtualstar.recorder.timeparse import parse_time_bound, utc_text
+
+# The stores (numpy, pyarrow) are imported when a command runs: --help stays fast.
 
 app = typer.Typer(help="Query, plot and export recorded signals.", no_args_is_help=True,
                   add_completion=False)
@@ -46,6 +44,8 @@ def _error(exc: Exception) -> typer.Exit:
 
 def _open(store: str):
     """Open a store's reader; say on stderr when it recovered a recording whose recorder died."""
+    from virtualstar.recorder.stores import open_reader
+
     reader = open_reader(store)
     recovered = getattr(reader, "recovered", None)
     if recovered is not None:
@@ -83,7 +83,7 @@ def _warn_if_no_samples(n: int, a: int, b: int) -> None:
                    "in the recording; `vs data info` lists the gaps)", err=True)
 
 
-def _plain(v: np.ndarray) -> list:
+def _plain(v) -> list:
     if v.dtype.kind == "f":
         return [None if x != x else x for x in v.tolist()]  # NaN is not JSON
     return v.tolist()
@@ -135,6 +135,8 @@ def query(
                 return
             typer.echo(f"{len(env)} buckets of {env.bucket_us / 1e6:g} s from {utc_text(a)} "
                        f"to {utc_text(b)}")
+            import numpy as np
+
             for k in env.names:
                 lo = float(np.nanmin(env.mins[k])) if len(env) else float("nan")
                 hi = float(np.nanmax(env.maxs[k])) if len(env) else float("nan")
@@ -145,6 +147,8 @@ def query(
         raise _error(exc) from None
     _warn_if_no_samples(len(block), a, b)
     if csv_out:
+        from virtualstar.recorder.export import write_csv
+
         write_csv([block], block.names, sys.stdout)
         return
     if json_out:
@@ -168,6 +172,8 @@ def info(store: StoreArg,
     Damaged files are named on stderr and skipped; each is a gap whose reason starts with
     "damaged" (`vs data recover DIR` sets them aside).
     """
+    from virtualstar.recorder.parquet_store import ParquetStoreReader
+
     try:
         reader = _open(store)
         start, end = reader.time_range()
@@ -246,6 +252,9 @@ def export(
     """Export a window (default: everything) to CSV and/or MATLAB .mat."""
     if csv_path is None and mat_path is None:
         raise _fail("give --csv FILE and/or --mat FILE")
+    from virtualstar.recorder.export import write_csv, write_mat
+    from virtualstar.recorder.parquet_store import ParquetStoreReader
+
     try:
         reader = _open(store)
         a, b = _window(reader, t_from, t_to)

@@ -8,8 +8,11 @@ from typing import Annotated
 
 import typer
 
-from astcom_client.events import LEVELS
 from virtualstar.cli.store_warnings import reports_damage
+
+#: astcom_client.events.LEVELS, named here so that --help does not import ASTCom (numpy);
+#: tests/events checks that they agree.
+LEVEL_NAMES = ("debug", "info", "warning", "error")
 
 __all__ = ["log"]
 
@@ -49,7 +52,7 @@ def log(
                        "its first/last event).")] = "start",
     t_to: Annotated[str, typer.Option("--to", help="End (excluded), same forms.")] = "end",
     level: Annotated[str, typer.Option(
-        "--level", help=f"Lowest level shown: {', '.join(LEVELS)}.")] = "debug",
+        "--level", help=f"Lowest level shown: {', '.join(LEVEL_NAMES)}.")] = "debug",
     sources: Annotated[list[str] | None, typer.Option(
         "--source", help="Only these sources (emulator, vss, recorder); comma-separated or "
                          "repeated.")] = None,
@@ -75,6 +78,7 @@ def log(
     Table by default; --json gives {"seq", "t_us", "utc", "source", "level", "kind",
     "message", "fields"} per event.
     """
+    from astcom_client.events import LEVELS
     from virtualstar.eventlog import EventFilter, follow_vss, format_event
     from virtualstar.recorder import RecorderError
     from virtualstar.recorder.timeparse import parse_time_bound

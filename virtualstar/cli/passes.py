@@ -6,13 +6,8 @@ import json
 from pathlib import Path
 from typing import Annotated
 
-import erfa
-import numpy as np
 import typer
 
-from virtualstar.astro import AstroError, EarthOrientation, avoidance_from_options, satellite_passes
-from virtualstar.astro.avoidance import body_places
-from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
 from virtualstar.cli.where import (
     HumidityOpt,
     JsonOpt,
@@ -51,6 +46,13 @@ def passes(
 ) -> None:
     """List satellite passes: rise, culmination (time, elevation) and set; the closest the pass
     comes to the Sun; with a horizon profile, when it is above that profile."""
+    from virtualstar.astro import (
+        AstroError,
+        EarthOrientation,
+        avoidance_from_options,
+        satellite_passes,
+    )
+
     the_site = build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction)
     t0, t1 = parse_times([start]), parse_times([end])
     if not -90.0 < min_el < 90.0:
@@ -109,6 +111,12 @@ def _pass_sky(satellite, p, site, zones, eop, t0, t1) -> dict:
     A pass already up at the search's start (no rise) or still up at its end (no set) is
     sampled from that start or to that end: the part inside the window counts whole.
     """
+    import erfa
+    import numpy as np
+
+    from virtualstar.astro.avoidance import body_places
+    from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
+
     lo = p.rise.utc if p.rise is not None else t0
     hi = p.set.utc if p.set is not None else t1
     span = float(hi.seconds_since(lo.jd1[0], lo.jd2[0])[0])

@@ -65,6 +65,7 @@ from .parquet_journal import (
     session_of,
 )
 from .samples import UNKNOWN_LOST, Gap, SampleBlock, SignalInfo
+from .timeparse import utc_text
 
 __all__ = [
     "DEFAULT_FLUSH_INTERVAL_S",
@@ -74,6 +75,7 @@ __all__ = [
     "ParquetStoreReader",
     "ParquetStoreWriter",
     "recover_store",
+    "utc_text",
 ]
 
 PARQUET_FORMAT = "virtualstar-recorder/1"
@@ -88,9 +90,6 @@ def _hour_label(hour: int) -> str:
     return datetime.fromtimestamp(hour * 3600, UTC).strftime("%Y%m%dT%HZ")
 
 
-def _utc_text(t_us: int) -> str:
-    return datetime.fromtimestamp(t_us / 1e6, UTC).isoformat(timespec="microseconds").replace(
-        "+00:00", "Z")
 
 
 class ParquetStoreWriter:
@@ -637,7 +636,3 @@ def _first_t(path: Path) -> int:
         return int(md.row_group(0).column(0).statistics.min)
     return 0
 
-
-def utc_text(t_us: int) -> str:
-    """Return mount time `t_us` as ISO-8601 UTC text with microseconds."""
-    return _utc_text(t_us)
