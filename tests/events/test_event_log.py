@@ -178,6 +178,13 @@ def test_vs_log_filters_a_store_by_level_source_kind_text_and_time(night_store):
     assert table.exit_code == 0 and "el axis faulted: encoder" in table.stdout
 
 
+def test_vs_log_help_names_the_levels_astcom_defines():
+    from astcom_client.events import LEVELS
+    from virtualstar.cli.log import LEVEL_NAMES
+
+    assert LEVEL_NAMES == LEVELS  # named twice so that `vs log --help` imports no ASTCom
+
+
 def test_the_event_filter_keeps_what_each_option_says():
     e = Event(START_US, "vss", "warning", "safety", "safety: Sun → park", {"reason": "Sun"})
     assert EventFilter(min_level="warning").matches(e)
