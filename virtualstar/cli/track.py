@@ -47,12 +47,12 @@ def track(
     if duration is not None:
         params["duration_s"] = duration
     if tle is not None:
+        from catalogs import ElementFileError, read_element_text
+
         try:
-            params["tle"] = tle.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise fail(f"cannot read TLE file {tle}: {exc.strerror}", as_json=as_json) from None
-        except UnicodeDecodeError:
-            raise fail(f"{tle} is not a text TLE file", as_json=as_json) from None
+            params["tle"] = read_element_text(tle)
+        except ElementFileError as exc:
+            raise fail(f"--tle: {exc}", as_json=as_json) from None
         if sat:
             params["sat"] = sat
     elif radec:

@@ -89,8 +89,6 @@ def load_satellite(tle: Path, sat: str | None) -> Satellite:
             raise UsageError(f"{tle}: no element sets found")
         record = select_satellite(records, sat) if sat else records[0]
         return Satellite.from_record(record)
-    except OSError as exc:
-        raise UsageError(f"cannot read {tle}: {exc.strerror}") from None
     except (CatalogError, AstroError, KeyError, ValueError) as exc:
         raise UsageError(str(exc).strip('"')) from None
 
