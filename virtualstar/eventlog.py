@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from astcom_client.events import Event, level_rank, utc_text
+from virtualstar.display import safe_text
 
 __all__ = ["FOLLOW_POLL_S", "EventFilter", "VssEventSource", "follow_vss", "format_event",
            "store_events"]
@@ -56,7 +57,8 @@ class EventFilter:
 
 def format_event(e: Event) -> str:
     """Return one table row: UTC, level, source, kind, message."""
-    return f"{utc_text(e.t_us)}  {e.level:<7} {e.source:<8} {e.kind:<11} {e.message}"
+    return (f"{utc_text(e.t_us)}  {safe_text(e.level):<7} {safe_text(e.source):<8} "
+            f"{safe_text(e.kind):<11} {safe_text(e.message)}")
 
 
 def store_events(reader) -> list[Event]:

@@ -23,6 +23,7 @@ from virtualstar.cli.where import (
     parse_times,
     run_collecting_warnings,
 )
+from virtualstar.display import safe_text
 
 
 def passes(
@@ -79,7 +80,7 @@ def passes(
     if as_json:
         typer.echo(json.dumps(rows, indent=1))
         return
-    typer.echo(f"{satellite.name}: {len(rows)} passes above {min_el:g} deg from {the_site.name}")
+    typer.echo(f"{safe_text(satellite.name)}: {len(rows)} passes above {min_el:g} deg from {the_site.name}")
     typer.echo(f"{'rise UTC':24} {'az':>6}   {'culmination UTC':24} {'el':>5} {'az':>6}   "
                f"{'set UTC':24} {'az':>6}  {'sun_sep_min':>11}  {'visible':7}"
                + (f"  {'above the horizon profile (UTC)':45}" if zones.horizon else ""))

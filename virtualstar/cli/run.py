@@ -9,8 +9,9 @@ from typing import Annotated, Any
 
 import typer
 
-from virtualstar.cli.status import JsonOpt, ServerOpt, ask, print_json
+from virtualstar.cli.status import JsonOpt, ServerOpt, ask, print_json, shown
 from virtualstar.cli.status import fail as status_fail
+from virtualstar.display import safe_text
 
 __all__ = ["run"]
 
@@ -179,9 +180,9 @@ def _block_line(r: dict[str, Any]) -> str:
     figs = ("" if r.get("encoder_rms_arcsec") is None else
             f" encoder {r['encoder_rms_arcsec']:.3f}″ RMS / {r['encoder_peak_arcsec']:.3f}″ peak,"
             f" on sky {r['on_sky_rms_arcsec']:.3f}″ / {r['on_sky_peak_arcsec']:.3f}″")
-    err = f" ({r['error']['message']})" if r.get("error") else ""
+    err = f" ({safe_text(r['error']['message'])})" if r.get("error") else ""
     slew = "" if r.get("slew_s") is None else f" slew {r['slew_s']:.0f} s"
-    return (f"{(r.get('start_utc') or r['planned_start_utc'])[11:19]} {r['target']} "
+    return (f"{(r.get('start_utc') or r['planned_start_utc'])[11:19]} {safe_text(r['target'])} "
             f"#{r['repeat']}: {r['outcome']}{slew}{figs}{err}")
 
 
@@ -208,7 +209,7 @@ def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json:
 
     s = result.get("summary", {})
     wall = f", {result['wall_s']:.0f} s wall time" if "wall_s" in result else ""
-    t = Table(title=f"{result.get('program')}: {result.get('state')} — {s.get('done', 0)} done, "
+    t = Table(title=f"{shown(result.get('program'))}: {result.get('state')} — {s.get('done', 0)} done, "
                     f"{s.get('late', 0)} late, {s.get('missed', 0)} missed, "
                     f"{s.get('faulted', 0)} faulted, {len(result.get('replans', []))} re-plans; "
                     f"{s.get('priority_weighted_hours', 0.0):.2f} priority-weighted h{wall}",
@@ -224,7 +225,7 @@ def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json:
     for r in result.get("records", []):
         minutes = "-" if r.get("observed_s") is None else f"{r['observed_s'] / 60:.1f}"
         t.add_row((r.get("start_utc") or r["planned_start_utc"])[11:19], minutes,
-                  f"{r['target']} #{r['repeat']}", r["outcome"],
+                  f"{shown(r['target'])} #{r['repeat']}", r["outcome"],
                   "-" if r.get("slew_s") is None else f"{r['slew_s']:.0f} s",
                   pair(r, "encoder"), pair(r, "on_sky"))
     console = Console()
@@ -233,4 +234,4 @@ def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json:
         console.print(f"re-planned at {rp['at_utc'][11:19]}: {rp['reason']} → {rp['blocks']} "
                       "blocks", markup=False)
     if result.get("error"):
-        console.print(f"ended: {result['error']['message']}", markup=False)
+        console.print(f"ended: {safe_text(result['error']['message'])}", markup=False)

@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from virtualstar.display import safe_text
+
 if TYPE_CHECKING:
     from virtualstar.astro import Satellite, Site, UtcTimes
 
@@ -278,7 +280,7 @@ def _hms(deg: float, hours: bool) -> str:
 def _print_table(obj: Any, site: Site, rows: list[_Row], events: list[dict]) -> None:
     refr = (f"refraction on ({site.pressure_hpa:g} hPa, {site.temperature_c:g} C, "
             f"humidity {site.humidity:g})" if site.refraction else "refraction off")
-    typer.echo(f"{obj.name} from {site.name} (lat {site.lat_deg:.4f}, lon {site.lon_deg:.4f}, "
+    typer.echo(f"{safe_text(obj.name)} from {safe_text(site.name)} (lat {site.lat_deg:.4f}, lon {site.lon_deg:.4f}, "
                f"{site.height_m:g} m), {refr}")
     typer.echo(f"{'UTC':24} {'az_deg':>10} {'el_deg':>9} {'az_rate_deg_s':>14} "
                f"{'el_rate_deg_s':>14}  {'RA (apparent)':>13} {'Dec':>12} {'sun_sep_deg':>11}")
