@@ -26,7 +26,8 @@ _LAZY = {
     "load_csv": "csv_format", "read_csv": "csv_format",
     "FitResult": "fitting", "SelectionStep": "fitting", "fit_run": "fitting",
     "select_terms": "fitting",
-    "PointingModel": "model", "load_model": "model", "model_from_values": "model",
+    "PointingModel": "model", "load_model": "model", "model_from_text": "model",
+    "model_from_values": "model",
     "load_run": "run_files",
     "PointingRun": "runs", "RunParameters": "runs", "wrap_deg_180": "runs",
     "simulate_run": "simulate",
@@ -40,7 +41,7 @@ _LAZY = {
 if TYPE_CHECKING:
     from .csv_format import load_csv, read_csv
     from .fitting import FitResult, SelectionStep, fit_run, select_terms
-    from .model import PointingModel, load_model, model_from_values
+    from .model import PointingModel, load_model, model_from_text, model_from_values
     from .run_files import load_run
     from .runs import PointingRun, RunParameters, wrap_deg_180
     from .simulate import simulate_run
@@ -80,6 +81,7 @@ __all__ = [
     "load_model",
     "load_run",
     "load_tpoint",
+    "model_from_text",
     "model_from_values",
     "parse_term_list",
     "pick_spread",

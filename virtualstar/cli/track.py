@@ -47,12 +47,12 @@ def track(
     if duration is not None:
         params["duration_s"] = duration
     if tle is not None:
-        from catalogs import ElementFileError, read_element_text
+        from virtualstar.files import FileRefused, read_text_file
 
-        try:
-            params["tle"] = read_element_text(tle)
-        except ElementFileError as exc:
-            raise fail(f"--tle: {exc}", as_json=as_json) from None
+        try:  # the server takes at most 256 KiB of TLE text
+            params["tle"] = read_text_file(tle, max_bytes=256 * 1024, what="TLE file")
+        except FileRefused as exc:
+            raise fail(f"cannot read {exc}", as_json=as_json) from None
         if sat:
             params["sat"] = sat
     elif radec:
