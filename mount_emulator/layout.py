@@ -473,8 +473,29 @@ _SCALED_RANGES: dict[str, tuple[float, float]] = {  # (lowest, highest × defaul
 }
 
 
+# Parameters that must stay strictly positive (the step divides by them), and those that
+# may be zero but never negative.
+POSITIVE_PARAMS = frozenset({
+    "inertia_motor", "inertia_load", "torque_constant", "current_tau", "thermal_resistance",
+    "thermal_tau", "friction_smoothing", "velocity_filter_tau", "rate_limit", "accel_limit",
+    "ctrl_rate_limit", "ctrl_accel_limit", "following_error_limit", "current_limit",
+    "supply_resistance", "bus_capacitance", "chopper_resistance", "heartbeat_timeout",
+})
+NONNEGATIVE_PARAMS = frozenset({"stiffness", "damping", "winding_resistance",
+                                "viscous_friction", "coulomb_friction", "cogging",
+                                "brake_torque", "friction_ff", "integral_zone"})
+
+
 def param_range(slot: Slot) -> tuple[float, float]:
-    """Return the (min, max) a parameter may be written to, in its unit."""
+    """Return the (min, max) a parameter may be written to, in its unit; a parameter the
+    step divides by (POSITIVE_PARAMS) never reaches 0: at least 1e-6 × its default."""
+    lo, hi = _declared_range(slot)
+    if slot.name.rsplit(".", 1)[-1] in POSITIVE_PARAMS and lo <= 0:
+        lo = 1e-6 * slot.default
+    return lo, hi
+
+
+def _declared_range(slot: Slot) -> tuple[float, float]:
     short = slot.name.rsplit(".", 1)[-1]
     for key in (slot.name, short):
         if key in _FIXED_RANGES:

@@ -24,15 +24,8 @@ if TYPE_CHECKING:
 
 __all__ = ["POSITIVE_PARAMS", "build_collection"]
 
-# Parameters that must stay strictly positive (the step divides by them).
-POSITIVE_PARAMS = {
-    "inertia_motor", "inertia_load", "torque_constant", "current_tau", "thermal_resistance",
-    "thermal_tau", "friction_smoothing", "velocity_filter_tau", "rate_limit", "accel_limit",
-    "ctrl_rate_limit", "ctrl_accel_limit", "following_error_limit", "current_limit",
-    "supply_resistance", "bus_capacitance", "chopper_resistance", "heartbeat_timeout",
-}
-NONNEGATIVE_PARAMS = {"stiffness", "damping", "winding_resistance", "viscous_friction",
-                      "coulomb_friction", "cogging", "brake_torque", "friction_ff", "integral_zone"}
+POSITIVE_PARAMS = L.POSITIVE_PARAMS  # the layout knows them: param_range keeps them > 0
+NONNEGATIVE_PARAMS = L.NONNEGATIVE_PARAMS
 
 
 def _param_setter(params: np.ndarray, slot: L.Slot,
@@ -75,8 +68,6 @@ def build_collection(emu: MountEmulator) -> tuple[Collection, dict[int, int]]:
         column_to_state[var.trace_column] = slot.index
     for slot in L.PARAM_SLOTS:
         lo, hi = L.param_range(slot)
-        if slot.name.rsplit(".", 1)[-1] in POSITIVE_PARAMS and lo <= 0:
-            lo = 1e-6 * slot.default  # the step divides by it: never 0
         coll.add_variable(slot.name, "f64", kind="parameter", access="rw", unit=slot.unit,
                           doc=f"{slot.doc} (default {slot.default:g})",
                           get=lambda i=slot.index: float(params[i]),

@@ -151,3 +151,47 @@ def test_elements_years_older_than_the_mount_time_are_refused_with_the_hint_vs_w
     assert "days after the TLE epoch" in error.message and "load fresh elements" in error.message
     assert "vs where --tle" in error.message
     assert ping == {"pong": True}  # the server keeps serving
+
+
+def test_track_wait_shows_the_wait_for_the_pass_in_mount_time_when_piped():
+    """`vs track --tle ... --wait` into a pipe: a line per phase, the first ones saying how
+    long until the pass starts (mount time, read from the server), then the summary."""
+    sat, sf = skyfield_iss()
+    sub = wgs84.subpoint_of(sat.at(sf.ts.utc(*OVERHEAD_UTC)))
+    site = Site(lat_deg=sub.latitude.degrees, lon_deg=sub.longitude.degrees, height_m=0.0,
+                pressure_hpa=0.0, name="under the ISS")
+    overhead_us = int(UtcTimes.from_iso(["2024-05-18T20:00:00Z"]).to_unix_us()[0])
+    rig = Rig(start_us=overhead_us - 300_000_000, site=site, horizon_deg=60.0).start()
+    try:
+        res = runner.invoke(app, ["track", "--tle", str(sample_tle_path("stations")), "--sat",
+                                  "ISS", "--server", rig.url, "--wait"])
+    finally:
+        rig.close()
+    assert res.exit_code == 0, res.output
+    lines = res.stderr.splitlines()
+    planned = next(x for x in lines if ": pass planned" in x)
+    assert planned.startswith("track_satellite ISS (ZARYA): pass planned — the pass starts in ")
+    assert "culmination 8" in planned or "culmination 9" in planned
+    phases = [x.split(": ", 1)[1].split(" —")[0] for x in lines
+              if x.startswith("track_satellite ISS")]
+    assert {"pass planned", "waiting", "tracking"} <= set(phases), lines
+    assert phases.index("pass planned") < phases.index("waiting") < phases.index("tracking")
+    assert any("of the pass left" in x for x in lines if ": tracking" in x)
+    assert "tracking error RMS" in res.stdout  # the summary table once the pass ended
+
+
+def test_the_wait_line_counts_down_in_mount_time():
+    from virtualstar.cli.wait_display import wait_text
+
+    op = {"kind": "track", "target": "ISS\u202e", "phase": "waiting",
+          "info": {"pass_start_utc": "2024-05-18T20:00:00.000Z",
+                   "pass_end_utc": "2024-05-18T20:04:30.000Z",
+                   "pass_rise_utc": "2024-05-18T19:58:00.000Z", "culmination_el_deg": 87.25}}
+    at = int(UtcTimes.from_iso(["2024-05-18T19:47:25Z"]).to_unix_us()[0])
+    assert wait_text(op, at) == (
+        "track ISS\\u202e: waiting — the pass starts in 12 min 35 s; rise 19:58:00, tracked "
+        "20:00:00–20:04:30 UTC, culmination 87.2°; mount time 19:47:25")
+    assert wait_text({**op, "phase": "tracking"}, at + 780_000_000).startswith(
+        "track ISS\\u202e: tracking — 4 min 05 s of the pass left;")
+    assert wait_text(op, None) == ("track ISS\\u202e: waiting — rise 19:58:00, tracked "
+                                   "20:00:00–20:04:30 UTC, culmination 87.2°")

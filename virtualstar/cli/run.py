@@ -9,8 +9,9 @@ from typing import Annotated, Any
 
 import typer
 
-from virtualstar.cli.status import JsonOpt, ServerOpt, ask, print_json
+from virtualstar.cli.status import JsonOpt, ServerOpt, ask, print_json, shown
 from virtualstar.cli.status import fail as status_fail
+from virtualstar.display import safe_text
 
 __all__ = ["run"]
 
@@ -195,10 +196,10 @@ def _block_line(r: dict[str, Any]) -> str:
         if r.get("planned_deviation"):
             figs += (f"; planned deviation {_f(r.get('planned_deviation_peak_arcsec'), '.1f')}″ "
                      f"({', '.join(r['planned_deviation'])})")
-    err = f" ({r['error']['message']})" if r.get("error") else ""
+    err = f" ({safe_text(r['error']['message'])})" if r.get("error") else ""
     slew = "" if r.get("slew_s") is None else f" slew {r['slew_s']:.0f} s"
     delay = f" {r['delay_s']:.0f} s late" if (r.get("delay_s") or 0) >= 1.0 else ""
-    return (f"{(r.get('start_utc') or r['planned_start_utc'])[11:19]} {r['target']} "
+    return (f"{(r.get('start_utc') or r['planned_start_utc'])[11:19]} {safe_text(r['target'])} "
             f"#{r['repeat']}: {r['outcome']}{delay}{slew}{figs}{err}")
 
 
@@ -228,7 +229,7 @@ def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json:
 
     s = result.get("summary", {})
     wall = f", {result['wall_s']:.0f} s wall time" if "wall_s" in result else ""
-    t = Table(title=f"{result.get('program')}: {result.get('state')} — {s.get('done', 0)} done, "
+    t = Table(title=f"{shown(result.get('program'))}: {result.get('state')} — {s.get('done', 0)} done, "
                     f"{s.get('degraded', 0)} degraded, {s.get('late', 0)} late, "
                     f"{s.get('missed', 0)} missed, {s.get('faulted', 0)} faulted, "
                     f"{len(result.get('replans', []))} re-plans; "
@@ -252,7 +253,7 @@ def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json:
 
     for r in result.get("records", []):
         t.add_row((r.get("start_utc") or r["planned_start_utc"])[11:16],
-                  f"{r['target']} #{r['repeat']}", r["outcome"],
+                  f"{shown(r['target'])} #{r['repeat']}", r["outcome"],
                   "-" if r.get("delay_s") is None else f"{r['delay_s']:.0f}",
                   "-" if r.get("slew_s") is None else f"{r['slew_s']:.0f}",
                   pair(r, "on_target"),
@@ -268,4 +269,4 @@ def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json:
         console.print(f"re-planned at {rp['at_utc'][11:19]}: {rp['reason']} → {rp['blocks']} "
                       "blocks", markup=False)
     if result.get("error"):
-        console.print(f"ended: {result['error']['message']}", markup=False)
+        console.print(f"ended: {safe_text(result['error']['message'])}", markup=False)

@@ -12,13 +12,13 @@ from typing import Annotated
 
 import typer
 
-from virtualstar.astro import AstroError, avoidance_from_options
-from virtualstar.astro.site import site_from_options
 from virtualstar.cli.status import fail
 from virtualstar.launcher import DEFAULT_ENDPOINT_PORT, EndpointUnavailable
-from virtualstar.server import DEFAULT_PORT, AccessConfig, VssError, build_server
-from virtualstar.server.access import check_listen
-from virtualstar.server.server import parse_listen_url
+from virtualstar.vss_client import DEFAULT_SERVER_URL
+
+# The server, the astronomy and the emulator are imported when the command runs: --help
+# stays fast (benchmarks/bench_cli_startup.py; tests/test_import_rules.py). The launcher
+# imports the emulator only when it starts one.
 
 __all__ = ["server"]
 
@@ -66,7 +66,7 @@ def server(
         "--allow-origin", help="A web page origin allowed to connect, e.g. http://panel:8080 "
         "(repeat for more; default: pages served from loopback only).")] = None,
     listen: Annotated[str, typer.Option(
-        "--listen", help="Where clients connect: ws://HOST:PORT.")] = f"ws://127.0.0.1:{DEFAULT_PORT}",
+        "--listen", help="Where clients connect: ws://HOST:PORT.")] = DEFAULT_SERVER_URL,
     site_file: Annotated[Path | None, typer.Option(
         "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a \\[site] table (and optionally \\[safety]).")] = None,
     site: Annotated[str | None, typer.Option(
@@ -88,6 +88,12 @@ def server(
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log connection events.")] = False,
 ) -> None:
     """Serve clients (vs status/slew/track/...) until Ctrl-C; the mount is fed continuously."""
+    from virtualstar.astro import AstroError, avoidance_from_options
+    from virtualstar.astro.site import site_from_options
+    from virtualstar.server import AccessConfig, VssError
+    from virtualstar.server.access import check_listen
+    from virtualstar.server.server import parse_listen_url
+
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
                         format="%(asctime)s %(name)s: %(message)s")
     if emulator == (mount is not None):
@@ -251,6 +257,8 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
 
 async def _serve(speed, mount, password, mapping, listen, site, pointing_model, passive,
                  zones, access) -> None:
+    from virtualstar.server import build_server
+
     stop = _stop_event()
     vss = build_server(mount_url=mount, password=password, mapping_path=mapping, site=site,
                        speed=speed, active=not passive, pointing_model=pointing_model,

@@ -8,7 +8,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from virtualstar.cli.status import JsonOpt, ServerOpt, _f, ask, fail, print_json
+from virtualstar.cli.status import JsonOpt, ServerOpt, _f, ask, fail, print_json, shown
 
 __all__ = ["AllowSunOpt", "RadecOpt", "StarOpt", "op_table", "slew", "target_params"]
 
@@ -67,7 +67,7 @@ def op_table(op: dict[str, Any], title: str) -> Table:
     t = Table(title=title, show_header=False, title_justify="left")
     t.add_column("what", style="bold")
     t.add_column("value")
-    t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
+    t.add_row("operation", f"#{op['id']} {op['kind']} {shown(op['target'])}: {op['phase']}")
     rows = [("slew time", "slew_time_s", ".1f", " s"),
             ("landing error RMS", "landing_rms_arcsec", ".3f", "″"),
             ("landing error peak", "landing_peak_arcsec", ".3f", "″"),

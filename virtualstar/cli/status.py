@@ -60,6 +60,7 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
     With `quiet` (the command's --json), a failure also prints a JSON error object on
     stdout (`{"error": {"code", "message"}}`), so a script parses the same stream either way.
     """
+    from virtualstar.display import safe_text
     from virtualstar.vss_client import ServerUnavailable, VssRequestError, call_server
 
     url = server or default_server_url()
@@ -71,7 +72,7 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
                     if kind == "operation":
                         info = data.get("info", {})
                         left = info.get("seconds_left")
-                        spinner.update(f"{data.get('kind')} {data.get('target')}: "
+                        spinner.update(f"{data.get('kind')} {shown(data.get('target'))}: "
                                        f"{data.get('phase')}"
                                        + (f" ({left:.0f} s mount time left)" if left else ""))
                     elif kind == "fault":
@@ -83,11 +84,22 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
     except VssRequestError as exc:
         if quiet:
             print_json({"error": {"code": exc.code, "message": exc.message}})
-        raise fail(f"the server refused {cmd}: {exc.message} [{exc.code}]", 1) from None
+        raise fail(f"the server refused {cmd}: {safe_text(exc.message)} [{exc.code}]",
+                   1) from None
     except ServerUnavailable as exc:
         if quiet:
             print_json({"error": {"code": "server_unavailable", "message": str(exc)}})
         raise fail(str(exc), 2) from None
+
+
+def shown(text: Any) -> str:
+    """Return outside text (a target or TLE name, a server's message) for a rich cell or
+    line: control and bidirectional characters escaped, rich markup made inert."""
+    from rich.markup import escape
+
+    from virtualstar.display import safe_text
+
+    return escape(safe_text(text))
 
 
 def print_json(doc: Any) -> None:
@@ -138,12 +150,12 @@ def render_status(st: dict[str, Any]) -> Table:
     t.add_row("pointing model", st.get("pointing_model") or "none (encoders = observed)")
     op = st.get("operation")
     if op:
-        t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
+        t.add_row("operation", f"#{op['id']} {op['kind']} {shown(op['target'])}: {op['phase']}")
     now = st.get("on_target")
     if now:
         last = now.get("last_sample") or {}
         planned = ", ".join(now.get("planned") or []) or "none planned"
-        t.add_row("on target", f"{now['target']}: the boresight is "
+        t.add_row("on target", f"{shown(now['target'])}: the boresight is "
                   f"{_f(now['error_arcsec'], '.3f', '″')} from its true place (az "
                   f"{now['az_deg']:.5f}°, el {now['el_deg']:.5f}°); planned deviation "
                   f"{_f(last.get('planned_deviation_arcsec'), '.3f', '″')} ({planned})")

@@ -60,8 +60,26 @@ def track(
         params["radec"] = radec
     else:
         params["star"] = star
-    op = ask(server, "track", params, progress=True, quiet=as_json)
+    if wait and not as_json:
+        op = _track_showing_the_wait(server, params)
+    else:
+        op = ask(server, "track", params, progress=True, quiet=as_json)
     if as_json:
         print_json(op)
     else:
         Console().print(op_table(op, "track"))
+
+
+def _track_showing_the_wait(server: str | None, params: dict) -> dict:
+    """Send `track` and show the wait (a live countdown at a terminal, lines when piped)."""
+    import sys
+
+    from virtualstar.cli.status import api_password
+    from virtualstar.cli.wait_display import WaitDisplay
+    from virtualstar.vss_client import default_server_url
+
+    console = Console(stderr=True)
+    url = server or default_server_url()
+    with WaitDisplay(url, password=api_password(), terminal=console.is_terminal,
+                     out=sys.stderr, console=console) as display:
+        return ask(server, "track", params, on_event=display.on_event)

@@ -41,7 +41,8 @@ def plot_plan(plan: Plan, program: Program, site: Site, path: str | Path,
     sidereal = [t for t in planned if not t.is_satellite]
     # every sidereal target at once: ERFA's per-time work is shared (observe_stars)
     el_of = {t.name: s.el_deg for t, s in
-             zip(sidereal, target_skies(sidereal, grid, site, eop, _no_zones()), strict=True)}
+             zip(sidereal, target_skies(sidereal, grid, site, eop, _no_zones()), strict=True)
+             if s.el_deg is not None}
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, target in enumerate(planned):
         name = target.name
@@ -54,7 +55,9 @@ def plot_plan(plan: Plan, program: Program, site: Site, path: str | Path,
                 ax.plot((t - grid.t_us[0]) / 3.6e9, el, color=colour, lw=3,
                         label=name if b.repeat == 1 else None)
             continue
-        el = el_of[name]
+        el = el_of.get(name)
+        if el is None:  # never where it may be observed: no curve to draw
+            continue
         ax.plot(hours, el, color=colour, lw=0.8, alpha=0.6)
         for b in (b for b in plan.blocks if b.target == name):
             sel = (grid.t_us >= b.start_us) & (grid.t_us <= b.end_us)

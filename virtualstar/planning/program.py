@@ -190,16 +190,15 @@ def _target(path: Path, index: int, t: dict[str, Any]) -> ProgramTarget:
     spec = str(t[kind]) if kind != "tle_file" else str(t.get("sat", ""))
     tle_file, tle_text = None, ""
     if kind == "tle_file":
+        from catalogs import ElementFileError, read_element_text
+
         tle_file = (path.parent / str(t["tle_file"])).resolve()
-        if not tle_file.is_file():
-            raise ProgramError(f"{where}: tle_file {t['tle_file']!r}: no such file "
-                               f"(looked for {tle_file})")
         if not spec:
             raise ProgramError(f"{where}: a tle_file needs sat = \"NAME\" (the satellite in it)")
         try:
-            tle_text = tle_file.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ProgramError(f"{where}: cannot read tle_file {tle_file}: {exc}") from None
+            tle_text = read_element_text(tle_file)
+        except ElementFileError as exc:
+            raise ProgramError(f"{where}: tle_file {t['tle_file']!r}: {exc}") from None
     elif kind == "radec":
         from virtualstar.astro import AstroError, parse_radec
 
