@@ -41,6 +41,23 @@ def star_truth(name: str, t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarra
     return aa.az.deg, aa.alt.deg
 
 
+def radec_truth(ra_deg: float, dec_deg: float, t_us, site, step_us: int = 10_000):
+    """Return astropy's observed az, el (deg) of an ICRS RA/Dec at mount times (UTC µs).
+
+    Computed on a 10-ms grid and interpolated linearly: a star moves at most 15″/s, so
+    the interpolation error stays below a microarcsecond, and 10 kHz samples cost little.
+    """
+    import astropy.units as u
+    from astropy.coordinates import SkyCoord
+
+    t_us = np.atleast_1d(np.asarray(t_us, np.int64))
+    grid = np.arange(t_us.min() - step_us, t_us.max() + 2 * step_us, step_us)
+    aa = SkyCoord(ra=ra_deg * u.deg, dec=dec_deg * u.deg, frame="icrs").transform_to(
+        observed_frame(grid, site))
+    az = np.degrees(np.unwrap(np.radians(aa.az.deg)))
+    return np.interp(t_us, grid, az) % 360.0, np.interp(t_us, grid, aa.alt.deg)
+
+
 def vega_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
     """Return astropy's observed az, el (deg) of Vega at mount times (UTC µs)."""
     return star_truth("Vega", t_us, site)

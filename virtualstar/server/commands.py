@@ -83,6 +83,14 @@ class GuideParams:
 
 
 @dataclass(frozen=True)
+class OffsetParams:
+    axis: str  # ra, dec, az, el, path, transverse (or all, with op=reset)
+    op: str = "add"  # add, set, rate, reset
+    arcsec: float | None = None  # arcsec (rate: arcsec/s)
+    seconds: float | None = None  # path only: seconds of time (rate: s/s)
+
+
+@dataclass(frozen=True)
 class StopParams:
     reset_faults: bool = False
 
@@ -272,6 +280,10 @@ async def _guide(t: Telescope, p: GuideParams) -> Any:
     return await t.guide(p.north_arcsec, p.east_arcsec, p.rate_arcsec_s)
 
 
+async def _offset(t: Telescope, p: OffsetParams) -> Any:
+    return await t.steering.offset(p.axis, p.op, arcsec=p.arcsec, seconds=p.seconds)
+
+
 async def _stop(t: Telescope, p: StopParams) -> Any:
     return await t.stop(reset_faults=p.reset_faults)
 
@@ -354,6 +366,12 @@ COMMANDS: dict[str, Command] = {
     "guide": Command(GuideParams, _guide, "A guide pulse: offset the sky target being tracked "
                      "by north_arcsec / east_arcsec at rate_arcsec_s; answers with when the pulse "
                      "runs (mount µs) and the total offset."),
+    "offset": Command(OffsetParams, _offset, "Offset the running track (PWI4-style): axis ra, "
+                      "dec, az, el (arcsec), path (seconds of time, or arcsec along the track), "
+                      "transverse (arcsec across it); op add, set, rate (per second) or reset; "
+                      "applied gradually within the offset limits from 20 ms after acceptance "
+                      "(replace_from); answers with from_us, reached_us, lead_ms and the "
+                      "offsets."),
     "stop": Command(StopParams, _stop, "Stop the operation, bring the mount to rest; "
                     "reset_faults=true also clears latched faults."),
     "reset_faults": Command(NoParams, _reset, "Stop and clear the mount's latched faults."),

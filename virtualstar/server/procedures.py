@@ -45,9 +45,9 @@ from virtualstar.astro import (
     satellite_passes,
     unwrap_azimuth,
 )
-from virtualstar.astro.constants import ARCSEC_PER_RAD
 from virtualstar.astro.exceptions import SatelliteError
 
+from .corrections import Corrections
 from .exceptions import InExclusionZone, StaleElements, TargetUnreachable
 from .feeder import Feeder
 from .operations import Operation, Phase
@@ -56,7 +56,6 @@ from .trajectories import (
     SLEW_MARGIN,
     ConstantRatePath,
     Path,
-    Points,
     RampIn,
     RampOut,
     TargetPath,
@@ -77,6 +76,7 @@ T = TypeVar("T")
 MAX_JOIN_PLANS = 12  # plans of a join before giving up (each with 1.5× the previous margin)
 PASS_LOOKBACK_S = 1800.0  # predictions start this far back, so a pass in progress is found
 MIN_JOIN_TRACK_S = 10.0  # a finite path is joined only if this much of it is left
+PASS_OFFSET_MARGIN_S = 30.0  # a pass is planned this much longer at both ends (path offsets)
 RUN_UP_STEP_US = 2_000_000  # a run-up inside a zone moves the join this much later
 MOVE_LOOKAHEAD_S = 3600.0  # a move at rates is checked against the limits and zones this far
 MOVE_CHECK_STEP_DEG = 0.1  # ... on a grid of mount time that moves at most this far a step
@@ -105,8 +105,13 @@ async def run_beside(main: Awaitable[T], feeder: Feeder) -> T:
 
 
 async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int | None = None,
-                  end_us: int | None = None, allow_sun: bool = False) -> tuple[RampIn, Feeder]:
-    """Slew to the run-up of `path` and start following it; return the run-up and its feeder."""
+                  end_us: int | None = None, allow_sun: bool = False,
+                  corrections: Corrections | None = None) -> tuple[RampIn, Feeder]:
+    """Slew to the run-up of `path` and start following it; return the run-up and its feeder.
+
+    With `corrections`, offsets changed from now on start at the join (the run-up aims
+    at the place they had when it was planned), and the feeder is handed to them.
+    """
     cfg = t.config
     lead_s = cfg.start_lead_s
     plan = 0
@@ -115,6 +120,8 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         ramp = plan_run_up(path, az_rad=here.az_rad, el_rad=here.el_rad, now_us=here.t_us,
                            limits=t.limits, lead_s=lead_s, ramp_s=cfg.ramp_s,
                            not_before_us=not_before_us)
+        if corrections is not None:
+            corrections.hold_until(ramp.join_us)
         if end_us is not None and ramp.join_us > end_us - int(MIN_JOIN_TRACK_S * 1e6):
             raise TargetUnreachable(f"too little of the path is left to join it: it ends "
                                     f"{(end_us - here.t_us) / 1e6:.0f} s from now")
@@ -144,6 +151,8 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
             feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
                                                      on_points=t.note_points)
             if feeder is not None:
+                if corrections is not None:
+                    corrections.attach(feeder)
                 t.supervisor.phase(op, Phase.JOINING)
                 return ramp, feeder
         log.warning("operation %s: the join at %s came too late for the host (plan %d); "
@@ -187,11 +196,11 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
     cfg = t.config
     await prepare(t, op)
     here = await t.motion.position()
-    path = TargetPath(target, cfg.site, limits=t.limits, eop=t.eop, model=t.model,
-                      current_az_rad=here.az_rad,
-                      guard=t.safety.guard(op.target, allow_sun=allow_sun),
-                      offsets=t.guide_offsets(op))
-    ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun)
+    corrections = t.steering.corrections(op)
+    path = corrections.wrap(TargetPath(target, cfg.site, limits=t.limits, eop=t.eop,
+                                       model=t.model, current_az_rad=here.az_rad,
+                                       guard=t.safety.guard(op.target, allow_sun=allow_sun)))
+    ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun, corrections=corrections)
 
     async def on_path() -> dict[str, Any]:
         settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
@@ -217,6 +226,7 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
     try:
         result = await run_beside(on_path(), feeder)
     except (TargetUnreachable, InExclusionZone) as exc:
+        corrections.attach(None)
         if op.phase is not Phase.TRACKING:
             raise
         # the next chunk would leave the limits or enter a zone: the points already
@@ -225,6 +235,8 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
         why = ("the target left the limits" if isinstance(exc, TargetUnreachable)
                else "stopped before entering the exclusion zone")
         result = {"ended": f"{why}: {exc}", "tracking_to_us": await t.motion.mount_time_us()}
+    finally:
+        corrections.attach(None)
     op.info["feeder"] = feeder.stats.as_dict()
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
@@ -395,12 +407,8 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
         raise TargetUnreachable(f"the next pass of {sat.name} begins in "
                                 f"{(choice.join_us - here.t_us) / 1e6:.0f} s, more than the "
                                 f"{max_wait_s:g} s allowed")
-    with _sgp4_errors(sat, here.t_us):
-        plan = plan_satellite_pass(
-            sat, cfg.site, choice.join_us, set_us, step_s=cfg.sat_grid_s, limits=t.limits,
-            track_rate_limit_deg_s=t.track_rate_limit_deg_s * cfg.keyhole_rate_fraction,
-            accel_limit_deg_s2=t.limits.az_max_accel_deg_s2, eop=t.eop, model=t.model,
-            current_az_rad=here.az_rad)
+    full = _plan_pass(t, sat, here, choice.join_us, set_us)
+    plan = dataclasses.replace(full, path=full.path.between(choice.join_us, set_us))
     join_us, set_us, stops = _safe_part(t, plan, choice.join_us, allow_sun)
     if stops is not None:
         op.info["zone_stop"] = stops
@@ -415,10 +423,13 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
                        keyhole_max_error_arcsec=plan.keyhole_max_error_arcsec,
                        max_az_rate_deg_s=plan.max_az_rate_deg_s)
     t.supervisor.begun(op)
+    # the offsets move along the whole table (margins included), the feed ends at set
+    corrections = t.steering.corrections(op)
     # run out to rest after set, and hold: stopping a little late costs nothing
-    path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
+    path = RampOut(corrections.wrap(full.path, end_us=set_us), cfg.ramp_s,
+                   max(2.0, 1.0 * cfg.margin_speed))
     ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
-                                 allow_sun=allow_sun)
+                                 allow_sun=allow_sun, corrections=corrections)
 
     async def on_path() -> int:
         await t.motion.wait_until(ramp.join_us)
@@ -429,7 +440,10 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
         t.supervisor.phase(op, Phase.TRACKING, join_error_arcsec=err)
         return min(await t.motion.wait_until(set_us, op.info), set_us)
 
-    track_to = await run_beside(on_path(), feeder)
+    try:
+        track_to = await run_beside(on_path(), feeder)
+    finally:
+        corrections.attach(None)
     op.info["feeder"] = feeder.stats.as_dict()
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
@@ -438,6 +452,26 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
 
 
 # ---------------------------------------------------------------------- helpers
+def _plan_pass(t: Telescope, sat: Satellite, here, join_us: int, set_us: int):
+    """Plan the pass from `join_us` to `set_us`, with `PASS_OFFSET_MARGIN_S` more at both
+    ends for path offsets (without, if the longer pass would not fit the cable wrap)."""
+    cfg = t.config
+    margin_us = int(PASS_OFFSET_MARGIN_S * 1e6)
+    for margin in (margin_us, 0):
+        try:
+            with _sgp4_errors(sat, here.t_us):
+                return plan_satellite_pass(
+                    sat, cfg.site, join_us - margin, set_us + margin, step_s=cfg.sat_grid_s,
+                    limits=t.limits,
+                    track_rate_limit_deg_s=t.track_rate_limit_deg_s * cfg.keyhole_rate_fraction,
+                    accel_limit_deg_s2=t.limits.az_max_accel_deg_s2, eop=t.eop, model=t.model,
+                    current_az_rad=here.az_rad)
+        except TargetUnreachable:
+            if not margin:
+                raise
+    raise AssertionError("unreachable")
+
+
 def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, int, str | None]:
     """Return (join, end, why it ends early or None) of the pass stretch outside every zone.
 
@@ -515,10 +549,3 @@ def _choose_pass(t: Telescope, sat: Satellite, here):
                                 f"at least {cfg.min_pass_track_s:g} s left to track in the next "
                                 f"{cfg.pass_search_s / 3600:g} h")
     return choice
-
-
-def sky_rate_arcsec_s(p: Points) -> np.ndarray:
-    """Return the on-sky rate of trajectory points (arcsec/s)."""
-    return np.hypot(p.az_rate_rad_s * np.cos(p.el_rad), p.el_rate_rad_s) * ARCSEC_PER_RAD
-
-
