@@ -309,6 +309,8 @@ class MountModel:
         last = int(self.state[L.G_TRAJ_LAST_US]) if tail > head else -(2**62)
         lims = [(self.params[L.param_index(a, L.P_POS_MIN)], self.params[L.param_index(a, L.P_POS_MAX)])
                 for a in range(2)]
+        if len(t) > 1 and bool(np.all(np.diff(t) > 0)):
+            return self._append_increasing(t, az, el, vaz, vel, max(earliest, last), lims)
         accepted = late = out = 0
         for k in range(len(t)):
             if tail - head >= cap - 1:
@@ -335,6 +337,38 @@ class MountModel:
         self.state[L.G_TRAJ_OUT_OF_RANGE] += out
         self.state[L.G_TRAJ_ACCEPTED] += accepted
         return accepted
+
+    def _append_increasing(self, t, az, el, vaz, vel, after, lims) -> int:
+        """`_append` for a batch already increasing in time: the same rules, as arrays."""
+        cap = self.traj_capacity
+        tail = int(self.state[L.G_TRAJ_TAIL])
+        head = int(self.state[L.G_TRAJ_HEAD])
+        late = t <= after
+        inside = ((az >= lims[0][0]) & (az <= lims[0][1]) & (el >= lims[1][0])
+                  & (el <= lims[1][1]) & ~np.isinf(vaz) & ~np.isinf(vel))
+        take = np.flatnonzero(~late & inside)
+        room = cap - 1 - (tail - head)
+        stored = take[:max(room, 0)]
+        # once full, the points after are neither stored nor counted (push them later)
+        full = len(stored) >= room
+        considered = (int(stored[-1]) + 1 if len(stored) else 0) if full else len(t)
+        idx = (tail + np.arange(len(stored))) % cap
+        self.traj_t[idx] = t[stored]
+        self.traj_p[idx, 0] = az[stored]
+        self.traj_p[idx, 1] = el[stored]
+        self.traj_v[idx, 0] = vaz[stored]
+        self.traj_v[idx, 1] = vel[stored]
+        tail += len(stored)
+        self.state[L.G_TRAJ_TAIL] = tail
+        if len(stored):
+            self.state[L.G_TRAJ_LAST_US] = int(t[stored[-1]])
+        elif tail <= head:
+            self.state[L.G_TRAJ_LAST_US] = 0
+        self.state[L.G_TRAJ_LATE] += int(np.count_nonzero(late[:considered]))
+        self.state[L.G_TRAJ_OUT_OF_RANGE] += int(np.count_nonzero(~late[:considered]
+                                                                  & ~inside[:considered]))
+        self.state[L.G_TRAJ_ACCEPTED] += len(stored)
+        return len(stored)
 
     # --------------------------------------------------------------------- time
     def set_clock(self, start_us: int) -> None:
