@@ -77,18 +77,27 @@ def skyfield_iss():
 
 
 def iss_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
-    """Return skyfield's observed az, el (deg) of the ISS at mount times (UTC µs).
+    """Return skyfield's observed az, el (deg) of the ISS at mount times (UTC µs)."""
+    sat, _ = skyfield_iss()
+    return satellite_truth(sat, t_us, site)
 
-    The apparent direction (light time, aberration), as a telescope sees it, lifted by
-    ERFA's refraction constants for the site's air (skyfield's own formula ignores
-    humidity and wavelength: arcseconds at 20°); a site without air gets none.
+
+def satellite_truth(sat, t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
+    """Return skyfield's observed az, el (deg) of a satellite at mount times (UTC µs).
+
+    `sat`: a skyfield EarthSatellite, or (line1, line2) of its elements. The apparent
+    direction (light time, aberration), as a telescope sees it, lifted by ERFA's
+    refraction constants for the site's air (skyfield's own formula ignores humidity
+    and wavelength: arcseconds at 20°); a site without air gets none.
     """
     from datetime import UTC, datetime
 
     import erfa
-    from skyfield.api import wgs84
+    from skyfield.api import EarthSatellite, wgs84
 
-    sat, sf = skyfield_iss()
+    _, sf = skyfield_iss()
+    if isinstance(sat, tuple):
+        sat = EarthSatellite(sat[0], sat[1], "truth", sf.ts)
     earth = sf.ephemeris["earth"]
     observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
     ts = sf.ts.from_datetimes([datetime.fromtimestamp(t / 1e6, tz=UTC) for t in t_us])

@@ -9,6 +9,7 @@ from typing import Any
 from virtualstar.astro import Site, load_site
 
 from .access import AccessConfig
+from .camera_link import CameraLink, CameraLinkConfig
 from .clock import MountClock, PacedClock
 from .mapping import load_mapping
 from .mount_link import LinkConfig, MountLink
@@ -25,6 +26,7 @@ def build_server(*, mount_url: str, password: str | None = None,
                  clock: MountClock | None = None,
                  connector: Callable[[], Awaitable[Any]] | None = None,
                  access: AccessConfig | None = None,
+                 camera: CameraLinkConfig | None = None,
                  **telescope_options) -> VssServer:
     """Return a VssServer for the mount at `mount_url` (not started yet).
 
@@ -33,7 +35,8 @@ def build_server(*, mount_url: str, password: str | None = None,
     clock: a `virtualstar.lockstep.LockstepClock` shared with an embedded emulator
     (lockstep simulated time; `speed` is then its pace, 0 for none), with `connector`
     opening the in-memory connection to it. access: the API's passwords and allowed
-    origins (default: none, loopback pages only). Raises MappingError, BadRequest.
+    origins (default: none, loopback pages only). camera: a guide camera device for
+    closed-loop tracking (camera_link.py). Raises MappingError, BadRequest.
     """
     mapping = load_mapping(mapping_path)
     link = MountLink(LinkConfig(mount_url, password, connector=connector), mapping)
@@ -44,6 +47,8 @@ def build_server(*, mount_url: str, password: str | None = None,
                              simulated=(speed != 1.0) if simulated is None else simulated,
                              lockstep=lockstep, active=active, **telescope_options)
     telescope = Telescope(link, config, clock or PacedClock(speed))
+    if camera is not None:
+        telescope.steering.camera = CameraLink(camera)
     if pointing_model is not None:
         telescope.load_model(str(pointing_model))
     return VssServer(telescope, heartbeat_s=heartbeat_s, access=access)

@@ -57,6 +57,7 @@ class TrackParams(TargetParams):
     duration_s: float | None = None
     wait: bool = False
     max_wait_s: float | None = None
+    closed_loop: bool = False  # guided by the guide camera (needs the server's --camera)
 
 
 @dataclass(frozen=True)
@@ -217,7 +218,8 @@ async def _track(t: Telescope, p: TrackParams) -> Any:
         if any(getattr(p, k) is not None for k in ("radec", "ra_deg", "star", "altaz", "az_deg")):
             raise BadRequest("track: give either a TLE or a sky target, not both")
         sat = _satellite(p.tle, p.sat)
-        op = await t.track_satellite(sat, max_wait_s=p.max_wait_s, allow_sun=p.allow_sun)
+        op = await t.track_satellite(sat, max_wait_s=p.max_wait_s, allow_sun=p.allow_sun,
+                                     closed_loop=p.closed_loop)
         return await _result(op, wait_done=p.wait, accepted=p.answer_on_accept)
     if p.sat is not None:
         raise BadRequest("track: 'sat' selects a satellite inside 'tle'; no TLE was given")
@@ -225,7 +227,7 @@ async def _track(t: Telescope, p: TrackParams) -> Any:
     if fixed is not None:
         raise BadRequest("track: a fixed az/el does not move; use slew for it")
     op = await t.follow_target(target, name, kind="track", duration_s=p.duration_s,
-                               allow_sun=p.allow_sun)
+                               allow_sun=p.allow_sun, closed_loop=p.closed_loop)
     return await _result(op, wait_done=p.wait, accepted=p.answer_on_accept)
 
 

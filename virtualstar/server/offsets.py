@@ -21,18 +21,22 @@ Axes and units (docs/vss.md, "Offsets"):
 
 from __future__ import annotations
 
-import copy
+import bisect
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["AXES", "OPERATIONS", "OffsetLimits", "OffsetProfile", "Offsets", "time_optimal"]
+__all__ = ["ALL_AXES", "AXES", "LOOP_AXES", "OPERATIONS", "OffsetLimits", "OffsetProfile",
+           "Offsets", "time_optimal"]
 
 AXES = ("ra", "dec", "az", "el", "path", "transverse")
-ARCSEC_AXES = ("ra", "dec", "az", "el", "transverse")
+# the closed loop's own axes (closed_loop.py): added to the user's, so an offset a user
+# gives on top of a guided track moves the boresight from the target, not the loop
+LOOP_AXES = ("guide_ra", "guide_dec", "guide_path", "guide_transverse")
+ALL_AXES = AXES + LOOP_AXES
 OPERATIONS = ("add", "set", "rate", "reset")
-KEEP_HISTORY_US = 120_000_000  # knots older than this before a change are folded away
+KEEP_HISTORY_US = 30_000_000  # knots older than this before a change are folded away
 
 
 @dataclass(frozen=True)
@@ -95,6 +99,11 @@ class OffsetProfile:
     v: list[float] = field(default_factory=list)
     a: list[float] = field(default_factory=list)
     changes: int = 0
+    _arrays: tuple[np.ndarray, ...] | None = field(default=None, repr=False, compare=False)
+
+    def copy(self) -> OffsetProfile:
+        return OffsetProfile(list(self.t_us), list(self.p), list(self.v), list(self.a),
+                             self.changes)
 
     def at(self, t_us: int) -> tuple[float, float]:
         """Return (offset, rate) at one mount time."""
@@ -106,19 +115,23 @@ class OffsetProfile:
         t = np.asarray(t_us, np.int64)
         if not self.t_us:
             return np.zeros(t.shape), np.zeros(t.shape)
-        knots = np.asarray(self.t_us, np.int64)
+        if self._arrays is None:
+            self._arrays = (np.asarray(self.t_us, np.int64), np.asarray(self.p),
+                            np.asarray(self.v), np.asarray(self.a))
+        knots, pk, vk, ak = self._arrays
         k = np.searchsorted(knots, t, side="right") - 1
         before = k < 0
         k = np.maximum(k, 0)
         dt = (t - knots[k]) * 1e-6
-        a = np.asarray(self.a)[k]
-        v = np.asarray(self.v)[k] + a * dt
-        p = np.asarray(self.p)[k] + np.asarray(self.v)[k] * dt + 0.5 * a * dt * dt
+        a = ak[k]
+        v = vk[k] + a * dt
+        p = pk[k] + vk[k] * dt + 0.5 * a * dt * dt
         return np.where(before, 0.0, p), np.where(before, 0.0, v)
 
     def knots_between(self, t0_us: int, t1_us: int) -> list[int]:
         """Return the knot times in (t0_us, t1_us]: where the acceleration changes."""
-        return [t for t in self.t_us if t0_us < t <= t1_us]
+        return self.t_us[bisect.bisect_right(self.t_us, t0_us):
+                         bisect.bisect_right(self.t_us, t1_us)]
 
     @property
     def end_us(self) -> int:
@@ -136,8 +149,7 @@ class OffsetProfile:
         """
         from_us = int(from_us)
         p0, v0 = self.at(from_us)
-        keep = [i for i, t in enumerate(self.t_us) if t < from_us]
-        self._truncate(keep, from_us)
+        self._truncate(from_us)
         v_rel = max(v_max - abs(goal_rate), 1e-3 * v_max)
         t, p, v = from_us, p0, v0
         g = goal
@@ -157,8 +169,7 @@ class OffsetProfile:
         """From `from_us`, change the rate to `rate` at `a_max` and keep it (a drift)."""
         from_us = int(from_us)
         p0, v0 = self.at(from_us)
-        keep = [i for i, t in enumerate(self.t_us) if t < from_us]
-        self._truncate(keep, from_us)
+        self._truncate(from_us)
         t = from_us
         if v0 != rate:
             dt_us = max(1, int(round(abs(rate - v0) / a_max * 1e6)))
@@ -172,18 +183,22 @@ class OffsetProfile:
 
     def fold(self, before_us: int) -> None:
         """Forget knots older than `before_us` (but the one in force then)."""
-        k = sum(1 for t in self.t_us if t <= before_us) - 1
+        k = bisect.bisect_right(self.t_us, before_us) - 1
         if k > 0:
             del self.t_us[:k], self.p[:k], self.v[:k], self.a[:k]
+            self._arrays = None
 
-    def _truncate(self, keep: list[int], from_us: int) -> None:
-        n = (keep[-1] + 1) if keep else 0
+    def _truncate(self, from_us: int) -> None:
+        """Drop the knots at or after `from_us` (the plan from there is being replaced)."""
+        n = bisect.bisect_left(self.t_us, from_us)
         del self.t_us[n:], self.p[n:], self.v[n:], self.a[n:]
+        self._arrays = None
         self.fold(from_us - KEEP_HISTORY_US)
 
     def _knot(self, t_us: int, p: float, v: float, a: float) -> None:
+        self._arrays = None
         if self.t_us and self.t_us[-1] == t_us:
-            self.p[-1], self.v[-1], self.a[-1] = p, v, a
+            self.p[-1], self.v[-1], self.a[-1] = float(p), float(v), float(a)
             return
         self.t_us.append(int(t_us))
         self.p.append(float(p))
@@ -197,10 +212,10 @@ class Offsets:
 
     limits: OffsetLimits = field(default_factory=OffsetLimits)
     axes: dict[str, OffsetProfile] = field(
-        default_factory=lambda: {a: OffsetProfile() for a in AXES})
+        default_factory=lambda: {a: OffsetProfile() for a in ALL_AXES})
 
     def snapshot(self) -> dict[str, OffsetProfile]:
-        return copy.deepcopy(self.axes)
+        return {a: prof.copy() for a, prof in self.axes.items()}
 
     def restore(self, snapshot: dict[str, OffsetProfile]) -> None:
         self.axes = snapshot
@@ -241,15 +256,28 @@ class Offsets:
         return self.axes[axis].plan(from_us, goal, goal_rate, rate_lim, acc_lim)
 
     def axis_limits(self, axis: str, sky_rate_arcsec_s: float | None) -> tuple[float, float]:
-        if axis == "path":
+        if axis in ("path", "guide_path"):
             if sky_rate_arcsec_s is None:
                 raise ValueError("the path axis needs the target's sky rate")
             return self.limits.path_limits(sky_rate_arcsec_s)
         return self.limits.rate_arcsec_s, self.limits.accel_arcsec_s2
 
     def sample(self, t_us: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Return {axis: (offset, rate)} at mount times (arcsec, path seconds; per second)."""
-        return {a: prof.sample(t_us) for a, prof in self.axes.items()}
+        """Return {axis: (offset, rate)} at mount times (arcsec, path seconds; per second),
+        the closed loop's axes added into the user's (ra, dec, path, transverse)."""
+        out = {a: self.axes[a].sample(t_us) for a in AXES}
+        for loop in LOOP_AXES:
+            prof = self.axes[loop]
+            if prof.t_us:
+                axis = loop.removeprefix("guide_")
+                (p, v), (lp, lv) = out[axis], prof.sample(t_us)
+                out[axis] = (p + lp, v + lv)
+        return out
+
+    def total(self, axis: str, t_us: int) -> float:
+        """An axis's offset with the closed loop's share (path: seconds) at one time."""
+        loop = self.axes.get(f"guide_{axis}")
+        return self.axes[axis].at(t_us)[0] + (loop.at(t_us)[0] if loop is not None else 0.0)
 
     def knots_between(self, t0_us: int, t1_us: int) -> list[int]:
         return sorted({t for prof in self.axes.values() for t in prof.knots_between(t0_us, t1_us)})
@@ -269,10 +297,10 @@ class Offsets:
             p, v = prof.at(t_us)
             end = prof.end_us
             goal = prof.p[-1] + prof.v[-1] * max(t_us - end, 0) * 1e-6 if prof.t_us else 0.0
-            unit = "s" if axis == "path" else "arcsec"
+            unit = "s" if axis.endswith("path") else "arcsec"
             doc = {f"total_{unit}": p, f"rate_{unit}_per_s": v, f"goal_{unit}": goal,
                    "moving": bool(prof.t_us) and t_us < end, "changes": prof.changes}
-            if axis == "path" and sky_rate_arcsec_s is not None:
+            if unit == "s" and sky_rate_arcsec_s is not None:
                 doc["total_arcsec"] = p * sky_rate_arcsec_s
             out[axis] = doc
         return out

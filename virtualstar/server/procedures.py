@@ -47,9 +47,10 @@ from virtualstar.astro import (
 )
 from virtualstar.astro.exceptions import SatelliteError
 
+from . import closed_loop as guided
 from .corrections import Corrections
 from .exceptions import InExclusionZone, StaleElements, TargetUnreachable
-from .feeder import Feeder
+from .feeder import Feeder, FeederConfig
 from .operations import Operation, Phase
 from .pass_selection import choose_pass, windows_from_passes
 from .trajectories import (
@@ -76,6 +77,7 @@ T = TypeVar("T")
 MAX_JOIN_PLANS = 12  # plans of a join before giving up (each with 1.5× the previous margin)
 PASS_LOOKBACK_S = 1800.0  # predictions start this far back, so a pass in progress is found
 MIN_JOIN_TRACK_S = 10.0  # a finite path is joined only if this much of it is left
+CLOSED_LOOP_LEAD_S = 5.0  # mount seconds buffered under a closed loop (real time's lead)
 PASS_OFFSET_MARGIN_S = 30.0  # a pass is planned this much longer at both ends (path offsets)
 RUN_UP_STEP_US = 2_000_000  # a run-up inside a zone moves the join this much later
 MOVE_LOOKAHEAD_S = 3600.0  # a move at rates is checked against the limits and zones this far
@@ -106,7 +108,8 @@ async def run_beside(main: Awaitable[T], feeder: Feeder) -> T:
 
 async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int | None = None,
                   end_us: int | None = None, allow_sun: bool = False,
-                  corrections: Corrections | None = None) -> tuple[RampIn, Feeder]:
+                  corrections: Corrections | None = None,
+                  feed: FeederConfig | None = None) -> tuple[RampIn, Feeder]:
     """Slew to the run-up of `path` and start following it; return the run-up and its feeder.
 
     With `corrections`, offsets changed from now on start at the join (the run-up aims
@@ -144,11 +147,12 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         t.motion.verify_at(pos, rest_az, rest_el, cfg.arrival_tolerance_arcsec,
                            f"slew to the run-up of {op.target}")
         if pos.t_us + int(lead_s * 1e6) < ramp.begin_us:
-            if ramp.begin_us - pos.t_us > cfg.feed_lead_s * 1e6:
+            feed = feed or t.feeder_config()
+            if ramp.begin_us - pos.t_us > feed.lead_s * 1e6:
                 t.supervisor.phase(op, Phase.WAITING, start_utc=iso_utc(ramp.begin_us))
-                await t.motion.wait_until(ramp.begin_us - int((cfg.feed_lead_s - lead_s) * 1e6),
+                await t.motion.wait_until(ramp.begin_us - int((feed.lead_s - lead_s) * 1e6),
                                           op.info)
-            feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
+            feeder = await t.motion.start_trajectory(ramp, feed, lead_s,
                                                      on_points=t.note_points)
             if feeder is not None:
                 if corrections is not None:
@@ -187,7 +191,8 @@ async def prepare(t: Telescope, op: Operation) -> None:
 
 # ---------------------------------------------------------------------- procedures
 async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
-                            duration_s: float | None, allow_sun: bool = False) -> dict[str, Any]:
+                            duration_s: float | None, allow_sun: bool = False,
+                            closed_loop: bool = False) -> dict[str, Any]:
     """Slew to a sky target, verify the landing, track it (for `duration_s`, or until ended).
 
     The track stops before the target would enter a Sun/Moon zone or pass below the
@@ -200,11 +205,16 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
     path = corrections.wrap(TargetPath(target, cfg.site, limits=t.limits, eop=t.eop,
                                        model=t.model, current_az_rad=here.az_rad,
                                        guard=t.safety.guard(op.target, allow_sun=allow_sun)))
-    ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun, corrections=corrections)
+    ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun, corrections=corrections,
+                                 feed=_feed(t, closed_loop))
 
     async def on_path() -> dict[str, Any]:
-        settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
         await t.motion.wait_until(ramp.join_us)
+        async with guided.running(t, op, corrections, "sky", closed_loop):
+            return await joined()
+
+    async def joined() -> dict[str, Any]:
+        settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
         t.supervisor.phase(op, Phase.SETTLING)
         await t.motion.wait_until(settled_us)
         err = await t.motion.verify_on_path(ramp, cfg.arrival_tolerance_arcsec,
@@ -389,7 +399,8 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
 
 
 async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
-                               max_wait_s: float | None, allow_sun: bool = False) -> dict[str, Any]:
+                               max_wait_s: float | None, allow_sun: bool = False,
+                               closed_loop: bool = False) -> dict[str, Any]:
     """Track the next pass of `sat` that can still be reached, or the one in progress.
 
     Only a stretch of the pass outside every zone (Sun, Moon, horizon profile) is
@@ -429,10 +440,15 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
     path = RampOut(corrections.wrap(full.path, end_us=set_us), cfg.ramp_s,
                    max(2.0, 1.0 * cfg.margin_speed))
     ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
-                                 allow_sun=allow_sun, corrections=corrections)
+                                 allow_sun=allow_sun, corrections=corrections,
+                                 feed=_feed(t, closed_loop))
 
     async def on_path() -> int:
         await t.motion.wait_until(ramp.join_us)
+        async with guided.running(t, op, corrections, "satellite", closed_loop):
+            return await joined()
+
+    async def joined() -> int:
         t.supervisor.phase(op, Phase.SETTLING, tracking_from_us=ramp.join_us)
         await t.motion.wait_until(ramp.join_us + int(cfg.settle_s * 1e6))
         err = await t.motion.verify_on_path(ramp, cfg.arrival_tolerance_arcsec,
@@ -452,6 +468,15 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
 
 
 # ---------------------------------------------------------------------- helpers
+def _feed(t: Telescope, closed_loop: bool) -> FeederConfig:
+    """The feed of a track: a closed loop re-plans ten times a second, and each re-plan
+    sends the buffered future again, so it keeps at most `CLOSED_LOOP_LEAD_S` buffered."""
+    feed = t.feeder_config()
+    if closed_loop and feed.lead_s > CLOSED_LOOP_LEAD_S:
+        feed = dataclasses.replace(feed, lead_s=CLOSED_LOOP_LEAD_S)
+    return feed
+
+
 def _plan_pass(t: Telescope, sat: Satellite, here, join_us: int, set_us: int):
     """Plan the pass from `join_us` to `set_us`, with `PASS_OFFSET_MARGIN_S` more at both
     ends for path offsets (without, if the longer pass would not fit the cable wrap)."""

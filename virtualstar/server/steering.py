@@ -13,8 +13,10 @@ from typing import TYPE_CHECKING, Any
 
 from virtualstar.astro import iso_utc
 
+from .camera_link import CameraLink
 from .corrections import CorrectionMode, Corrections
-from .exceptions import BadRequest, NotTracking
+from .estimator import FilterConfig
+from .exceptions import BadRequest, NoCamera, NotTracking
 from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, pulse_change
 from .offsets import AXES, OPERATIONS, OffsetLimits
 from .operations import TERMINAL, Operation, Phase
@@ -44,6 +46,8 @@ class Steering:
         self.limits = OffsetLimits(cfg.offset_rate_arcsec_s, cfg.offset_accel_arcsec_s2)
         self.min_lead_us = DEFAULT_MIN_LEAD_US
         self._current: tuple[int, Corrections] | None = None
+        self.camera: CameraLink | None = None  # a guide camera for closed loops (camera_link.py)
+        self.filter_config = FilterConfig()
 
     @property
     def mode(self) -> CorrectionMode:
@@ -59,6 +63,13 @@ class Steering:
                                                 math.radians(self.t.config.site.lat_deg),
                                                 limits=self.limits))
         return self._current[1]
+
+    def need_camera(self, what: str) -> None:
+        """Refuse a closed loop without a guide camera (NoCamera, naming the option)."""
+        if self.camera is None:
+            raise NoCamera(f"{what}: closed-loop tracking needs a guide camera: start the server "
+                           "with --camera URL (or the embedded emulator's simulated camera, "
+                           "--camera-sim); open-loop tracking needs none")
 
     def running(self, what: str) -> tuple[Operation, Corrections]:
         """The operation a correction applies to; NotTracking when there is none."""
@@ -108,10 +119,15 @@ class Steering:
                                 "east": goal.get("ra", {}).get("goal_arcsec", 0.0)}
         return doc
 
+    async def close(self) -> None:
+        if self.camera is not None:
+            await self.camera.close()
+
     # ------------------------------------------------------------------ status
     def status(self, t_us: int | None) -> dict[str, Any]:
         """`status`'s "corrections": how they reach the mount and the current offsets."""
         doc: dict[str, Any] = self.mode.as_dict()
+        doc["camera"] = None if self.camera is None else self.camera.config.url
         op = self.t.op
         if (self._current is not None and op is not None and self._current[0] == op.id
                 and op.phase not in TERMINAL and t_us is not None):

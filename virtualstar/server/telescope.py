@@ -207,6 +207,7 @@ class Telescope:
             task.cancel()
         if tasks:
             await asyncio.wait(tasks)
+        await self.steering.close()
         await self.link.stop()
 
     async def first_samples(self, timeout_s: float) -> None:
@@ -396,13 +397,17 @@ class Telescope:
                                    f"({self.link.last_error or 'connecting'})")
 
     async def follow_target(self, target, name: str, *, kind: str = "track",
-                            duration_s: float | None = None, allow_sun: bool = False) -> Operation:
-        """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped)."""
+                            duration_s: float | None = None, allow_sun: bool = False,
+                            closed_loop: bool = False) -> Operation:
+        """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped);
+        `closed_loop`: guided by the guide camera's centroids (closed_loop.py)."""
         self._check_can_move()
+        if closed_loop:
+            self.steering.need_camera(kind)
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.follow_sky_target(self, op, target, duration_s=duration_s,
-                                                      allow_sun=allow_sun)
+                                                      allow_sun=allow_sun, closed_loop=closed_loop)
 
         check = self._target_check(target, name, allow_sun)
         return await self._start(kind, name, procedure, resumable=True, allow_sun=allow_sun,
@@ -520,13 +525,17 @@ class Telescope:
         return await self.steering.guide(north_arcsec, east_arcsec, rate_arcsec_s)
 
     async def track_satellite(self, sat: Satellite, *, max_wait_s: float | None = None,
-                              allow_sun: bool = False) -> Operation:
-        """Track the pass of `sat` in progress, or the next one above the horizon limit."""
+                              allow_sun: bool = False, closed_loop: bool = False) -> Operation:
+        """Track the pass of `sat` in progress, or the next one above the horizon limit;
+        `closed_loop`: the along/across offsets follow the guide camera (closed_loop.py)."""
         self._check_can_move()
+        if closed_loop:
+            self.steering.need_camera("track")
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.track_satellite_pass(self, op, sat, max_wait_s=max_wait_s,
-                                                         allow_sun=allow_sun)
+                                                         allow_sun=allow_sun,
+                                                         closed_loop=closed_loop)
 
         return await self._start("track_satellite", sat.name, procedure, resumable=True,
                                  allow_sun=allow_sun)
