@@ -67,7 +67,7 @@ def star_place(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
     return (np.interp(t_us, grid, np.unwrap(aa.az.rad)), np.interp(t_us, grid, aa.alt.rad))
 
 
-def satellite_place(lines: tuple[str, str], true_us: np.ndarray, site):
+def satellite_place(elements, true_us: np.ndarray, site):
     """skyfield's apparent place of a satellite (rad), refracted with ERFA's constants.
 
     UT1 and polar motion from astropy's IERS table (polar motion moves the site by metres:
@@ -79,7 +79,7 @@ def satellite_place(lines: tuple[str, str], true_us: np.ndarray, site):
 
     sf = skyfield_context(EarthOrientation.from_astropy_iers_data())
     ts, eph = sf.ts, sf.ephemeris
-    sat = EarthSatellite(*lines, "truth", ts)
+    sat = EarthSatellite.from_satrec(elements, ts)  # the truth's own elements, full precision
     here = eph["earth"] + wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
     times = ts.from_datetimes([datetime.fromtimestamp(t / 1e6, UTC) for t in true_us])
     alt, az, _ = here.at(times).observe(eph["earth"] + sat).apparent().altaz()
@@ -169,14 +169,12 @@ def pass_run(site, *, closed: bool, dropped: float) -> dict:
     info = done["info"]
     on = (t >= info["tracking_from_us"]) & (t <= info["tracking_to_us"])
     t, v = t[on], v[on]
-    truth = satellite_place((camera.truth.line1, camera.truth.line2), v[:, 2].astype(np.int64),
-                            site)
+    truth = satellite_place(camera.truth.satrec, v[:, 2].astype(np.int64), site)
     err = np.degrees(erfa.seps(v[:, 0] % (2 * np.pi), v[:, 1], *truth)) * 3600
     seen = [f for f in frames if f.found and f.t_us >= info["tracking_from_us"]]
     acquired = seen[0].t_us if seen else info["tracking_from_us"]
     w = t >= acquired + 20_000_000
-    along, across = measure_offsets((iss.line1, iss.line2), (camera.truth.line1,
-                                                              camera.truth.line2), t[w][::50],
+    along, across = measure_offsets((iss.line1, iss.line2), camera.truth.satrec, t[w][::50],
                                     camera.truth.site)
     loop = info.get("closed_loop", {})
     return {"rms": float(np.sqrt(np.mean(err[w] ** 2))), "peak": float(err[w].max()),

@@ -12,7 +12,7 @@ It imports only `astcom_client` of ours, and skyfield, sgp4 and ERFA for the tru
 from .device import EMULATOR_NAMES, GuideCameraDevice, MountPacedClock
 from .exceptions import CameraConfigError, GuideCameraError
 from .frames import CameraConfig, Frame, FrameMaker, Weather
-from .tle_shift import measure_offsets, shifted_tle
+from .tle_shift import measure_offsets, shifted_elements, shifted_tle
 from .truth import CameraSite, SatelliteTruth, StarTruth
 
 __all__ = [
@@ -29,5 +29,6 @@ __all__ = [
     "StarTruth",
     "Weather",
     "measure_offsets",
+    "shifted_elements",
     "shifted_tle",
 ]

@@ -33,7 +33,7 @@ from typing import Any
 
 from .exceptions import CameraConfigError
 from .frames import CameraConfig
-from .tle_shift import shifted_tle
+from .tle_shift import shifted_elements
 from .truth import CameraSite, SatelliteTruth, StarTruth
 
 __all__ = ["load_camera_file", "read_tle_set"]
@@ -106,8 +106,9 @@ def truth_from_table(t: dict[str, Any], site: CameraSite, where: Path | str):
             at_us = int(round(at.timestamp() * 1e6))
         except ValueError:
             raise CameraConfigError(f"{where}: at = {t['at']!r}: expected ISO-8601 UTC") from None
-        line1, line2 = shifted_tle(line1, line2, along_s=along, across_arcsec=across,
-                                   at_us=at_us, site=site)
+        return SatelliteTruth.from_satrec(
+            shifted_elements(line1, line2, along_s=along, across_arcsec=across, at_us=at_us,
+                             site=site), site)
     return SatelliteTruth(line1, line2, site)
 
 

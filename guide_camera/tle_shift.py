@@ -4,11 +4,11 @@ A LEO's elements are typically wrong by a time along the track (drag, a manoeuvr
 since the epoch) and by a little across it. `shifted_tle` moves a satellite:
 
 * along-track by `along_s` seconds: its mean anomaly grows by n·along_s, so the
-  truth satellite is where the given elements put it `along_s` later *in its
-  orbit*. Seen from the ground that is not quite a time shift of the observed track:
-  the site has turned with the Earth meanwhile (≈ 285 m/s at 52°), so 2 s of
-  mean anomaly on the ISS look like ≈ 2.09 s along and ±25″ across, varying over
-  the pass (`measure_offsets`) — as a real along-track error would;
+  truth satellite is where the given elements put it about `along_s` later in its
+  orbit. Seen from the ground that is not quite a time shift of the observed track:
+  the site has turned with the Earth meanwhile (≈ 285 m/s at 52°), so 2 s of mean
+  anomaly on the ISS look like ≈ 2.09 s along and up to ±25″ across, varying over
+  the pass — as a real along-track error would;
 * across-track by `across_arcsec` as seen from the site at `at_us` (e.g. the
   culmination): the orbit plane is tilted by β = across·ρ/r (ρ the range, r the
   geocentric radius) about the in-plane axis 90° before the satellite's argument
@@ -18,9 +18,11 @@ since the epoch) and by a little across it. `shifted_tle` moves a satellite:
   the δΩ·cos i it brings along the track is taken back out of the mean anomaly.
   Positive: to the left of the direction of travel, as the VSS's `transverse`.
 
-The result is written as TLE text with `sgp4.exporter` (angles to 1e-4°: the time
-to 2 ms, the across offset to about an arcsecond); `measure_offsets` tells what the
-two TLEs really differ by, with skyfield, along a pass.
+Both are then corrected twice by what `measure_offsets` (skyfield) sees from the site at
+`at_us`, so that *there and then* the truth is `along_s` along and `across_arcsec`
+across; elsewhere on the pass it differs as a real error does. The result is written as
+TLE text with `sgp4.exporter` (angles to 1e-4°: the time to 2 ms, the across offset to
+about an arcsecond).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ import numpy as np
 from .exceptions import CameraConfigError
 from .truth import CameraSite
 
-__all__ = ["measure_offsets", "shifted_tle"]
+__all__ = ["measure_offsets", "shifted_elements", "shifted_tle"]
 
 MINUTES_PER_S = 1.0 / 60.0
 
@@ -77,16 +79,44 @@ def _teme_at(sat, t_us: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(r), np.array(v)
 
 
+def shifted_elements(line1: str, line2: str, *, along_s: float, across_arcsec: float,
+                     at_us: int, site: CameraSite):
+    """Return the elements (an sgp4 `Satrec`, full precision) of the satellite moved along
+    and across its track, so that seen from `site` at `at_us` it is `along_s` later along
+    the track and `across_arcsec` across it (two rounds: what a move of the elements looks
+    like from the ground is measured with `measure_offsets` and the rest moved again)."""
+    if not (math.isfinite(along_s) and math.isfinite(across_arcsec)):
+        raise CameraConfigError("along_s and across_arcsec must be finite")
+    sat = _satrec(line1, line2)
+    if not along_s and not across_arcsec:
+        return sat
+    a, c = along_s, across_arcsec
+    out = _move(sat, a, c, at_us, site)
+    for _ in range(2):
+        seen_a, seen_c = measure_offsets(sat, out, np.array([at_us]), site)
+        a += along_s - float(seen_a[0])
+        c += across_arcsec - float(seen_c[0])
+        out = _move(sat, a, c, at_us, site)
+    return out
+
+
 def shifted_tle(line1: str, line2: str, *, along_s: float, across_arcsec: float,
                 at_us: int, site: CameraSite) -> tuple[str, str]:
-    """Return TLE lines 1 and 2 of the satellite moved along and across its track."""
+    """`shifted_elements` written as TLE lines (angles to 1e-4°: near a LEO's culmination
+    the across offset is then only good to a few arcseconds; use the elements)."""
+    from sgp4.exporter import export_tle
+
+    return export_tle(shifted_elements(line1, line2, along_s=along_s,
+                                       across_arcsec=across_arcsec, at_us=at_us, site=site))
+
+
+def _move(sat, along_s: float, across_arcsec: float, at_us: int, site: CameraSite):
+    """Move the elements: `along_s` of mean anomaly, a plane tilt of `across_arcsec` at the
+    range of `at_us` (the orbit's view; what the ground sees differs a little)."""
     from skyfield.api import EarthSatellite, wgs84
 
     from .truth import _skyfield
 
-    if not (math.isfinite(along_s) and math.isfinite(across_arcsec)):
-        raise CameraConfigError("along_s and across_arcsec must be finite")
-    sat = _satrec(line1, line2)
     n_rad_s = sat.no_kozai * MINUTES_PER_S  # mean motion, rad/s
     d_mean = n_rad_s * along_s
     d_incl = d_node = 0.0
@@ -99,7 +129,7 @@ def shifted_tle(line1: str, line2: str, *, along_s: float, across_arcsec: float,
         u0 = math.atan2(np.dot(np.cross(node, r), h) / np.linalg.norm(h), np.dot(node, r))
         ts, _ = _skyfield()
         t = ts.from_datetime(datetime.fromtimestamp(at_us / 1e6, UTC))
-        es = EarthSatellite(line1.strip(), line2.strip(), "", ts)
+        es = EarthSatellite.from_satrec(sat, ts)
         rho_km = float((es - wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)).at(t)
                        .distance().km)
         beta = math.radians(across_arcsec / 3600.0) * rho_km / float(np.linalg.norm(r))
@@ -110,23 +140,21 @@ def shifted_tle(line1: str, line2: str, *, along_s: float, across_arcsec: float,
         sin_i = math.sin(sat.inclo)
         d_node = -beta * math.sin(u_axis) / sin_i if abs(sin_i) > 1e-6 else 0.0
         d_mean -= d_node * math.cos(sat.inclo)
-    from sgp4.exporter import export_tle
-
-    return export_tle(_with_elements(sat, d_incl=d_incl, d_node=d_node, d_mean=d_mean))
+    return _with_elements(sat, d_incl=d_incl, d_node=d_node, d_mean=d_mean)
 
 
-def measure_offsets(nominal: tuple[str, str], truth: tuple[str, str], t_us: np.ndarray,
+def measure_offsets(nominal, truth, t_us: np.ndarray,
                     site: CameraSite) -> tuple[np.ndarray, np.ndarray]:
     """Return (along seconds, across arcsec) of `truth` relative to `nominal` at times.
 
-    From skyfield's apparent places: the along offset τ solves truth(t) ≈ nominal(t + τ)
+    Each is (line1, line2) or an sgp4 `Satrec`. From skyfield's apparent places: the along offset τ solves truth(t) ≈ nominal(t + τ)
     along the track (Newton steps), the across offset is what is left, positive to the
     left of the direction of travel (x = az·cos E right, y = el up).
     """
     from .truth import SatelliteTruth
 
-    nom = SatelliteTruth(*nominal, CameraSite(site.lat_deg, site.lon_deg, site.height_m))
-    tru = SatelliteTruth(*truth, CameraSite(site.lat_deg, site.lon_deg, site.height_m))
+    where = CameraSite(site.lat_deg, site.lon_deg, site.height_m)
+    nom, tru = (SatelliteTruth.of(x, where) for x in (nominal, truth))
     t = np.asarray(t_us, np.int64)
     t_az, t_el = tru.place(t)
     tau = np.zeros(len(t))

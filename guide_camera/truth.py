@@ -155,20 +155,44 @@ class _GriddedTruth:
 
 
 class SatelliteTruth(_GriddedTruth):
-    """A satellite's true place from its truth TLE (lines 1 and 2)."""
+    """A satellite's true place from its truth TLE (lines 1 and 2), or its elements."""
 
     step_us = SAT_STEP_US
 
     def __init__(self, line1: str, line2: str, site: CameraSite, name: str = "truth") -> None:
+        line1, line2 = _checked_tle(line1, line2)
+        from sgp4.api import Satrec
+
+        self._setup(Satrec.twoline2rv(line1, line2), site, name)
+        self.line1, self.line2 = line1, line2
+
+    @classmethod
+    def from_satrec(cls, satrec, site: CameraSite, name: str = "truth") -> SatelliteTruth:
+        """From an sgp4 `Satrec` (full-precision elements: `tle_shift.shifted_elements`)."""
+        err, _, _ = satrec.sgp4(satrec.jdsatepoch, satrec.jdsatepochF)
+        if err:
+            raise CameraConfigError(f"SGP4 cannot propagate the truth elements (error {err})")
+        self = cls.__new__(cls)
+        self._setup(satrec, site, name)
+        from sgp4.exporter import export_tle
+
+        self.line1, self.line2 = export_tle(satrec)  # for display: angles to 1e-4°
+        return self
+
+    @classmethod
+    def of(cls, elements, site: CameraSite) -> SatelliteTruth:
+        """From (line1, line2) or a `Satrec`."""
+        if isinstance(elements, tuple):
+            return cls(*elements, site)
+        return cls.from_satrec(elements, site)
+
+    def _setup(self, satrec, site: CameraSite, name: str) -> None:
         from skyfield.api import EarthSatellite
 
-        super().__init__(site)
-        line1, line2 = _checked_tle(line1, line2)
-        try:
-            self.satellite = EarthSatellite(line1, line2, name, _skyfield()[0])
-        except (ValueError, IndexError) as exc:
-            raise CameraConfigError(f"the truth TLE cannot be read: {exc}") from None
-        self.line1, self.line2, self.name = line1.strip(), line2.strip(), name
+        _GriddedTruth.__init__(self, site)
+        self.satrec = satrec
+        self.name = name
+        self.satellite = EarthSatellite.from_satrec(satrec, _skyfield()[0])
 
     def _apparent(self, observer_at, earth):
         return observer_at.observe(earth + self.satellite).apparent()

@@ -136,15 +136,16 @@ def satellite_camera(line1: str, line2: str, site: Any, *, along_s: float = 0.0,
     """A camera that sees a satellite whose true elements are the given ones moved
     `along_s` along its track and `across_arcsec` across it at `at_us` (guide_camera's
     `shifted_tle`); the VSS is given the unmoved ones."""
-    from guide_camera import CameraSite, SatelliteTruth, shifted_tle
+    from guide_camera import CameraSite, SatelliteTruth, shifted_elements
 
     where = CameraSite.from_object(site)
-    if along_s or across_arcsec:
-        if at_us is None:
-            raise ValueError("an across-track shift needs the time it is measured at (at_us)")
-        line1, line2 = shifted_tle(line1, line2, along_s=along_s, across_arcsec=across_arcsec,
-                                   at_us=at_us, site=where)
-    return CameraSim(SatelliteTruth(line1, line2, where), config)
+    if not (along_s or across_arcsec):
+        return CameraSim(SatelliteTruth(line1, line2, where), config)
+    if at_us is None:
+        raise ValueError("a moved satellite needs the time its offsets are seen at (at_us)")
+    elements = shifted_elements(line1, line2, along_s=along_s, across_arcsec=across_arcsec,
+                                at_us=at_us, site=where)
+    return CameraSim(SatelliteTruth.from_satrec(elements, where), config)
 
 
 def star_camera(ra_deg: float, dec_deg: float, site: Any, *, config: Any = None,

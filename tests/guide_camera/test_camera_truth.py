@@ -15,7 +15,14 @@ import pytest
 from sky_truth import sky_sep_arcsec, star_truth
 
 from catalogs import bright_stars, load_tle_file, sample_tle_path, select_satellite
-from guide_camera import CameraSite, SatelliteTruth, StarTruth, measure_offsets, shifted_tle
+from guide_camera import (
+    CameraSite,
+    SatelliteTruth,
+    StarTruth,
+    measure_offsets,
+    shifted_elements,
+    shifted_tle,
+)
 from guide_camera.boresight import TERMS, axis_place
 from virtualstar.astro import UtcTimes, load_site
 
@@ -87,21 +94,23 @@ def test_the_optical_axis_is_where_the_emulators_own_geometry_puts_it():
         assert np.abs(el - ref_el).max() * 206264.8 < 1e-4
 
 
-def test_a_shifted_tle_is_off_by_the_asked_time_along_and_angle_across_where_asked():
+def test_shifted_elements_are_off_by_the_asked_time_along_and_angle_across_where_asked():
     site = CameraSite.from_object(load_site())
     rec = _iss()
     at = _us(PASS)
-    line1, line2 = shifted_tle(rec.line1, rec.line2, along_s=0.0, across_arcsec=40.0, at_us=at,
-                               site=site)
-    along, across = measure_offsets((rec.line1, rec.line2), (line1, line2), np.array([at]), site)
-    assert across[0] == pytest.approx(40.0, abs=1.5)  # TLE angles carry 1e-4°: ~1″ here
-    assert abs(along[0]) < 0.01
-    line1, line2 = shifted_tle(rec.line1, rec.line2, along_s=2.0, across_arcsec=0.0, at_us=at,
-                               site=site)
-    along, _ = measure_offsets((rec.line1, rec.line2), (line1, line2), np.array([at]), site)
-    # 2 s of mean anomaly; seen from the turning Earth a little more along the track
-    assert along[0] == pytest.approx(2.0, abs=0.15)
-    assert line1[2:7] == rec.line1[2:7] and line2[8:16] == rec.line2[8:16]  # same satellite
+    nominal = (rec.line1, rec.line2)
+    for along_s, across in ((0.0, 40.0), (2.0, 0.0), (2.0, 40.0), (-1.0, -25.0)):
+        moved = shifted_elements(*nominal, along_s=along_s, across_arcsec=across, at_us=at,
+                                 site=site)
+        along, seen = measure_offsets(nominal, moved, np.array([at, at + 120_000_000]), site)
+        assert along[0] == pytest.approx(along_s, abs=0.002)
+        assert seen[0] == pytest.approx(across, abs=0.2)
+        assert abs(seen[1] - seen[0]) > 1.0 or across == 0  # a real error: it changes
+    # as TLE text the angles carry 1e-4°: near culmination a few arcseconds across
+    line1, line2 = shifted_tle(*nominal, along_s=2.0, across_arcsec=40.0, at_us=at, site=site)
+    along, seen = measure_offsets(nominal, (line1, line2), np.array([at]), site)
+    assert along[0] == pytest.approx(2.0, abs=0.01) and seen[0] == pytest.approx(40.0, abs=5.0)
+    assert line1[2:7] == rec.line1[2:7]  # the same satellite
 
 
 def test_the_camera_site_refuses_values_out_of_range_naming_them(tmp_path):
@@ -113,3 +122,20 @@ def test_the_camera_site_refuses_values_out_of_range_naming_them(tmp_path):
     bad.write_text("[site]\nlat_deg = 52.0\nlon_deg = 16.9\nheigth_m = 3\n")
     with pytest.raises(CameraConfigError, match="heigth_m"):
         CameraSite.from_toml(bad)
+
+
+def test_the_bundled_camera_file_gives_the_iss_moved_2_s_along_and_40_arcsec_across(tmp_path):
+    from catalogs import sample_tle_path
+    from virtualstar.launcher import camera_from_file
+
+    path = sample_tle_path("stations").with_name("camera-iss-truth.toml")
+    sim = camera_from_file(path, load_site())
+    assert sim.config.noise_arcsec == 0.5 and sim.config.period_s == 0.1
+    rec = _iss()
+    along, across = measure_offsets((rec.line1, rec.line2), sim.truth.satrec,
+                                    np.array([_us(PASS)]), sim.truth.site)
+    assert across[0] == pytest.approx(40.0, abs=0.2) and along[0] == pytest.approx(2.0, abs=0.002)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[truth]\nstar = "Vega"\n[camera]\nnoise = 1\n')
+    with pytest.raises(ValueError, match="noise"):
+        camera_from_file(bad, load_site())

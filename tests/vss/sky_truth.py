@@ -85,7 +85,7 @@ def iss_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
 def satellite_truth(sat, t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
     """Return skyfield's observed az, el (deg) of a satellite at mount times (UTC µs).
 
-    `sat`: a skyfield EarthSatellite, or (line1, line2) of its elements. The apparent
+    `sat`: a skyfield EarthSatellite, (line1, line2) of its elements, or an sgp4 Satrec. The apparent
     direction (light time, aberration), as a telescope sees it, lifted by ERFA's
     refraction constants for the site's air (skyfield's own formula ignores humidity
     and wavelength: arcseconds at 20°); a site without air gets none.
@@ -98,6 +98,8 @@ def satellite_truth(sat, t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray
     _, sf = skyfield_iss()
     if isinstance(sat, tuple):
         sat = EarthSatellite(sat[0], sat[1], "truth", sf.ts)
+    elif not isinstance(sat, EarthSatellite):
+        sat = EarthSatellite.from_satrec(sat, sf.ts)
     earth = sf.ephemeris["earth"]
     observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
     ts = sf.ts.from_datetimes([datetime.fromtimestamp(t / 1e6, tz=UTC) for t in t_us])

@@ -41,7 +41,7 @@ def test_closed_loop_follows_an_iss_whose_elements_are_2_s_along_and_40_arcsec_a
     iss = _iss()
     camera = satellite_camera(iss.line1, iss.line2, site, along_s=2.0, across_arcsec=40.0,
                               at_us=_us(CULMINATION), config=CameraConfig(seed=5))
-    truth_lines = (camera.truth.line1, camera.truth.line2)
+    truth_elements = camera.truth.satrec  # full precision (TLE text rounds angles to 1e-4°)
 
     async def scenario(vss, clock):
         c = vss.client()
@@ -76,7 +76,7 @@ def test_closed_loop_follows_an_iss_whose_elements_are_2_s_along_and_40_arcsec_a
     t = rec.t_us
     enc_az, enc_el = np.degrees(rec["axis.az.position"]) % 360, np.degrees(rec["axis.el.position"])
     true_us = rec["time.true_us"].astype(np.int64)
-    truth = satellite_truth(truth_lines, true_us, site)
+    truth = satellite_truth(truth_elements, true_us, site)
     nominal = satellite_truth((iss.line1, iss.line2), true_us, site)
     err = sky_sep_arcsec(enc_az, enc_el, *truth)
     open_loop = sky_sep_arcsec(*nominal, *truth)
