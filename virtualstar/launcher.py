@@ -80,6 +80,7 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
                          url: str = "ws://127.0.0.1:0", az_deg: float = 0.0, el_deg: float = 20.0,
                          params: dict[str, float] | None = None,
                          password: str | None = None,
+                         observer_password: str | None = None,
                          geometry_arcsec: dict[str, float] | None = None,
                          seeing_arcsec: float | None = None,
                          clock: Any = None) -> EmbeddedEmulator:
@@ -107,9 +108,12 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
         start_us = clock.now_us
         # in lockstep nobody waits for a packet in wall time: fewer, longer packets
         extra["stream_flush_s"] = LOCKSTEP_STREAM_FLUSH_S
+    if observer_password and not password:
+        raise ValueError("an observer password needs an operator password too")
+    passwords = {role: pw for role, pw in (("operator", password),
+                                           ("observer", observer_password)) if pw}
     config = EmulatorConfig(speed=speed, start_us=start_us, az_deg=az_deg, el_deg=el_deg,
-                            params=dict(params or {}),
-                            passwords={"operator": password} if password else None, **extra)
+                            params=dict(params or {}), passwords=passwords or None, **extra)
     emulator = MountEmulator(config)
     bound = await emulator.start(url, run_loop=clock is None)
     if clock is not None:
@@ -190,11 +194,12 @@ class EmbeddedCamera:
     url: str
     device: Any
 
-    async def connect_in_memory(self, *, name: str = "in-process", timeout_s: float = 5.0):
+    async def connect_in_memory(self, *, name: str = "in-process", password: str | None = None,
+                                timeout_s: float = 5.0):
         from astcom_client import Client
 
         end = self.device.endpoint.connect_in_memory(IN_MEMORY_QUEUE)
-        return await Client.open(end, name=name, timeout_s=timeout_s)
+        return await Client.open(end, password=password, name=name, timeout_s=timeout_s)
 
     async def stop(self) -> None:
         await self.device.stop()
@@ -202,21 +207,25 @@ class EmbeddedCamera:
 
 async def start_guide_camera(emulator: EmbeddedEmulator, sim: CameraSim, *, site: Any = None,
                              clock: Any = None, url: str | None = "ws://127.0.0.1:0",
-                             password: str | None = None) -> EmbeddedCamera:
+                             password: str | None = None,
+                             observer_password: str | None = None) -> EmbeddedCamera:
     """Start the guide camera simulator beside an embedded emulator (same event loop).
 
     It reads the emulator through an in-memory ASTCom connection and waits on `clock`
     (the lockstep clock: deterministic frames), or follows the emulator's own clock.
-    `url` also serves the camera on a socket (the panel, the recorder; None: nowhere).
+    `url` also serves the camera on a socket (the panel, the recorder; None: nowhere);
+    `password` (the emulator's operator password) and `observer_password` guard it too.
     """
     from guide_camera import CameraConfig, CameraSite, GuideCameraDevice
 
     async def connect():
         return await emulator.connect_in_memory(password=password, name="guide-camera")
 
+    passwords = {role: pw for role, pw in (("operator", password),
+                                           ("observer", observer_password)) if pw} or None
     device = GuideCameraDevice(connect, sim.truth, config=sim.config or CameraConfig(),
                                site=None if site is None else CameraSite.from_object(site),
-                               clock=clock)
+                               clock=clock, passwords=passwords)
     bound = await device.start(url)
     return EmbeddedCamera(bound, device)
 
@@ -240,7 +249,8 @@ class EmbeddedVss:
 @contextlib.asynccontextmanager
 async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int | None = None,
                        site: Any = None, listen: str | None = None,
-                       password: str | None = None, emulator_url: str = "ws://127.0.0.1:0",
+                       password: str | None = None, observer_password: str | None = None,
+                       emulator_url: str = "ws://127.0.0.1:0",
                        geometry_arcsec: dict[str, float] | None = None,
                        seeing_arcsec: float | None = None,
                        emulator_params: dict[str, float] | None = None,
@@ -254,6 +264,7 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
     through an in-memory ASTCom connection; otherwise through `emulator_url` at
     `speed`. `listen` (ws://HOST:PORT) also serves the VSS API on a socket. The block
     starts once the VSS is connected and has its first tracking-error samples.
+    `password` (the VSS uses it) and `observer_password` guard the emulator's endpoint.
     `camera` runs a simulated guide camera beside the emulator (served on `camera_url`
     too, if given) and gives it to the VSS for closed loops.
     """
@@ -262,6 +273,7 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
 
     emu = await start_emulator(speed=speed, start_us=start_us, url=emulator_url,
                                params=emulator_params, password=password,
+                               observer_password=observer_password,
                                geometry_arcsec=geometry_arcsec, seeing_arcsec=seeing_arcsec,
                                clock=clock)
     connector = None
@@ -276,10 +288,11 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
             from virtualstar.astro import load_site
 
             cam = await start_guide_camera(emu, camera, site=site or load_site(), clock=clock,
-                                           url=camera_url, password=password)
+                                           url=camera_url, password=password,
+                                           observer_password=observer_password)
 
             async def camera_connector():
-                return await cam.connect_in_memory(name="virtualstar-server")
+                return await cam.connect_in_memory(name="virtualstar-server", password=password)
 
             link = CameraLinkConfig(cam.url or "in-process guide camera",
                                     connector=camera_connector)

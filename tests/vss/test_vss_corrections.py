@@ -213,4 +213,4 @@ def test_offset_commands_with_a_wrong_axis_op_or_value_are_refused_with_the_vali
     assert all(e.code == "bad_request" for e in errors), [(e.code, e.message) for e in errors]
     assert "ra, dec, az, el, path, transverse" in errors[0].message
     assert "add, set, rate, reset" in errors[1].message
-    assert "slew instead" in errors[2].message
+    assert "from -3600 to 3600 (arcsec)" in errors[2].message

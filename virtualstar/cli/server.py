@@ -41,7 +41,9 @@ def server(
         "--mount", help="ASTCom URL of the mount, e.g. ws://mount:8765 (instead of --emulator).")] = None,
     password: Annotated[str | None, typer.Option(
         "--password", envvar="ASTCOM_PASSWORD", help="Operator password of the mount's ASTCom "
-        "endpoint (the server's own API passwords: --operator-password, --observer-password).")] = None,
+        "endpoint (the server's own API passwords: --operator-password, --observer-password). "
+        "With --emulator and API passwords, the embedded emulator's endpoint takes the API's "
+        "operator and observer passwords unless this is given.")] = None,
     mapping: Annotated[Path | None, typer.Option(
         "--mapping", help="JSON role mapping for the mount (default: the emulator's).")] = None,
     operator_password: Annotated[str | None, typer.Option(
@@ -226,9 +228,23 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
                           cameras) -> None:
     from virtualstar.launcher import embedded_vss
 
+    # The emulator's own ASTCom endpoint inherits the server's protection: with API
+    # passwords it takes the same ones (--password, if given, for the operator instead),
+    # else anyone who can reach its port could stop the operator's track.
+    guard, observer_password = "", None
+    if access.passwords:
+        observer_password = access.passwords.get("observer")
+        if password is None:
+            password = access.passwords["operator"]
+            guard = "the server's operator password" + (
+                " and its observer password" if observer_password else "")
+        else:
+            guard = "--password as its operator password"
     stop = _stop_event()
     async with embedded_vss(clock=clock, speed=1.0, start_us=start_us, site=site,
-                            listen=listen, password=password, geometry_arcsec=geometry_arcsec,
+                            listen=listen, password=password,
+                            observer_password=observer_password,
+                            geometry_arcsec=geometry_arcsec,
                             mapping_path=mapping, active=not passive,
                             pointing_model=pointing_model, zones=zones, access=access,
                             **cameras) as vss:
@@ -241,7 +257,10 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
         typer.echo(f"VirtualStar Server on {vss.url} (mount: embedded emulator, {mode}; its "
                    f"ASTCom endpoint for other clients: {vss.emulator.url})")
         if vss.camera is not None:
-            typer.echo(f"simulated guide camera on {vss.camera.url}")
+            typer.echo(f"simulated guide camera on {vss.camera.url}"
+                       + (" (the same passwords)" if guard else ""))
+        if guard:
+            typer.echo(f"The emulator's ASTCom endpoint takes {guard}.")
         await stop.wait()
     typer.echo("VirtualStar Server stopped")
 

@@ -9,6 +9,7 @@
     ├── NotActive (PermissionError)                 passive          the server is passive: it only watches
     ├── Unauthorized (PermissionError)              unauthorized     no (or a wrong) password: authenticate first
     ├── Forbidden (PermissionError)                 forbidden        the connection's role may not do this (observer)
+    ├── Throttled (PermissionError)                 throttled        a password attempt not checked: too many wrong ones (retry later)
     ├── MountUnavailable (ConnectionError)          mount_offline    no connection to the mount right now
     ├── MountRejected (RuntimeError)                mount_rejected   the mount refused a command (its message)
     ├── MountFault (RuntimeError)                   mount_fault      the mount latched a fault during an operation
@@ -41,6 +42,7 @@ __all__ = [
     "OperationAborted",
     "StaleElements",
     "TargetUnreachable",
+    "Throttled",
     "TrackingLost",
     "Unauthorized",
     "UnknownCommand",
@@ -174,3 +176,9 @@ class NoCamera(LookupError, VssError):
     """A closed loop was asked for but the server has no guide camera."""
 
     code = "no_camera"
+
+
+class Throttled(PermissionError, VssError):
+    """A password attempt refused unchecked: too many wrong ones from the address or overall."""
+
+    code = "throttled"

@@ -99,11 +99,12 @@ class OffsetProfile:
     v: list[float] = field(default_factory=list)
     a: list[float] = field(default_factory=list)
     changes: int = 0
+    folded: bool = False  # knots older than KEEP_HISTORY_US before a change were forgotten
     _arrays: tuple[np.ndarray, ...] | None = field(default=None, repr=False, compare=False)
 
     def copy(self) -> OffsetProfile:
         return OffsetProfile(list(self.t_us), list(self.p), list(self.v), list(self.a),
-                             self.changes)
+                             self.changes, self.folded)
 
     def at(self, t_us: int) -> tuple[float, float]:
         """Return (offset, rate) at one mount time."""
@@ -122,10 +123,15 @@ class OffsetProfile:
         k = np.searchsorted(knots, t, side="right") - 1
         before = k < 0
         k = np.maximum(k, 0)
-        dt = (t - knots[k]) * 1e-6
+        # before the first knot: nothing (never offset), or, once history was forgotten,
+        # the oldest state kept (nobody asks that far back: the feeder samples the future,
+        # the closed loop frames a second old)
+        dt = np.where(before, 0.0, (t - knots[k]) * 1e-6)
         a = ak[k]
         v = vk[k] + a * dt
         p = pk[k] + vk[k] * dt + 0.5 * a * dt * dt
+        if self.folded:
+            return p, v
         return np.where(before, 0.0, p), np.where(before, 0.0, v)
 
     def knots_between(self, t0_us: int, t1_us: int) -> list[int]:
@@ -154,8 +160,11 @@ class OffsetProfile:
         t, p, v = from_us, p0, v0
         g = goal
         for dt, acc in time_optimal(p0 - goal, v0 - goal_rate, v_rel, a_max):
-            self._knot(t, p, v, acc)
             t_next = t + int(round(dt * 1e6))
+            if t_next == t:  # shorter than a microsecond: its rate change, at once
+                v += acc * dt
+                continue
+            self._knot(t, p, v, acc)
             dt = (t_next - t) * 1e-6
             p, v = p + v * dt + 0.5 * acc * dt * dt, v + acc * dt
             g += goal_rate * dt
@@ -187,6 +196,7 @@ class OffsetProfile:
         if k > 0:
             del self.t_us[:k], self.p[:k], self.v[:k], self.a[:k]
             self._arrays = None
+            self.folded = True
 
     def _truncate(self, from_us: int) -> None:
         """Drop the knots at or after `from_us` (the plan from there is being replaced)."""

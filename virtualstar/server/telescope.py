@@ -43,6 +43,7 @@ from virtualstar.astro import (
 
 from . import procedures
 from .clock import MountClock, PacedClock
+from .event_log import KEPT_APART
 from .exceptions import (
     BadRequest,
     MappingError,
@@ -172,7 +173,7 @@ class Telescope:
         self._tasks: set[asyncio.Task] = set()
         self.programs = ProgramControl(self, lambda kind, data: self.emit(kind, data))
         self.steering = Steering(self)  # offsets and guide pulses of the running track
-        self.log = EventLog("vss")
+        self.log = EventLog("vss", kept_apart=KEPT_APART)
         self.last_mount_us: int | None = None  # the newest tracking-error sample's time
 
     def log_event(self, level: str, kind: str, message: str, **fields: Any) -> None:
@@ -571,11 +572,12 @@ class Telescope:
         self.emit("mode", {"mode": mode})
         return {"mode": mode}
 
-    def load_model(self, path: str) -> dict[str, Any]:
-        from pointing_model import PointingModelError, load_model
+    def load_model(self, path: str, text: str | None = None) -> dict[str, Any]:
+        """Use the pointing model in file `path` (its `text` when already read)."""
+        from pointing_model import PointingModelError, load_model, model_from_text
 
         try:
-            self.model = load_model(path)
+            self.model = load_model(path) if text is None else model_from_text(text, str(path))
         except (PointingModelError, OSError, ValueError) as exc:
             raise BadRequest(f"cannot load pointing model {path}: {exc}") from None
         self.model_source = str(path)
