@@ -96,10 +96,9 @@ def test_closed_loop_follows_an_iss_whose_elements_are_2_s_along_and_40_arcsec_a
 
 
 def test_closed_loop_on_a_star_guides_out_hidden_pointing_errors_as_an_autoguider():
+    from catalogs import bright_stars
     from mount_emulator import Geometry
     from virtualstar.launcher import hidden_geometry_arcsec, star_camera
-
-    from catalogs import bright_stars
 
     site = load_site()
     geometry = hidden_geometry_arcsec(seed=11)

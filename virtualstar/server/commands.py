@@ -33,12 +33,12 @@ from .exceptions import BadRequest, TargetUnreachable, UnknownCommand, VssError
 from .offsets import OffsetLimits
 from .operations import Phase
 from .steering import MAX_OFFSET_ARCSEC, MAX_PATH_S, check_offset
-
-LOOSEST_LIMITS = OffsetLimits(36_000.0, 36_000.0)  # the widest a server may be configured
 from .targets import parse_target
 from .telescope import Operation, Telescope
 
 __all__ = ["COMMANDS", "Command", "Within", "dispatch", "within"]
+
+LOOSEST_LIMITS = OffsetLimits(36_000.0, 36_000.0)  # the widest a server may be configured
 
 
 @dataclass(frozen=True)
