@@ -145,6 +145,13 @@ def render_status(st: dict[str, Any]) -> Table:
                   f"{_f(s['peak_arcsec'], '.3f', '″')}; on the sky RMS "
                   f"{_f(s.get('on_sky_rms_arcsec'), '.3f', '″')}, peak "
                   f"{_f(s.get('on_sky_peak_arcsec'), '.3f', '″')}")
+    corr = st.get("corrections") or {}
+    if corr:
+        axes = (corr.get("offsets") or {}).get("axes") or {}
+        shown = ", ".join(f"{a} {d.get('total_s', d.get('total_arcsec', 0.0)):+.3f}"
+                          f"{' s' if 'total_s' in d else '″'}" for a, d in axes.items())
+        t.add_row("offsets", f"{shown or 'none'} ({corr.get('mode')}, from "
+                             f"{_f(corr.get('min_lead_ms'), 'g', ' ms')} lead)")
     ts = st.get("time_sync", {})
     t.add_row("clock offset", f"{_f(ts.get('offset_us'), 'd', ' µs')} (mount − UTC, from the "
                               f"{ts.get('offset_source') or '-'}; {ts.get('syncs')} PPS syncs, "
