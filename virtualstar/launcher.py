@@ -13,12 +13,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["CameraSim", "EmbeddedCamera", "camera_from_file", "EmbeddedEmulator", "EmbeddedVss", "embedded_vss",
+__all__ = ["DEFAULT_ENDPOINT_PORT", "CameraSim", "EmbeddedCamera", "EmbeddedEmulator",
+           "EmbeddedVss", "EndpointUnavailable", "camera_from_file", "embedded_vss",
            "hidden_geometry_arcsec", "satellite_camera", "star_camera", "start_emulator",
            "start_guide_camera"]
 
+# `vs server --emulator` serves its emulator's ASTCom endpoint on this port unless told
+# otherwise, so that after a restart clients (the panel) find it where it was: beside the
+# VSS's own 8740.
+DEFAULT_ENDPOINT_PORT = 8741
 IN_MEMORY_QUEUE = 256  # frames in flight per direction of an in-process connection
 LOCKSTEP_STREAM_FLUSH_S = 0.2  # mount seconds of samples per stream packet in lockstep
+
+
+class EndpointUnavailable(OSError):
+    """The embedded emulator's ASTCom endpoint cannot listen where it was asked to."""
 
 
 @dataclass
@@ -115,7 +124,11 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
     config = EmulatorConfig(speed=speed, start_us=start_us, az_deg=az_deg, el_deg=el_deg,
                             params=dict(params or {}), passwords=passwords or None, **extra)
     emulator = MountEmulator(config)
-    bound = await emulator.start(url, run_loop=clock is None)
+    try:
+        bound = await emulator.start(url, run_loop=clock is None)
+    except OSError as exc:
+        raise EndpointUnavailable(exc.errno, f"the emulator's ASTCom endpoint cannot listen on "
+                                  f"{url}: {exc.strerror or exc}") from None
     if clock is not None:
         clock.add_driver(emulator.run_until)
     return EmbeddedEmulator(bound, emulator)
@@ -283,6 +296,7 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
     server = None
     cam = None
     try:  # from here on the emulator runs: it stops however the block ends, a refused set-up too
+        server_options.setdefault("mount_endpoint", emu.url)  # told to clients (status, hello)
         link = None
         if camera is not None:
             from virtualstar.astro import load_site

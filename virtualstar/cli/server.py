@@ -15,7 +15,10 @@ import typer
 from virtualstar.astro import AstroError, avoidance_from_options
 from virtualstar.astro.site import site_from_options
 from virtualstar.cli.status import fail
+from virtualstar.launcher import DEFAULT_ENDPOINT_PORT, EndpointUnavailable
 from virtualstar.server import DEFAULT_PORT, AccessConfig, VssError, build_server
+from virtualstar.server.access import check_listen
+from virtualstar.server.server import parse_listen_url
 
 __all__ = ["server"]
 
@@ -37,6 +40,12 @@ def server(
     seed: Annotated[int | None, typer.Option(
         "--seed", help="With --emulator: draw hidden pointing errors (>= 100 arcsec RMS) from this "
         "seed, as `mount-emulator --seed N` does.")] = None,
+    endpoint_port: Annotated[int | None, typer.Option(
+        "--endpoint-port", show_default=False,
+        help=f"With --emulator: the loopback port of the emulator's ASTCom endpoint for other "
+        f"clients (the panel, astcom, the recorder), default {DEFAULT_ENDPOINT_PORT}; fixed, so "
+        "a restarted server is found where it was. 0 picks a free port. Clients are told where "
+        "it is (status: mount_endpoint).")] = None,
     mount: Annotated[str | None, typer.Option(
         "--mount", help="ASTCom URL of the mount, e.g. ws://mount:8765 (instead of --emulator).")] = None,
     password: Annotated[str | None, typer.Option(
@@ -101,6 +110,12 @@ def server(
                    "process); give --speed X for a simulated mount running at X times real time")
     if not emulator and start is not None:
         raise fail("--start only applies to --emulator (a mount keeps its own clock)")
+    if endpoint_port is not None and not emulator:
+        raise fail("--endpoint-port only applies to --emulator (--mount names the mount's endpoint)")
+    if endpoint_port is None:
+        endpoint_port = DEFAULT_ENDPOINT_PORT
+    if not 0 <= endpoint_port <= 65535:
+        raise fail(f"--endpoint-port {endpoint_port}: expected a TCP port, 0..65535 (0: a free one)")
     geometry_arcsec = None
     if geometry is not None or seed is not None:
         if not emulator:
@@ -126,6 +141,8 @@ def server(
                    "move the telescope)")
     try:
         access = AccessConfig(passwords=passwords or None, allowed_origins=allow_origin or None)
+        # refused before anything starts (the embedded emulator's endpoint listens first)
+        check_listen(parse_listen_url(listen)[0], access)
     except VssError as exc:
         raise fail(str(exc)) from None
     try:
@@ -147,7 +164,7 @@ def server(
                                       else time.time_ns() // 1000, pace=pace)
             serve = _serve_embedded(clock, start_us, password, listen, the_site, mapping,
                                     pointing_model, passive, geometry_arcsec, zones, access,
-                                    cameras)
+                                    f"ws://127.0.0.1:{endpoint_port}", cameras)
             if clock is None:
                 asyncio.run(serve)
             else:
@@ -159,6 +176,9 @@ def server(
                                pointing_model, passive, zones, access, cameras))
     except VssError as exc:
         raise fail(str(exc)) from None
+    except EndpointUnavailable as exc:
+        raise fail(f"{exc.strerror}; choose another with --endpoint-port PORT (0: a free one)",
+                   1) from None
     except OSError as exc:
         raise fail(f"cannot listen on {listen}: {exc.strerror or exc}", 1) from None
 
@@ -225,7 +245,7 @@ def _stop_event() -> asyncio.Event:
 
 async def _serve_embedded(clock, start_us, password, listen, site, mapping,
                           pointing_model, passive, geometry_arcsec, zones, access,
-                          cameras) -> None:
+                          emulator_url, cameras) -> None:
     from virtualstar.launcher import embedded_vss
 
     # The emulator's own ASTCom endpoint inherits the server's protection: with API
@@ -243,7 +263,7 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
     stop = _stop_event()
     async with embedded_vss(clock=clock, speed=1.0, start_us=start_us, site=site,
                             listen=listen, password=password,
-                            observer_password=observer_password,
+                            observer_password=observer_password, emulator_url=emulator_url,
                             geometry_arcsec=geometry_arcsec,
                             mapping_path=mapping, active=not passive,
                             pointing_model=pointing_model, zones=zones, access=access,

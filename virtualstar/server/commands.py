@@ -282,11 +282,13 @@ def _show(value: Any) -> str:
 
 
 class OperationFailed(VssError):
-    """An operation a request waited for ended in failure; carries the failure's code."""
+    """An operation a request waited for ended in failure; carries the failure's code
+    (and `stopped` when a client's `stop` ended it)."""
 
-    def __init__(self, message: str, code: str) -> None:
+    def __init__(self, message: str, code: str, *, stopped: bool = False) -> None:
         super().__init__(message)
         self.code = code
+        self.stopped = stopped
 
 
 def _plain_match(value: Any, allowed: tuple) -> bool:
@@ -303,7 +305,7 @@ async def _result(op: Operation, *, wait_done: bool, accepted: bool = False) -> 
     if op.phase in (Phase.FAILED, Phase.ABORTED):
         err = op.info.get("error", {})
         raise OperationFailed(err.get("message", "the operation failed"),
-                              err.get("code", "internal"))
+                              err.get("code", "internal"), stopped=bool(err.get("stopped")))
     return op.as_dict()
 
 

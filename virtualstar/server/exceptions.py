@@ -21,6 +21,7 @@
     ├── NotArrived (RuntimeError)                   not_arrived      the mount is not where the target is (how far: in the message)
     ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
     ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
+    │   └── StoppedByClient                         aborted          ended by a client's `stop` (`stopped`: true)
     └── InternalError (RuntimeError)                internal         a bug: reported, the server keeps running
 """
 
@@ -41,6 +42,7 @@ __all__ = [
     "NotTracking",
     "OperationAborted",
     "StaleElements",
+    "StoppedByClient",
     "TargetUnreachable",
     "Throttled",
     "TrackingLost",
@@ -118,6 +120,16 @@ class OperationAborted(RuntimeError, VssError):
     """An operation ended early: a newer command, a fault, a lost mount or a shutdown."""
 
     code = "aborted"
+
+
+class StoppedByClient(OperationAborted):
+    """An operation ended by a client's `stop`: what an operator asked for, not a failure.
+
+    Its code stays `aborted` (clients know it); `stopped` marks it in the operation's
+    `info.error`, so a panel can tell a deliberate stop from a replacement or a shutdown.
+    """
+
+    stopped = True
 
 
 class StaleElements(ValueError, VssError):

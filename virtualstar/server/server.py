@@ -264,10 +264,12 @@ class VssServer:
         if not client.session.role:
             timer = loop.call_later(self.access.auth_timeout_s, self._auth_expired, client)
         tasks: set[asyncio.Task] = set()
-        client.queue.put_nowait(Event("hello", {
-            "server": "virtualstar", "api_version": API_VERSION, "commands": sorted([*COMMANDS, "auth"]),
-            "heartbeat_s": self.heartbeat_s, "auth": client.session.hello()},
-            next(self._seq)).to_json())
+        hello = {"server": "virtualstar", "api_version": API_VERSION,
+                 "commands": sorted([*COMMANDS, "auth"]), "heartbeat_s": self.heartbeat_s,
+                 "auth": client.session.hello()}
+        if client.session.may_watch:  # no password needed: say where the mount answers ASTCom
+            hello["mount_endpoint"] = self.telescope.config.mount_endpoint or None
+        client.queue.put_nowait(Event("hello", hello, next(self._seq)).to_json())
         assert client.slots is not None
         try:
             while True:
@@ -354,13 +356,21 @@ class VssServer:
 
     def _log_refusal(self, client: _Client, cmd: str, exc: VssError) -> None:
         """A command the server refused or that failed (a bad target, the Sun zone, not
-        arrived...): a warning with the code, beside the command's own info line."""
+        arrived...): a warning with the code, beside the command's own info line. An
+        operation that a `stop` or a newer command ended was neither: an info line saying
+        how it ended (`outcome`: stopped or aborted)."""
         if cmd in QUIET_COMMANDS:
             return
         role = client.session.role.label if client.session.role else "none"
-        self.telescope.log_event("warning", "command", f"{cmd} from {client.peer} ({role}) "
-                                 f"refused: {exc} [{exc.code}]", command=cmd,
-                                 client=client.peer, role=role, code=exc.code)
+        if exc.code == "aborted":
+            outcome = "stopped" if getattr(exc, "stopped", False) else "aborted"
+            self.telescope.log_event("info", "command", f"{cmd} from {client.peer} ({role}) ended: "
+                                     f"{exc} [{outcome}]", command=cmd, client=client.peer,
+                                     role=role, code=exc.code, outcome=outcome)
+            return
+        self.telescope.log_event("warning", "command", f"{cmd} from {client.peer} ({role}) refused: "
+                                 f"{exc} [{exc.code}]", command=cmd, client=client.peer, role=role,
+                                 code=exc.code)
 
     async def _authenticate(self, client: _Client, params: dict[str, Any]) -> dict[str, Any]:
         """Check an `auth` request: throttled per address and overall, logged when wrong."""

@@ -51,6 +51,7 @@ from .exceptions import (
     MountUnavailable,
     NotActive,
     OperationAborted,
+    StoppedByClient,
     TargetUnreachable,
     VssError,
 )
@@ -112,6 +113,7 @@ class TelescopeConfig:
     hold_lookahead_s: float = HOLD_LOOKAHEAD_S  # a fixed hold must stay out of the zones this long
     offset_rate_arcsec_s: float = 1800.0  # how fast an offset moves the boresight (steering.py)
     offset_accel_arcsec_s2: float = 3600.0
+    mount_endpoint: str = ""  # where ASTCom clients reach the mount ('' unknown or nowhere)
 
     @property
     def margin_speed(self) -> float:
@@ -556,7 +558,7 @@ class Telescope:
             state = await self.motion.state()
             result["mount_state"] = self.link.mapping.state_name(state)
 
-        await self.supervisor.stop("stopped by a client", then=to_rest)
+        await self.supervisor.stop(StoppedByClient("stopped by a client"), then=to_rest)
         return result
 
     async def set_mode(self, mode: str) -> dict[str, Any]:
@@ -601,6 +603,7 @@ class Telescope:
         """Return encoder and observed positions, RA/Dec, states, mount time, error statistics."""
         cfg = self.config
         out: dict[str, Any] = {"connected": self.link.connected, "url": self.link.config.url,
+                               "mount_endpoint": cfg.mount_endpoint or None,
                                "mode": "active" if self.active else "passive",
                                "simulated": cfg.simulated, "time_mode": cfg.time_mode,
                                "speed": None if cfg.lockstep and cfg.speed <= 0 else cfg.speed,

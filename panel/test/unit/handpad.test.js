@@ -39,3 +39,14 @@ test('the offsets table reads totals and rates in their own units', () => {
                           { axis: 'path', unit: 's', total: 1.5, rate: 0.1, moving: true }]);
   assert.deepEqual(offsetRows({}), []);
 });
+
+test('the command outcome of an offset says when it acts, and its text says what moved', async () => {
+  const { commandOutcome, commandText, operationFigures } = await import('../../src/telescope-view.js');
+  assert.equal(commandText('offset', { axis: 'dec', op: 'add', arcsec: 5 }), 'offset dec add +5″');
+  assert.equal(commandText('offset', { axis: 'path', op: 'add', seconds: -0.25 }), 'offset path add -0.25 s');
+  assert.equal(commandText('offset', { axis: 'all', op: 'reset' }), 'offset all reset');
+  const out = commandOutcome('offset', { result: { lead_ms: 20, sent: 'replace_from', offsets: {} } });
+  assert.deepEqual(out, { outcome: 'done', text: 'done: acts 20 ms after acceptance (replace_from)' });
+  const figures = operationFigures({ info: { closed_loop: { state: 'locked', accepted: 12, refused: 1, held: 3 } } });
+  assert.deepEqual(figures.map((f) => f.text), ['locked: 12 frames used, 1 refused, 3 held']);
+});
