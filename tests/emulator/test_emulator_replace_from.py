@@ -133,3 +133,30 @@ def test_traj_init_zeroes_the_replace_counters():
     m.traj_init()
     for i in (L.G_TRAJ_REPLACES, L.G_TRAJ_REPLACE_REFUSED, L.G_TRAJ_DROPPED):
         assert m.state[i] == 0
+
+
+def test_an_increasing_batch_is_stored_and_counted_as_pushing_its_points_one_by_one():
+    from mount_emulator.model import MountModel
+
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        cap = int(rng.integers(3, 40))
+        batched = MountModel(start_us=10**15, traj_capacity=cap)
+        single = MountModel(start_us=10**15, traj_capacity=cap)
+        for _ in range(4):
+            n = int(rng.integers(2, 30))
+            t = np.sort(rng.choice(np.arange(10**15 - 50, 10**15 + 300), n, replace=False))
+            az, el = rng.uniform(-6, 6, n), rng.uniform(-0.5, 2.0, n)  # some out of range
+            v = rng.normal(size=n)
+            v[rng.random(n) < 0.05] = np.inf
+            got = batched.traj_push(t.astype(np.int64), az, el, v, v)  # the array path
+            one = sum(single.traj_push(t[k:k + 1].astype(np.int64), az[k:k + 1], el[k:k + 1],
+                                       v[k:k + 1], v[k:k + 1]) for k in range(n))
+            assert got == one, trial
+            for i in (L.G_TRAJ_TAIL, L.G_TRAJ_LATE, L.G_TRAJ_ACCEPTED, L.G_TRAJ_OUT_OF_RANGE,
+                      L.G_TRAJ_LAST_US):
+                assert batched.state[i] == single.state[i], (trial, i)
+        k = int(batched.state[L.G_TRAJ_TAIL])
+        idx = np.arange(k) % cap
+        assert np.array_equal(batched.traj_t[idx], single.traj_t[idx])
+        assert np.array_equal(batched.traj_p[idx], single.traj_p[idx])
