@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-OURS = ("astcom_client", "mount_emulator", "virtualstar", "pointing_model", "catalogs")
+OURS = ("astcom_client", "mount_emulator", "virtualstar", "pointing_model", "catalogs",
+        "guide_camera")
 
 
 def imported(path: Path) -> set[str]:
@@ -50,9 +51,13 @@ def offending(paths: list[Path], forbidden: tuple[str, ...]) -> list[str]:
 
 
 @pytest.mark.parametrize(("package", "forbidden"), [
-    ("astcom_client", ("mount_emulator", "virtualstar", "pointing_model", "catalogs")),
-    ("catalogs", ("astcom_client", "mount_emulator", "virtualstar", "pointing_model")),
-    ("mount_emulator", ("virtualstar", "pointing_model", "catalogs")),
+    ("astcom_client", ("mount_emulator", "virtualstar", "pointing_model", "catalogs",
+                       "guide_camera")),
+    ("catalogs", ("astcom_client", "mount_emulator", "virtualstar", "pointing_model",
+                  "guide_camera")),
+    ("mount_emulator", ("virtualstar", "pointing_model", "catalogs", "guide_camera")),
+    # the camera simulator: ASTCom and independent truth libraries (skyfield, sgp4, ERFA)
+    ("guide_camera", ("mount_emulator", "virtualstar", "pointing_model", "catalogs")),
 ])
 def test_a_package_imports_only_what_the_architecture_allows(package, forbidden):
     assert offending(modules(package), forbidden) == []
@@ -65,9 +70,15 @@ def test_the_pointing_model_core_imports_nothing_of_ours_and_its_cli_no_emulator
     assert offending(cli, ("mount_emulator", "astcom_client")) == []
 
 
-def test_only_the_launcher_of_virtualstar_imports_the_emulator():
+def test_only_the_launcher_of_virtualstar_imports_the_emulator_and_the_camera_simulator():
     others = [p for p in modules("virtualstar") if p != ROOT / "virtualstar" / "launcher.py"]
-    assert offending(others, ("mount_emulator",)) == []
+    assert offending(others, ("mount_emulator", "guide_camera")) == []
+
+
+@pytest.mark.parametrize("module", ["frames.py", "boresight.py"])
+def test_the_camera_frames_are_pure_functions(module):
+    names = imported(ROOT / "guide_camera" / module)
+    assert not names & {"time", "datetime", "asyncio", "socket", "astcom_client"}, names
 
 
 @pytest.mark.parametrize("module", ["protocol.py", "codec.py", "commands.py", "service.py",

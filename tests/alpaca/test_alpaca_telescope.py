@@ -324,3 +324,27 @@ def test_a_place_below_the_horizon_limit_is_refused_with_the_servers_reason(nigh
         scope.SlewToAltAzAsync(200.0, 2.0)
     assert "elevation" in str(exc.value) and "5" in str(exc.value)
     assert not scope.Slewing
+
+
+def test_offset_action_moves_the_track_on_the_sky_and_reports_the_offsets(night, scope):
+    scope.Tracking = True
+    scope.SlewToCoordinatesAsync(*j2000_of(*ICRS))
+    wait_for(lambda: not scope.Slewing, what="the slew")
+    mount_sleep(night, 3.0)
+    assert "Offset" in scope.SupportedActions
+    answer = json.loads(scope.Action("Offset", "dec add 12"))
+    assert answer["lead_ms"] == pytest.approx(20.0) and answer["sent"] == "replace_from"
+    mount_sleep(night, 2.0)
+    az, el, t = encoders(night)
+    shifted = truth(ICRS[0], ICRS[1] + 12.0 / 3600.0, t, night.site)
+    assert sky_sep_arcsec(az, el, *shifted).max() < 0.3
+    json.loads(scope.Action("Offset", '{"axis": "all", "op": "reset"}'))
+    mount_sleep(night, 2.0)
+    az, el, t = encoders(night)
+    assert sky_sep_arcsec(az, el, *truth(*ICRS, t, night.site)).max() < 0.3
+    for bad in ("dec add twelve", "", "dec add 1 2 3", '{"axis": "dec", "by": 1}'):
+        with pytest.raises(InvalidValueException):
+            scope.Action("Offset", bad)
+    scope.Tracking = False
+    with pytest.raises(InvalidOperationException):  # nothing tracked: nothing to offset
+        scope.Action("Offset", "ra add 1")

@@ -45,6 +45,9 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "track": ("virtualstar.cli.track", "track",
         "Track a target; returns once tracking has begun (satellite: once the pass is "
         "planned)."),
+    "offset": ("virtualstar.cli.offset", "offset",
+        "Offset the running track (PWI4-style) on ra, dec, az, el, path or transverse: add, "
+        "set, rate or reset; applied gradually from 20 ms after the server accepts it."),
     "stop": ("virtualstar.cli.stop", "stop",
         "Stop the running operation; the mount ramps to rest and holds."),
     "park": ("virtualstar.cli.park", "park",
@@ -98,7 +101,9 @@ class LazyGroup(TyperGroup):
             command = typer.main.get_group(target)  # a group even with one subcommand
         else:
             single = typer.Typer(add_completion=False)
-            single.command(cmd_name)(target)
+            # a command may ask for click settings, e.g. negative numbers as arguments
+            single.command(cmd_name, context_settings=getattr(target, "context_settings",
+                                                              None))(target)
             command = typer.main.get_command(single)
         command.name = cmd_name
         return command

@@ -161,6 +161,13 @@ def render_status(st: dict[str, Any]) -> Table:
                   f"{_f(last.get('planned_deviation_arcsec'), '.3f', '″')} ({planned})")
     for window, s in st.get("tracking_error", {}).items():
         t.add_row(f"errors, last {window}", _window_text(s))
+    corr = st.get("corrections") or {}
+    if corr:
+        axes = (corr.get("offsets") or {}).get("axes") or {}
+        axes_text = ", ".join(f"{a} {d.get('total_s', d.get('total_arcsec', 0.0)):+.3f}"
+                          f"{' s' if 'total_s' in d else '″'}" for a, d in axes.items())
+        t.add_row("offsets", f"{axes_text or 'none'} ({corr.get('mode')}, from "
+                             f"{_f(corr.get('min_lead_ms'), 'g', ' ms')} lead)")
     ts = st.get("time_sync", {})
     t.add_row("clock offset", f"{_f(ts.get('offset_us'), 'd', ' µs')} (mount − UTC, from the "
                               f"{ts.get('offset_source') or '-'}; {ts.get('syncs')} PPS syncs, "

@@ -27,6 +27,10 @@ def track(
     wait: Annotated[bool, typer.Option(
         "--wait", help="Wait until the track ends and print its tracking-error summary.")] = False,
     allow_sun: AllowSunOpt = False,
+    closed_loop: Annotated[bool, typer.Option(
+        "--closed-loop", help="Guide the track with the server's guide camera: along/across "
+        "offsets for a satellite, RA/Dec for a star (needs vs server --camera or "
+        "--camera-sim).")] = False,
     server: ServerOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
@@ -44,6 +48,8 @@ def track(
     params: dict = {"wait": wait}
     if allow_sun:
         params["allow_sun"] = True
+    if closed_loop:
+        params["closed_loop"] = True
     if duration is not None:
         params["duration_s"] = duration
     if tle is not None:

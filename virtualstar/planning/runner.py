@@ -228,13 +228,15 @@ class ProgramRunner:
         return await self._finish(rec, block, ended)
 
     def _track_params(self, block: Block, target, now_us: int) -> dict[str, Any]:
+        loop = {"closed_loop": True} if target.closed_loop else {}
         if block.kind == "satellite":
             from .sky import target_tle_text
 
             wait_s = max(0.0, (block.start_us - now_us) / 1e6) + 300.0
-            return {"tle": target_tle_text(target), "sat": target.spec, "max_wait_s": wait_s}
+            return {"tle": target_tle_text(target), "sat": target.spec, "max_wait_s": wait_s,
+                    **loop}
         key = "radec" if block.kind == "radec" else "star"
-        return {key: target.spec}
+        return {key: target.spec, **loop}
 
     async def _until(self, end_us: int, op_id: int | None) -> Exception | None:
         """Wait until mount time `end_us`; return the error if the operation ended first."""

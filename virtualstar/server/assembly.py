@@ -9,6 +9,7 @@ from typing import Any
 from virtualstar.astro import Site, load_site
 
 from .access import AccessConfig
+from .camera_link import CameraLink, CameraLinkConfig
 from .clock import MountClock, PacedClock
 from .mapping import load_mapping
 from .mount_link import LinkConfig, MountLink
@@ -25,6 +26,7 @@ def build_server(*, mount_url: str, password: str | None = None,
                  clock: MountClock | None = None,
                  connector: Callable[[], Awaitable[Any]] | None = None,
                  access: AccessConfig | None = None,
+                 camera: CameraLinkConfig | None = None,
                  **telescope_options) -> VssServer:
     """Return a VssServer for the mount at `mount_url` (not started yet).
 
@@ -36,7 +38,8 @@ def build_server(*, mount_url: str, password: str | None = None,
     follow from the clock (`clock.Margins`). mount_endpoint (a telescope option): the
     ASTCom URL clients are told the mount answers at (default `mount_url` when it is
     one). access: the API's passwords and allowed
-    origins (default: none, loopback pages only). Raises MappingError, BadRequest.
+    origins (default: none, loopback pages only). camera: a guide camera device for
+    closed-loop tracking (camera_link.py). Raises MappingError, BadRequest.
     """
     mapping = load_mapping(mapping_path)
     link = MountLink(LinkConfig(mount_url, password, connector=connector), mapping)
@@ -48,6 +51,8 @@ def build_server(*, mount_url: str, password: str | None = None,
     config = TelescopeConfig(site=site or load_site(), simulated=simulated, active=active,
                              **telescope_options)
     telescope = Telescope(link, config, clock)
+    if camera is not None:
+        telescope.steering.camera = CameraLink(camera)
     if pointing_model is not None:
         telescope.load_model(str(pointing_model))
     return VssServer(telescope, heartbeat_s=heartbeat_s, access=access)

@@ -7,8 +7,10 @@ a guide or user offset). From the same samples this module gives, per sample:
 
 * **on target**: the encoders against the target's true place — the target
   observed at that mount time (`virtualstar.astro`, checked against astropy and
-  skyfield in the tests), moved by the guide offsets the observer gave (the guider
-  measured the star there; they are reported apart as `guide_offset_arcsec`), taken
+  skyfield in the tests), moved by the offsets in force (`offsets.Offsets`: the
+  observer's, the guider's and the closed loop's — deliberate, so reported apart and
+  not counted as error; `offset_path.OffsetPath` applies them exactly as to the
+  demand), taken
   through the loaded pointing model into the encoder frame, as the VSS knows the
   mount's geometry (no model: the encoders are the observed place);
 * **planned deviation**: the demand (encoders + following error) against the same
@@ -38,7 +40,9 @@ import numpy as np
 from virtualstar.astro import observe_mount_times
 from virtualstar.astro.constants import ARCSEC_PER_RAD
 
-from .trajectories import observed_to_encoder
+from .offset_path import OffsetPath
+from .offsets import Offsets
+from .trajectories import Points, observed_to_encoder
 
 __all__ = ["OnTarget", "TargetTruth", "warm_up"]
 
@@ -62,25 +66,28 @@ class TargetTruth:
     to_us: int | None = None
     op_id: int | None = None  # the operation that follows it
     planned: list[str] = field(default_factory=list)  # what the VSS chose to send apart
-    offsets: Any = None  # GuideOffsets: the intended place moves with them
+    offsets: Offsets | None = None  # the intended place moves with them
     _chunk: tuple[np.ndarray, ...] | None = None  # t_us, az, el, az rate, el rate
-    _chunk_offsets: Any = None  # the offsets the chunk was computed with
     failed: str = ""
 
     def grid(self, first_us: int, last_us: int) -> tuple[np.ndarray, ...]:
         """The true place on the grid around [first_us, last_us]: (t_us, az, el, az rate,
         el rate) in the encoder frame (rad, rad/s), the azimuth continuous."""
         c = self._chunk
-        if (c is None or first_us < c[0][0] or last_us > c[0][-1]
-                or self._offsets_now() != self._chunk_offsets):
+        if c is None or first_us < c[0][0] or last_us > c[0][-1]:
             c = self._chunk = self._compute(first_us, last_us)
-            self._chunk_offsets = self._offsets_now()
         return c
 
-    def _offsets_now(self) -> Any:
-        o = self.offsets
-        return None if o is None else (len(o.pulses), o.end_us, o.base_north_rad,
-                                       o.base_east_rad)
+    @property
+    def offset(self) -> bool:
+        """Whether offsets move the intended place (then it is sampled through OffsetPath)."""
+        return self.offsets is not None and self.offsets.any
+
+    def intended(self, t_us: np.ndarray) -> Points:
+        """The intended place at mount times in the encoder frame: the truth moved by the
+        offsets, as the feeder moves the demand."""
+        lat = math.radians(self.site.lat_deg)
+        return OffsetPath(_GridPath(self), self.offsets or Offsets(), lat).sample(t_us)
 
     def _compute(self, first_us: int, last_us: int) -> tuple[np.ndarray, ...]:
         start = first_us // GRID_US * GRID_US
@@ -89,11 +96,46 @@ class TargetTruth:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the feeder has already said it (EOP, TLE age)
             o = observe_mount_times(self.target, t, self.site, self.eop)
-        place = (o.az_rad, o.el_rad, o.az_rate_rad_s, o.el_rate_rad_s)
-        if self.offsets is not None:
-            place = self.offsets.offset(t, *place, math.radians(self.site.lat_deg))
-        az, el, v_az, v_el = observed_to_encoder(self.model, np.unwrap(place[0]), *place[1:])
+        az, el, v_az, v_el = observed_to_encoder(self.model, np.unwrap(o.az_rad), o.el_rad,
+                                                 o.az_rate_rad_s, o.el_rate_rad_s)
         return t, np.unwrap(az), el, v_az, v_el
+
+
+class _GridPath:
+    """A target's true place as a `trajectories.Path`: cubic Hermite on its grid."""
+
+    def __init__(self, ref: TargetTruth) -> None:
+        self.ref = ref
+
+    def sample(self, t_us: np.ndarray) -> Points:
+        t = np.asarray(t_us, np.int64)
+        g_t, az, el, v_az, v_el = self.ref.grid(int(t.min()), int(t.max()))
+        k = np.clip((t - g_t[0]) // GRID_US, 0, g_t.shape[0] - 2)
+        s = (t - g_t[k]) / GRID_US
+        h = GRID_US / 1e6
+        s2, s3 = s * s, s * s * s
+        w = (2 * s3 - 3 * s2 + 1, (s3 - 2 * s2 + s) * h, -2 * s3 + 3 * s2, (s3 - s2) * h)
+        dw = ((6 * s2 - 6 * s) / h, 3 * s2 - 4 * s + 1, (-6 * s2 + 6 * s) / h, 3 * s2 - 2 * s)
+
+        def at(weights, p, v):
+            return (weights[0] * p[k] + weights[1] * v[k] + weights[2] * p[k + 1]
+                    + weights[3] * v[k + 1])
+
+        return Points(t, at(w, az, v_az), at(w, el, v_el), at(dw, az, v_az), at(dw, el, v_el))
+
+
+class _ObservedPath:
+    """A target's observed place as a `trajectories.Path` (computed at each time)."""
+
+    def __init__(self, target, site, eop) -> None:
+        self.target, self.site, self.eop = target, site, eop
+
+    def sample(self, t_us: np.ndarray) -> Points:
+        t = np.asarray(t_us, np.int64)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            o = observe_mount_times(self.target, t, self.site, self.eop)
+        return Points(t, o.az_rad, o.el_rad, o.az_rate_rad_s, o.el_rate_rad_s)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -151,9 +193,9 @@ class OnTarget:
         return ref if ref is not None and ref.to_us is None else None
 
     def follow(self, target, name: str, *, model, from_us: int, op_id: int | None = None,
-               planned: list[str] | None = None, offsets=None) -> TargetTruth:
-        """From mount time `from_us` the boresight should be on `target`, moved by the guide
-        `offsets` if any (ends the one before)."""
+               planned: list[str] | None = None, offsets: Offsets | None = None) -> TargetTruth:
+        """From mount time `from_us` the boresight should be on `target`, moved by the
+        operation's `offsets` if any (ends the one before)."""
         self.end(from_us)
         ref = TargetTruth(target, name, self.site, self.eop, model, int(from_us),
                           op_id=op_id, planned=list(planned or []), offsets=offsets)
@@ -188,14 +230,24 @@ class OnTarget:
                 continue
             i0 = int(np.searchsorted(t, ref.from_us))
             i1 = t.size if ref.to_us is None else int(np.searchsorted(t, ref.to_us, "right"))
+            if i1 <= i0:
+                continue
             try:
                 g_t, az, el, v_az, v_el = ref.grid(int(t[i0]), int(t[i1 - 1]))
+                place = ref.intended(t[i0:i1]) if ref.offset else None
             except Exception as exc:  # noqa: BLE001 - a truth that cannot be computed is said once
                 ref.failed = str(exc)
                 log.warning("on-target truth for %s unavailable: %s", ref.name, exc)
                 continue
             if on is None:
                 on, dev = np.full(t.size, math.nan), np.full(t.size, math.nan)
+            if place is not None:  # offsets in force: the intended place at each sample
+                part = slice(i0, i1)
+                on[part] = erfa.seps(np.asarray(enc_az, float)[part], np.asarray(enc_el, float)[part],
+                                     place.az_rad, place.el_rad) * ARCSEC_PER_RAD
+                dev[part] = erfa.seps(np.asarray(dem_az, float)[part], np.asarray(dem_el, float)[part],
+                                      place.az_rad, place.el_rad) * ARCSEC_PER_RAD
+                continue
             _distances(t, np.asarray(enc_az, float), np.asarray(enc_el, float),
                        np.asarray(dem_az, float), np.asarray(dem_el, float), i0, i1, g_t,
                        GRID_US, az, el, v_az, v_el, on, dev)
@@ -208,12 +260,10 @@ class OnTarget:
         if ref is None or t_us < ref.from_us:
             return None
         t = np.array([t_us], np.int64)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            o = observe_mount_times(ref.target, t, self.site, self.eop)
-        place = (o.az_rad, o.el_rad, o.az_rate_rad_s, o.el_rate_rad_s)
-        if ref.offsets is not None:
-            place = ref.offsets.offset(t, *place, math.radians(self.site.lat_deg))
+        observed = _ObservedPath(ref.target, self.site, self.eop)
+        p = (OffsetPath(observed, ref.offsets, math.radians(self.site.lat_deg)).sample(t)
+             if ref.offset else observed.sample(t))
+        place = (p.az_rad, p.el_rad)
         az, el = float(place[0][0]), float(place[1][0])
         sep = float(erfa.seps(math.radians(obs_az_deg), math.radians(obs_el_deg), az, el))
         return {"target": ref.name, "since_us": ref.from_us, "at_us": int(t_us),

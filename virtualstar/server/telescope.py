@@ -51,20 +51,20 @@ from .exceptions import (
     MountFault,
     MountUnavailable,
     NotActive,
-    NotTracking,
     OperationAborted,
     StoppedByClient,
     TargetUnreachable,
     VssError,
 )
 from .feeder import FeederConfig
-from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, GuideOffsets
 from .motion import Motion
 from .mount_link import MountLink
+from .offset_path import sky_rate_arcsec_s
 from .on_target import OnTarget
-from .operations import TERMINAL, Operation, Phase
+from .operations import Operation
 from .programs import ProgramControl
 from .safety import HOLD_LOOKAHEAD_S, Safety
+from .steering import Steering
 from .supervisor import Supervisor
 from .timesync import TimeSync
 from .tracking_errors import TrackingErrorHistory
@@ -112,6 +112,8 @@ class TelescopeConfig:
     resume_timeout_s: float = 60.0  # wall seconds an interrupted track waits for the mount
     zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
     hold_lookahead_s: float = HOLD_LOOKAHEAD_S  # a fixed hold must stay out of the zones this long
+    offset_rate_arcsec_s: float = 1800.0  # how fast an offset moves the boresight (steering.py)
+    offset_accel_arcsec_s2: float = 3600.0
     mount_endpoint: str = ""  # where ASTCom clients reach the mount ('' unknown or nowhere)
 
 
@@ -146,7 +148,7 @@ class Telescope:
         self._mount_state: int | None = None
         self._tasks: set[asyncio.Task] = set()
         self.programs = ProgramControl(self, lambda kind, data: self.emit(kind, data))
-        self._guide: tuple[int, GuideOffsets] | None = None  # (operation id, its offsets)
+        self.steering = Steering(self)  # offsets and guide pulses of the running track
         self.log = EventLog("vss", kept_apart=KEPT_APART)
         self.last_mount_us: int | None = None  # the newest tracking-error sample's time
 
@@ -192,6 +194,7 @@ class Telescope:
             task.cancel()
         if tasks:
             await asyncio.wait(tasks)
+        await self.steering.close()
         await self.link.stop()
 
     async def first_samples(self, timeout_s: float) -> None:
@@ -248,6 +251,9 @@ class Telescope:
             az_max_accel_deg_s2=v.get("az_slew_accel_limit", d.az_max_accel_deg_s2),
             el_max_accel_deg_s2=v.get("el_slew_accel_limit", d.el_max_accel_deg_s2))
         self.track_rate_limit_deg_s = v.get("az_track_rate_limit", self.limits.az_max_rate_deg_s)
+        if m.has("replace_min_lead"):
+            lead = (await self.link.read(["replace_min_lead"]))["replace_min_lead"]
+            self.steering.min_lead_us = max(0, int(lead))
 
     async def _start_error_stream(self) -> None:
         link = self.link
@@ -367,7 +373,7 @@ class Telescope:
 
     def note_points(self, p: Points) -> None:
         """The feeder pushed points: keep the target's on-sky rate for the on-sky error."""
-        self.errors.note_rates(p.t_us, procedures.sky_rate_arcsec_s(p))
+        self.errors.note_rates(p.t_us, sky_rate_arcsec_s(p))
 
     def feeder_config(self) -> FeederConfig:
         cfg = self.config
@@ -385,13 +391,17 @@ class Telescope:
                                    f"({self.link.last_error or 'connecting'})")
 
     async def follow_target(self, target, name: str, *, kind: str = "track",
-                            duration_s: float | None = None, allow_sun: bool = False) -> Operation:
-        """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped)."""
+                            duration_s: float | None = None, allow_sun: bool = False,
+                            closed_loop: bool = False) -> Operation:
+        """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped);
+        `closed_loop`: guided by the guide camera's centroids (closed_loop.py)."""
         self._check_can_move()
+        if closed_loop:
+            self.steering.need_camera(kind)
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.follow_sky_target(self, op, target, duration_s=duration_s,
-                                                      allow_sun=allow_sun)
+                                                      allow_sun=allow_sun, closed_loop=closed_loop)
 
         check = self._target_check(target, name, allow_sun)
         return await self._start(kind, name, procedure, resumable=True, allow_sun=allow_sun,
@@ -485,12 +495,6 @@ class Telescope:
         return await self._start("pointing_sample", name, procedure, allow_sun=allow_sun,
                                  check=check)
 
-    def guide_offsets(self, op: Operation) -> GuideOffsets:
-        """The guide offsets of a sky track (kept through its re-acquisitions)."""
-        if self._guide is None or self._guide[0] != op.id:
-            self._guide = (op.id, GuideOffsets())
-        return self._guide[1]
-
     async def move(self, az_rate_deg_s: float, el_rate_deg_s: float, *,
                    allow_sun: bool = False) -> Operation:
         """Turn the axes at constant rates until stopped or a limit/zone is near (hand pad)."""
@@ -513,47 +517,25 @@ class Telescope:
 
     async def guide(self, north_arcsec: float, east_arcsec: float,
                     rate_arcsec_s: float) -> dict[str, Any]:
-        """Offset the sky target being tracked north/east at `rate_arcsec_s` (a guide pulse).
+        """Offset the target being tracked north/east at `rate_arcsec_s` (a guide pulse).
 
-        A slew or track of a sky target accepts pulses from its start: given before the
-        mount has joined the target, they are part of the place it joins.
+        A slew or track accepts pulses from its start: given before the mount has
+        joined the target, they are part of the place it joins (steering.py).
         """
-        if not 0 < rate_arcsec_s <= MAX_GUIDE_RATE_ARCSEC_S:
-            raise BadRequest(f"guide: rate_arcsec_s={rate_arcsec_s:g}: expected > 0 and at most "
-                             f"{MAX_GUIDE_RATE_ARCSEC_S:g} (ten times sidereal)")
-        size = math.hypot(north_arcsec, east_arcsec)
-        if size == 0.0:
-            raise BadRequest("guide: north_arcsec and east_arcsec are both 0")
-        if size > MAX_GUIDE_STEP_ARCSEC:
-            raise BadRequest(f"guide: a pulse of {size:g}\u2033 is beyond the "
-                             f"{MAX_GUIDE_STEP_ARCSEC:g}\u2033 a guide pulse may move; slew instead")
-        op = self.op
-        if (op is None or op.kind not in ("slew", "track") or op.info.get("fixed")
-                or op.phase in TERMINAL or op.phase is Phase.ENDING):
-            what = "nothing runs" if op is None else f"operation {op.id} ({op.kind}) is " \
-                f"{op.phase.label}"
-            raise NotTracking(f"guide: no sky target is being tracked ({what}); a guide pulse "
-                              "offsets a running track or slew of a star, planet or RA/Dec")
-        offsets = self.guide_offsets(op)
-        now = await self.motion.mount_time_us()
-        if self.op is not op:
-            raise NotTracking(f"guide: operation {op.id} was replaced while the pulse was "
-                              "being scheduled")
-        pulse = offsets.add(north_arcsec, east_arcsec, rate_arcsec_s, now,
-                            self.feeder_config().step_us)
-        north, east = offsets.total_arcsec()
-        return {"id": op.id, "start_us": pulse.start_us, "end_us": pulse.end_us,
-                "start_utc": iso_utc(pulse.start_us, 3), "end_utc": iso_utc(pulse.end_us, 3),
-                "offset_arcsec": {"north": north, "east": east}}
+        return await self.steering.guide(north_arcsec, east_arcsec, rate_arcsec_s)
 
     async def track_satellite(self, sat: Satellite, *, max_wait_s: float | None = None,
-                              allow_sun: bool = False) -> Operation:
-        """Track the pass of `sat` in progress, or the next one above the horizon limit."""
+                              allow_sun: bool = False, closed_loop: bool = False) -> Operation:
+        """Track the pass of `sat` in progress, or the next one above the horizon limit;
+        `closed_loop`: the along/across offsets follow the guide camera (closed_loop.py)."""
         self._check_can_move()
+        if closed_loop:
+            self.steering.need_camera("track")
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.track_satellite_pass(self, op, sat, max_wait_s=max_wait_s,
-                                                         allow_sun=allow_sun)
+                                                         allow_sun=allow_sun,
+                                                         closed_loop=closed_loop)
 
         return await self._start("track_satellite", sat.name, procedure, resumable=True,
                                  allow_sun=allow_sun)
@@ -629,6 +611,7 @@ class Telescope:
                                "time_sync": self.timesync.status.as_dict(),
                                "safety": self._safety_doc(),
                                "limits": dataclasses.asdict(self.limits),
+                               "corrections": self.steering.status(self.last_mount_us),
                                "tracking_error": {f"{w}s": self.errors.window(w).as_dict()
                                                   for w in (1, 10, 60)}}
         if not self.link.connected:
