@@ -177,7 +177,7 @@ def test_track_wait_shows_the_wait_for_the_pass_in_mount_time_when_piped():
     assert {"pass planned", "waiting", "tracking"} <= set(phases), lines
     assert phases.index("pass planned") < phases.index("waiting") < phases.index("tracking")
     assert any("of the pass left" in x for x in lines if ": tracking" in x)
-    assert "tracking error RMS" in res.stdout  # the summary table once the pass ended
+    assert "error on target RMS" in res.stdout  # the summary table once the pass ended
 
 
 def test_the_wait_line_counts_down_in_mount_time():

@@ -104,6 +104,8 @@ class TargetTruth:
 class _GridPath:
     """A target's true place as a `trajectories.Path`: cubic Hermite on its grid."""
 
+    end_us = 2**62  # a truth has no end
+
     def __init__(self, ref: TargetTruth) -> None:
         self.ref = ref
 
@@ -126,6 +128,8 @@ class _GridPath:
 
 class _ObservedPath:
     """A target's observed place as a `trajectories.Path` (computed at each time)."""
+
+    end_us = 2**62
 
     def __init__(self, target, site, eop) -> None:
         self.target, self.site, self.eop = target, site, eop

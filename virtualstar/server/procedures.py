@@ -445,9 +445,10 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
     ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
                                  allow_sun=allow_sun, corrections=corrections,
                                  feed=_feed(t, closed_loop))
+    planned = ["keyhole"] if plan.keyhole_limited else []
     t.on_target.follow(sat, sat.name, model=t.model, from_us=ramp.join_us, op_id=op.id,
-                       planned=["keyhole"] if plan.keyhole_limited else None,
-                       offsets=corrections.offsets)
+                       planned=planned, offsets=corrections.offsets)
+    op.info["planned_deviation"] = planned  # known from the plan, before the pass ends
 
     async def on_path() -> int:
         await t.motion.wait_until(ramp.join_us)
