@@ -285,6 +285,14 @@ class Client:
         try:
             await client._flush()
             ready = await asyncio.wait_for(asyncio.shield(client._ready), timeout_s)
+        except ConnectionClosed:
+            await client._abort()
+            # An endpoint that refuses (429, 503) says why and closes at once; its reason may
+            # have arrived before our HELLO could be sent. Its reason, not the closed socket.
+            refusal = client._ready.exception() if client._ready.done() else None
+            if isinstance(refusal, AstcomError) and not isinstance(refusal, ConnectionClosed):
+                raise refusal from None
+            raise
         except BaseException:
             await client._abort()
             raise
