@@ -42,6 +42,9 @@ log = logging.getLogger("astcom.transports")
 
 _READ_CHUNK = 1 << 16
 _WS_CLOSE_CODES = {1000: 1000, 413: 1009, 429: 1013, 503: 1001}
+# How long a closing connection reads (and drops) what its peer still sends, so that the
+# peer receives our last frames: the ERR that says why it is cut off.
+_LINGER_S = 2.0
 
 
 class Transport(Protocol):
@@ -127,7 +130,21 @@ class WebSocketTransport:
     async def close(self, code: int = 1000, reason: str = "") -> None:
         ws_code = _WS_CLOSE_CODES.get(code, 1008 if code else 1000)
         text = f"{code} {reason}" if reason else ""
-        await self._ws.close(ws_code, text.encode()[:120].decode(errors="ignore"))
+        # The peer's close frame may sit behind messages it sent before it saw ours; they
+        # are read and dropped, else the closing handshake waits for close_timeout.
+        drain = asyncio.ensure_future(self._drop_incoming())
+        try:
+            await self._ws.close(ws_code, text.encode()[:120].decode(errors="ignore"))
+        finally:
+            drain.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await drain
+
+    async def _drop_incoming(self) -> None:
+        # a reader of our own may be in recv() already (ConcurrencyError): then it drains
+        with contextlib.suppress(Exception):
+            while True:
+                await self._ws.recv()
 
 
 class TcpTransport:
@@ -164,6 +181,15 @@ class TcpTransport:
 
     async def close(self, code: int = 1000, reason: str = "") -> None:
         if not self._writer.is_closing():
+            # Closing with unread bytes makes the kernel reset the connection, and a reset
+            # destroys what the peer has not read yet (our last replies): say we are done
+            # (FIN) and drop what still comes until the peer closes too, for a while.
+            with contextlib.suppress(Exception):
+                if self._writer.can_write_eof():
+                    self._writer.write_eof()
+                    async with asyncio.timeout(_LINGER_S):
+                        while await self._reader.read(_READ_CHUNK):
+                            pass
             self._writer.close()
         with contextlib.suppress(Exception):
             await asyncio.wait_for(self._writer.wait_closed(), 2.0)

@@ -23,7 +23,8 @@ enum ad_link_kind {
     AD_LINK_DATA = 1,   /* an ASTCom frame of channel `chan` (either way) */
     AD_LINK_OPEN = 2,   /* relay -> device: a client arrived on `chan` (body: its address) */
     AD_LINK_CLOSE = 3,  /* either way: `chan` is over; from the device: u16 LE code + reason */
-    AD_LINK_HELLO = 4,  /* chan 0: u8 version, u16 LE channels, u32 LE max_frame_bytes */
+    AD_LINK_HELLO = 4,  /* chan 0: u8 version, u16 LE channels, u32 LE max_frame_bytes,
+                           u32 LE token (the relay's; the device echoes it, 0 at boot) */
     AD_LINK_PING = 5,   /* chan 0, relay -> device: u32 token */
     AD_LINK_PONG = 6    /* chan 0, device -> relay: the same token */
 };
@@ -39,7 +40,8 @@ size_t ad_link_bytes(uint32_t max_frame_bytes, uint32_t max_reply_bytes, uint32_
 ad_link *ad_link_init(void *mem, size_t mem_bytes, ad_device *dev, uint32_t max_frame_bytes,
                       uint32_t max_reply_bytes, uint32_t channels, ad_link_drain_fn drain,
                       void *io);
-/* Announce the device (a HELLO on channel 0): at boot, and whenever the relay asks. */
+/* Announce the device at boot (a HELLO on channel 0 with token 0); a relay's HELLO is
+ * answered by the link itself, with the relay's token. */
 void ad_link_hello(ad_link *link);
 /* Returns the bytes consumed: fewer than `n` when a frame must wait for its channel
  * (a deferred call runs there); feed the rest after ad_link_service(). */

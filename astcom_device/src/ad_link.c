@@ -158,14 +158,23 @@ ad_link *ad_link_init(void *mem, size_t mem_bytes, ad_device *dev, uint32_t max_
     return l;
 }
 
-void ad_link_hello(ad_link *l)
+/* Announce the device; `token` is the relay HELLO's being answered (0 at boot), so the
+ * relay can tell its answer from a device that rebooted. */
+static void say_hello(ad_link *l, const uint8_t token[4])
 {
-    uint8_t body[7];
+    uint8_t body[11];
     body[0] = AD_LINK_VERSION;
     body[1] = (uint8_t)l->channels;
     body[2] = (uint8_t)(l->channels >> 8);
     for (int k = 0; k < 4; k++) body[3 + k] = (uint8_t)(l->max_frame >> (8 * k));
+    memcpy(body + 7, token, 4);
     send_link(l, 0, AD_LINK_HELLO, body, sizeof body, 0);
+}
+
+void ad_link_hello(ad_link *l)
+{
+    static const uint8_t boot[4] = {0, 0, 0, 0};
+    say_hello(l, boot);
 }
 
 static void close_channel(ad_link *l, uint8_t chan, int code, const char *reason, int tell)
@@ -193,11 +202,14 @@ static int dispatch(ad_link *l, uint8_t *f, size_t n)
     size_t len = n - 6;
     if (chan > l->channels) { l->st.framing_errors++; return 0; }
     switch (kind) {
-    case AD_LINK_HELLO:
+    case AD_LINK_HELLO: {
         /* the relay (re)started: every channel it knew is gone */
+        uint8_t token[4] = {0, 0, 0, 0};
+        if (len >= 11) memcpy(token, body + 7, 4);
         for (uint32_t c = 1; c <= l->channels; c++) close_channel(l, (uint8_t)c, 1001, "", 0);
-        ad_link_hello(l);
+        say_hello(l, token);
         break;
+    }
     case AD_LINK_PING:
         send_link(l, 0, AD_LINK_PONG, body, len > 8 ? 8 : len, 0);
         break;

@@ -54,13 +54,14 @@ static int64_t mono_ns(void)
 
 /* ---- the tick thread ---------------------------------------------------------------------- */
 #define LATE_BINS 20001 /* 0..20 ms in µs, the last bin holds everything later */
+#define SKIP_AFTER_NS 2000000000LL
 static volatile sig_atomic_t STOP;
 static struct {
     ad_device *dev;
     ad_step_fn step;
     double rate_hz;
     uint64_t hist[LATE_BINS];
-    uint64_t ticks, late_max_ns;
+    uint64_t ticks, late_max_ns, skipped;
 } T;
 
 static void *tick_thread(void *arg)
@@ -84,11 +85,15 @@ static void *tick_thread(void *arg)
         ad_tick(T.dev, tick, t_us);
         tick++;
         next += period_ns;
-        /* a loop more than 100 ms behind gives those ticks up rather than racing */
-        if (mono_ns() - next > 100000000) {
+        /* A late loop catches up (its ticks run back to back at their own times, so no
+         * tick and no sample is missing after the host took the CPU away for a while);
+         * only a loop more than SKIP_AFTER_NS behind, a host that cannot keep the rate,
+         * gives those ticks up (the tick numbers jump, a new clock segment; counted). */
+        if (mono_ns() - next > SKIP_AFTER_NS) {
             int64_t skip = (mono_ns() - next) / period_ns;
             next += skip * period_ns;
             tick += (uint64_t)skip;
+            T.skipped += (uint64_t)skip;
         }
     }
     return NULL;
@@ -112,31 +117,78 @@ static void write_stats(const char *path)
     ad_get_stats(T.dev, &st);
     fprintf(f, "{\"ticks\": %llu, \"late_p50_us\": %.0f, \"late_p99_us\": %.0f, "
                "\"late_p999_us\": %.0f, \"late_max_us\": %.1f, \"dropped_samples\": %llu, "
-               "\"ring_lost_samples\": %llu}\n",
+               "\"ring_lost_samples\": %llu, \"skipped_ticks\": %llu}\n",
             (unsigned long long)T.ticks, percentile(0.5), percentile(0.99), percentile(0.999),
             (double)T.late_max_ns / 1000.0, (unsigned long long)st.dropped_samples,
-            (unsigned long long)st.ring_lost_samples);
+            (unsigned long long)st.ring_lost_samples, (unsigned long long)T.skipped);
     fclose(f);
 }
 
 /* ---- TCP connections ------------------------------------------------------------------------- */
+/* A connection's end: no more requests are read (C_FLUSH) while the frames already built
+ * (the last reply, the ERR that says why) are sent; then our side shuts down (FIN) and
+ * what the peer still sends is read and thrown away until it closes too (C_LINGER).
+ * Closing a socket whose receive queue holds unread bytes makes the kernel send a RST,
+ * and a RST makes the peer's kernel discard the replies it has not read yet: the peer
+ * would never see why it was cut off. Each phase lasts at most CLOSE_WAIT_US. */
+enum { C_OPEN, C_FLUSH, C_DEAD, C_LINGER };
+#define CLOSE_WAIT_US 2000000
+
 typedef struct conn {
     int fd;
     ad_session *s;
     uint8_t *rx;
-    size_t rx_cap, rx_len;
+    size_t rx_cap, rx_len, rx_limit;   /* rx grows to the frame a header announces */
     uint8_t *tx;
-    size_t tx_cap, tx_head, tx_tail;
-    int closing;           /* no more reading: flush, then close */
-    int64_t closing_since;
+    size_t tx_cap, tx_head, tx_tail, tx_limit; /* the send ring grows up to tx_limit */
+    int closing;           /* C_OPEN, C_FLUSH, C_DEAD or C_LINGER */
+    int64_t closing_since; /* µs (monotonic) when the phase began */
+    int lingered;          /* counted in n_linger instead of n_conns */
     struct conn *next;
 } conn;
+
+static void begin_close(conn *c)
+{
+    if (c->closing == C_OPEN) {
+        c->closing = C_FLUSH;
+        c->closing_since = mono_ns() / 1000;
+    }
+}
+
+/* Buffers start small and grow to what the connection uses, up to their limits: a peer
+ * that connects and says little (or only garbage) costs a few KiB, not the limits. */
+#define RX_START 4096u
+#define TX_START 16384u
 
 static size_t conn_room(void *ctx)
 {
     conn *c = (conn *)ctx;
-    size_t f = c->tx_cap - (c->tx_head - c->tx_tail);
+    size_t f = c->tx_limit - (c->tx_head - c->tx_tail);
     return f > 4 ? f - 4 : 0;
+}
+
+/* Make the send ring hold `need` more bytes (its contents moved to the start). */
+static int tx_grow(conn *c, size_t need)
+{
+    size_t used = c->tx_head - c->tx_tail, cap = c->tx_cap;
+    if (cap - used >= need) return 0;
+    while (cap - used < need) cap *= 2;
+    if (cap > c->tx_limit) cap = c->tx_limit;
+    if (cap - used < need) return -1;
+    uint8_t *t = malloc(cap);
+    if (!t) return -1;
+    for (size_t i = 0; i < used;) {
+        size_t at = (c->tx_tail + i) % c->tx_cap, run = c->tx_cap - at;
+        if (run > used - i) run = used - i;
+        memcpy(t + i, c->tx + at, run);
+        i += run;
+    }
+    free(c->tx);
+    c->tx = t;
+    c->tx_cap = cap;
+    c->tx_tail = 0;
+    c->tx_head = used;
+    return 0;
 }
 
 static void tx_put(conn *c, const uint8_t *p, size_t n)
@@ -153,8 +205,8 @@ static void tx_put(conn *c, const uint8_t *p, size_t n)
 static int conn_send(void *ctx, const uint8_t *frame, size_t len, int droppable)
 {
     conn *c = (conn *)ctx;
-    if (conn_room(c) < len) {
-        if (!droppable) c->closing = 1; /* cannot happen while the reserve is kept */
+    if (conn_room(c) < len || tx_grow(c, len + 4)) {
+        if (!droppable) begin_close(c); /* cannot happen while the reserve is kept */
         return -1;
     }
     uint8_t head[4] = {(uint8_t)(len >> 24), (uint8_t)(len >> 16), (uint8_t)(len >> 8), (uint8_t)len};
@@ -179,6 +231,26 @@ static int conn_flush(conn *c)
     return 0;
 }
 
+static conn *conn_new(int fd, const ad_config *cfg, const ad_posix_opts *o)
+{
+    conn *c = calloc(1, sizeof *c);
+    if (!c) return NULL;
+    c->fd = fd;
+    c->rx_limit = (size_t)cfg->max_frame_bytes + 4;
+    c->rx_cap = c->rx_limit < RX_START ? c->rx_limit : RX_START;
+    c->tx_limit = 2 * (size_t)cfg->max_reply_bytes + (o->tx_extra_bytes ? o->tx_extra_bytes : (4u << 20));
+    c->tx_cap = c->tx_limit < TX_START ? c->tx_limit : TX_START;
+    c->rx = malloc(c->rx_cap);
+    c->tx = malloc(c->tx_cap);
+    if (!c->rx || !c->tx) {
+        free(c->rx);
+        free(c->tx);
+        free(c);
+        return NULL;
+    }
+    return c;
+}
+
 static void parse_frames(ad_device *dev, conn *c, uint32_t max_frame, int64_t now_us)
 {
     size_t off = 0;
@@ -187,10 +259,21 @@ static void parse_frames(ad_device *dev, conn *c, uint32_t max_frame, int64_t no
         uint32_t size = (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
         if (size > max_frame) {
             ad_refuse_oversize(dev, c->s, size);
-            c->closing = 1;
+            begin_close(c);
             break;
         }
-        if (c->rx_len - off - 4 < size) break;
+        if (c->rx_len - off - 4 < size) {
+            if (4 + (size_t)size > c->rx_cap) { /* make room for the whole frame */
+                memmove(c->rx, c->rx + off, c->rx_len - off);
+                c->rx_len -= off;
+                off = 0;
+                uint8_t *r = realloc(c->rx, 4 + (size_t)size);
+                if (!r) { c->closing = C_DEAD; return; }
+                c->rx = r;
+                c->rx_cap = 4 + (size_t)size;
+            }
+            break;
+        }
         if (!ad_can_receive(dev, c->s)) break;
         ad_receive(dev, c->s, p + 4, size, now_us);
         off += 4 + (size_t)size;
@@ -320,8 +403,10 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
     pthread_attr_init(&attr);
     if (pthread_create(&th, &attr, tick_thread, NULL)) { fprintf(stderr, "cannot start the tick thread\n"); return 1; }
     int64_t t_end = o->duration_s > 0 ? mono_ns() + (int64_t)(o->duration_s * 1e9) : 0;
-    struct pollfd *pf = calloc(max_conns + 2, sizeof *pf);
-    conn **pc = calloc(max_conns + 2, sizeof *pc);
+    /* lingering connections do not hold a slot; at most max_conns of them at once */
+    uint32_t n_linger = 0;
+    struct pollfd *pf = calloc(2 * (size_t)max_conns + 2, sizeof *pf);
+    conn **pc = calloc(2 * (size_t)max_conns + 2, sizeof *pc);
 
     while (!STOP && (!t_end || mono_ns() < t_end)) {
         int n = 0, li = -1, ki = -1;
@@ -334,7 +419,8 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
         int base = n;
         for (conn *c = conns; c; c = c->next) {
             pf[n].fd = c->fd;
-            pf[n].events = (short)((!c->closing && c->s && ad_can_receive(dev, c->s) ? POLLIN : 0)
+            pf[n].events = (short)((c->closing == C_LINGER
+                                    || (c->closing == C_OPEN && c->s && ad_can_receive(dev, c->s)) ? POLLIN : 0)
                                    | (c->tx_head != c->tx_tail ? POLLOUT : 0));
             pc[n - base] = c;
             n++;
@@ -346,32 +432,39 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
             if (fd >= 0) {
                 int one = 1;
                 setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-                conn *c = calloc(1, sizeof *c);
-                c->fd = fd;
-                c->rx_cap = (size_t)cfg->max_frame_bytes + 4;
-                c->rx = malloc(c->rx_cap);
-                c->tx_cap = 2 * (size_t)cfg->max_reply_bytes + (o->tx_extra_bytes ? o->tx_extra_bytes : (4u << 20));
-                c->tx = malloc(c->tx_cap);
-                ad_sink sink = {conn_room, conn_send, c};
-                c->s = ad_open(dev, sink, now_us);
-                if (!c->s) { c->closing = 1; c->closing_since = now_us; }
-                c->next = conns;
-                conns = c;
-                n_conns++;
+                conn *c = conn_new(fd, cfg, o);
+                if (!c) {
+                    close(fd); /* out of memory: refuse this one */
+                } else {
+                    ad_sink sink = {conn_room, conn_send, c};
+                    c->s = ad_open(dev, sink, now_us);
+                    if (!c->s) begin_close(c);
+                    c->next = conns;
+                    conns = c;
+                    n_conns++;
+                }
             }
         }
         for (int i = base; i < n; i++) {
             conn *c = pc[i - base];
+            if (c->closing == C_LINGER) {
+                if (pf[i].revents & (POLLIN | POLLHUP | POLLERR)) {
+                    uint8_t sink[4096];
+                    ssize_t r = recv(c->fd, sink, sizeof sink, MSG_DONTWAIT);
+                    if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR)) c->closing = C_DEAD;
+                }
+                continue;
+            }
             if (pf[i].revents & (POLLIN | POLLHUP | POLLERR)) {
-                if (!c->closing && c->rx_len < c->rx_cap) {
+                if (c->closing == C_OPEN && c->rx_len < c->rx_cap) {
                     ssize_t r = recv(c->fd, c->rx + c->rx_len, c->rx_cap - c->rx_len, MSG_DONTWAIT);
                     if (r > 0) c->rx_len += (size_t)r;
-                    else if (r == 0 || (errno != EAGAIN && errno != EINTR)) { c->closing = 2; }
+                    else if (r == 0 || (errno != EAGAIN && errno != EINTR)) c->closing = C_DEAD;
                 } else if (pf[i].revents & (POLLHUP | POLLERR)) {
-                    c->closing = 2;
+                    c->closing = C_DEAD;
                 }
             }
-            if (c->s && c->closing != 2) parse_frames(dev, c, cfg->max_frame_bytes, now_us);
+            if (c->s && c->closing != C_DEAD) parse_frames(dev, c, cfg->max_frame_bytes, now_us);
         }
         if (link && ki >= 0) {
             if (pf[ki].revents & POLLIN) {
@@ -384,7 +477,7 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
         ad_poll(dev, now_us);
         for (conn *c = conns; c; c = c->next) {
             /* frames left in rx while a call was pending or the sink was full */
-            if (c->s && !c->closing && c->rx_len >= 4) parse_frames(dev, c, cfg->max_frame_bytes, now_us);
+            if (c->s && c->closing == C_OPEN && c->rx_len >= 4) parse_frames(dev, c, cfg->max_frame_bytes, now_us);
         }
         if (link) {
             ad_link_service(link);
@@ -395,14 +488,26 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
             conn *c = *pp;
             int code;
             const char *reason;
-            if (c->s && !c->closing && ad_wants_close(c->s, &code, &reason)) { c->closing = 1; c->closing_since = now_us; }
-            if (conn_flush(c)) c->closing = 2;
-            int done = c->closing == 2 || (c->closing == 1 && (c->tx_head == c->tx_tail || now_us - c->closing_since > 2000000));
-            if (done) {
+            if (c->s && c->closing == C_OPEN && ad_wants_close(c->s, &code, &reason)) begin_close(c);
+            if (c->closing != C_LINGER && conn_flush(c)) c->closing = C_DEAD;
+            int late = c->closing != C_OPEN && now_us - c->closing_since > CLOSE_WAIT_US;
+            if (c->closing == C_FLUSH && (c->tx_head == c->tx_tail || late)) {
+                c->closing = C_DEAD;
+                if (!late && n_linger < max_conns && !shutdown(c->fd, SHUT_WR)) {
+                    /* the session is over and its slot free; the socket lingers */
+                    if (c->s) { ad_close(dev, c->s); c->s = NULL; }
+                    c->closing = C_LINGER;
+                    c->closing_since = now_us;
+                    c->lingered = 1;
+                    n_conns--;
+                    n_linger++;
+                }
+            }
+            if (c->closing == C_LINGER && late) c->closing = C_DEAD;
+            if (c->closing == C_DEAD) {
                 *pp = c->next;
-                if (c->closing == 1) shutdown(c->fd, SHUT_RDWR);
+                if (c->lingered) n_linger--; else n_conns--;
                 conn_free(dev, c);
-                n_conns--;
                 continue;
             }
             pp = &c->next;
