@@ -86,6 +86,16 @@ async def ws_client(relay: Relay):
     return await connect(relay.urls[0], proxy=None, compression=None)
 
 
+@contextlib.asynccontextmanager
+async def one_client(**config):
+    """A scripted device, a Relay on it, and one client whose channel the device opened."""
+    device = ScriptedDevice()
+    async with relay_on(device, **config) as relay:
+        ws = await ws_client(relay)
+        await device.next(LinkKind.OPEN)
+        yield device, relay, ws
+
+
 async def next_message(ws, timeout_s: float = 5.0):
     return msgpack.unpackb(await asyncio.wait_for(ws.recv(), timeout_s))
 
@@ -119,10 +129,7 @@ def test_the_answer_to_the_relays_hello_is_not_taken_for_a_reboot_even_after_a_s
 
 def test_a_device_that_reboots_closes_every_client_with_503():
     async def main():
-        device = ScriptedDevice()
-        async with relay_on(device) as relay:
-            ws = await ws_client(relay)
-            await device.next(LinkKind.OPEN)
+        async with one_client() as (device, _, ws):
             device.hello(0)  # booted again: it has forgotten every channel
             reply = await next_message(ws)
             assert reply[0] == "ERR" and reply[1] is None and reply[2]["code"] == 503
@@ -132,10 +139,7 @@ def test_a_device_that_reboots_closes_every_client_with_503():
 
 def test_a_silent_device_is_a_lost_link_and_later_clients_are_told_so():
     async def main():
-        device = ScriptedDevice()
-        async with relay_on(device, ping_interval_s=0.1, link_timeout_s=0.5) as relay:
-            ws = await ws_client(relay)
-            await device.next(LinkKind.OPEN)
+        async with one_client(ping_interval_s=0.1, link_timeout_s=0.5) as (device, relay, ws):
             device.pong = False
             reply = await next_message(ws)
             assert reply[2]["code"] == 503 and "has not answered" in reply[2]["message"]
@@ -160,10 +164,7 @@ def test_clients_beyond_the_devices_channels_get_429():
 
 def test_a_frame_over_the_devices_limit_is_refused_by_the_relay_with_413():
     async def main():
-        device = ScriptedDevice()
-        async with relay_on(device) as relay:
-            ws = await ws_client(relay)
-            await device.next(LinkKind.OPEN)
+        async with one_client() as (device, _, ws):
             await ws.send(b"\x00" * (MAX_FRAME + 1))
             reply = await next_message(ws)
             assert reply[2]["code"] == 413 and str(MAX_FRAME) in reply[2]["message"]
