@@ -9,6 +9,7 @@
 #include <netinet/tcp.h>
 #include <poll.h>
 #include <pthread.h>
+#include <sched.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -62,6 +63,7 @@ static struct {
     double rate_hz;
     uint64_t hist[LATE_BINS];
     uint64_t ticks, late_max_ns, skipped;
+    int64_t count_from_ns;  /* ticks due before this (monotonic) are not counted */
 } T;
 
 static void *tick_thread(void *arg)
@@ -75,10 +77,12 @@ static void *tick_thread(void *arg)
         while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR && !STOP) {}
         int64_t late = mono_ns() - next;
         if (late < 0) late = 0;
-        uint64_t us = (uint64_t)late / 1000u;
-        T.hist[us < LATE_BINS - 1 ? us : LATE_BINS - 1]++;
-        if ((uint64_t)late > T.late_max_ns) T.late_max_ns = (uint64_t)late;
-        T.ticks++;
+        if (next >= T.count_from_ns) {
+            uint64_t us = (uint64_t)late / 1000u;
+            T.hist[us < LATE_BINS - 1 ? us : LATE_BINS - 1]++;
+            if ((uint64_t)late > T.late_max_ns) T.late_max_ns = (uint64_t)late;
+            T.ticks++;
+        }
         ad_port_lock();
         int64_t t_us = T.step(tick);
         ad_port_unlock();
@@ -398,10 +402,24 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
     T.dev = dev;
     T.step = step;
     T.rate_hz = cfg->loop_rate_hz;
+    T.count_from_ns = mono_ns() + (int64_t)(o->warmup_s * 1e9);
     pthread_t th;
     pthread_attr_t attr;
     pthread_attr_init(&attr);
-    if (pthread_create(&th, &attr, tick_thread, NULL)) { fprintf(stderr, "cannot start the tick thread\n"); return 1; }
+    if (o->rt_priority > 0) {
+        /* a controller's loop: SCHED_FIFO, above every ordinary process of the host */
+        struct sched_param sp = {.sched_priority = o->rt_priority};
+        pthread_attr_setinheritsched(&attr, PTHREAD_EXPLICIT_SCHED);
+        pthread_attr_setschedpolicy(&attr, SCHED_FIFO);
+        pthread_attr_setschedparam(&attr, &sp);
+    }
+    int err = pthread_create(&th, &attr, tick_thread, NULL);
+    if (err) {
+        fprintf(stderr, "cannot start the tick thread%s: %s\n",
+                o->rt_priority > 0 ? " at SCHED_FIFO priority (needs CAP_SYS_NICE or an rtprio limit)" : "",
+                strerror(err));
+        return 1;
+    }
     int64_t t_end = o->duration_s > 0 ? mono_ns() + (int64_t)(o->duration_s * 1e9) : 0;
     /* lingering connections do not hold a slot; at most max_conns of them at once */
     uint32_t n_linger = 0;

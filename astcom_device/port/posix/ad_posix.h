@@ -20,6 +20,8 @@ typedef struct ad_posix_opts {
     double duration_s;        /* stop after this long (0: until SIGINT/SIGTERM) */
     uint32_t tx_extra_bytes;  /* per TCP connection, beyond two replies */
     const char *stats_path;   /* write the loop's lateness figures here as JSON at exit */
+    double warmup_s;          /* the lateness figures leave out the first warmup_s */
+    int rt_priority;          /* > 0: the tick thread runs SCHED_FIFO at this priority */
 } ad_posix_opts;
 
 /* Compute one tick (called with the critical section held); return its mount time. */
