@@ -208,6 +208,17 @@ void *ad_call_state(ad_call *call);
 /* Who asked: the session's client name and role ("observer"/"operator"). */
 const char *ad_call_client(const ad_call *call);
 
+/* ---- texts ------------------------------------------------------------------------------- */
+
+/* snprintf for the library's and an application's texts, without the C library's float
+ * printf (9 KiB of flash on a Cortex-M4): %s %.*s %c %d %u %x %02x, the l, ll and z
+ * lengths, %g %.Ng (up to 17 digits) %.Nf (up to 9 decimals) and %%. Returns the length
+ * the whole text needs, as snprintf does; `buf` always ends with a NUL when cap > 0. */
+#if defined(__GNUC__)
+__attribute__((format(printf, 3, 4)))
+#endif
+int ad_snprintf(char *buf, size_t cap, const char *fmt, ...);
+
 /* ---- figures ---------------------------------------------------------------------------- */
 
 typedef struct ad_stats {

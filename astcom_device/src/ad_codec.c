@@ -9,6 +9,7 @@
  * writer picks the wrong format for some negative integers (-129 comes out as +127).
  */
 #include "ad_codec.h"
+#include "astcom_device.h"
 
 #include <stdio.h>
 #include <string.h>
@@ -74,7 +75,7 @@ int ad_parse_ndarray(const uint8_t *p, uint32_t n, ad_ndarray *out)
 }
 
 /* ---- the validating walk --------------------------------------------------------------- */
-#define ERR(code, ...) do { snprintf(why, why_len, __VA_ARGS__); return (code); } while (0)
+#define ERR(code, ...) do { ad_snprintf(why, why_len, __VA_ARGS__); return (code); } while (0)
 
 int ad_validate(const uint8_t *frame, size_t len, const ad_limits *lim, char *why,
                 size_t why_len)

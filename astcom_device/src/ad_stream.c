@@ -105,7 +105,7 @@ static void write_layout(ad_wr *w, const ad_device *dev, const ad_msg *m)
         const ad_type *t = &dev->vrt[m->idx[k]].type;
         if (!t->ndim) { ad_wr_str(w, v->name); continue; }
         for (uint32_t e = 0; e < t->count; e++) {
-            snprintf(name, sizeof name, "%s[%u]", v->name, e);
+            ad_snprintf(name, sizeof name, "%s[%u]", v->name, e);
             ad_wr_str(w, name);
         }
     }
@@ -155,25 +155,25 @@ int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate, ad
     for (uint32_t k = 0; k < m.n; k++) {
         const ad_type *t = &dev->vrt[m.idx[k]].type;
         if (t->base <= 10 && t->ndim != AD_VARLEN) continue;
-        used += (size_t)snprintf(why + used, used < wl ? wl - used : 0, "%s%s (%s)",
+        used += (size_t)ad_snprintf(why + used, used < wl ? wl - used : 0, "%s%s (%s)",
                                  used ? ", " : "cannot stream ", dev->vars[m.idx[k]].name,
                                  dev->vars[m.idx[k]].type);
     }
     if (used) {
-        if (used < wl) snprintf(why + used, wl - used, ": streams carry numeric scalars and "
+        if (used < wl) ad_snprintf(why + used, wl - used, ": streams carry numeric scalars and "
                                 "fixed-size numeric arrays");
         return 422;
     }
     double loop = dev->cfg.loop_rate_hz, lowest = loop / 4294967296.0;
     if (!(rate >= lowest && rate <= loop * (1 + 1e-9))) {
-        snprintf(why, wl, "rate_hz %g out of range: expected %.6g <= rate_hz <= %g: at most the "
+        ad_snprintf(why, wl, "rate_hz %g out of range: expected %.6g <= rate_hz <= %g: at most the "
                  "device loop rate (every tick), at least one sample every 2^32 ticks", rate,
                  lowest, loop);
         return 422;
     }
     ad_sampler *old = find_sub(dev, s, msg);
     if (!old && s->n_streams >= dev->cfg.max_streams_per_client) {
-        snprintf(why, wl, "this connection already runs %u streams (the maximum)", s->n_streams);
+        ad_snprintf(why, wl, "this connection already runs %u streams (the maximum)", s->n_streams);
         return 429;
     }
     /* k = round(loop / rate), ties to even, as Python's round() */
@@ -193,7 +193,7 @@ int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate, ad
             if (!dev->samplers[i].used && &dev->samplers[i] != old) sp = &dev->samplers[i];
         if (!sp && old && old->subscribers == (1ull << s->slot)) sp = old; /* re-rate in place */
         if (!sp) {
-            snprintf(why, wl, "this device samples at most %u (message, rate) groups at once",
+            ad_snprintf(why, wl, "this device samples at most %u (message, rate) groups at once",
                      dev->cfg.max_samplers);
             return 429;
         }
