@@ -153,6 +153,13 @@ typedef struct ad_sink {
     size_t (*room)(void *ctx);
     int (*send)(void *ctx, const uint8_t *frame, size_t len, int droppable);
     void *ctx;
+    /* Optional (NULL: not offered): a reply of `len` bytes in parts, for replies larger
+     * than max_reply_bytes (a whole LIST on a device with a small scratch). begin() returns
+     * 0 when it takes the frame (it then must take every part: buffer or wait), else the
+     * reply is refused with ERR 413; part() gets the bytes in order; end() closes it. */
+    int (*begin)(void *ctx, size_t len);
+    void (*part)(void *ctx, const uint8_t *bytes, size_t n);
+    void (*end)(void *ctx);
 } ad_sink;
 
 typedef struct ad_session ad_session;
@@ -214,7 +221,9 @@ const char *ad_call_client(const ad_call *call);
  * printf (9 KiB of flash on a Cortex-M4): %s %.*s %c %d %u %x %02x, the l, ll and z
  * lengths, %g %.Ng (up to 17 digits) %.Nf (up to 9 decimals) and %%. Returns the length
  * the whole text needs, as snprintf does; `buf` always ends with a NUL when cap > 0. */
-#if defined(__GNUC__)
+#if defined(__GNUC__) && !defined(AD_NO_FORMAT_CHECK)
+/* checked against printf's rules by the host builds; on a Cortex-M4, whose uint32_t is an
+ * unsigned long of the same size, the firmware build defines AD_NO_FORMAT_CHECK */
 __attribute__((format(printf, 3, 4)))
 #endif
 int ad_snprintf(char *buf, size_t cap, const char *fmt, ...);

@@ -253,6 +253,14 @@ int ad_rd_skip(ad_rd *rd)
 static int wr_cb(void *data, const char *buf, size_t len)
 {
     ad_wr *w = (ad_wr *)data;
+    if (w->spill && len > w->left) {
+        ad_wr_flush(w);
+        if (len > w->left) { /* larger than the whole window: straight through */
+            w->spill(w->spill_ctx, (const uint8_t *)buf, len);
+            w->used += len;
+            return 0;
+        }
+    }
     if (!w->overflow && len <= w->left) {
         memcpy(w->p, buf, len);
         w->p += len;
@@ -268,10 +276,24 @@ static int wr_cb(void *data, const char *buf, size_t len)
 
 void ad_wr_init(ad_wr *w, uint8_t *buf, size_t cap)
 {
-    w->p = (char *)buf;
-    w->left = cap;
+    ad_wr_init_spill(w, buf, cap, NULL, NULL);
+}
+
+void ad_wr_init_spill(ad_wr *w, uint8_t *buf, size_t cap, ad_spill_fn spill, void *ctx)
+{
+    w->p = w->base = (char *)buf;
+    w->left = w->cap = cap;
     w->used = 0;
     w->overflow = 0;
+    w->spill = spill;
+    w->spill_ctx = ctx;
+}
+
+void ad_wr_flush(ad_wr *w)
+{
+    if (w->spill && w->p > w->base) w->spill(w->spill_ctx, (const uint8_t *)w->base, (size_t)(w->p - w->base));
+    w->p = w->base;
+    w->left = w->cap;
 }
 
 void ad_wr_array(ad_wr *w, uint32_t n) { PK(w); msgpack_pack_array(&pk, n); }

@@ -37,7 +37,7 @@ void ad_config_defaults(ad_config *c)
 
 /* ---- arena ------------------------------------------------------------------------------ */
 typedef struct layout {
-    size_t vrt, frt, traced, ring, sessions, msg_pool, samplers, scratch, stage, argbuf, total;
+    size_t vrt, traced, ring, sessions, msg_pool, samplers, scratch, stage, argbuf, total;
     uint32_t row_bytes, n_traced, stage_bytes, msg_pool_bytes, argbuf_bytes, n_sessions;
 } layout;
 
@@ -67,7 +67,7 @@ static void plan(const ad_config *c, const ad_var *vars, size_t nv, size_t nf, l
                                     : c->max_frame_bytes < 65536 ? c->max_frame_bytes * 2u
                                     : c->max_frame_bytes);
     L->vrt = off; off += up8(nv * sizeof(ad_var_rt));
-    L->frt = off; off += up8(nf * sizeof(ad_fn_rt));
+    (void)nf; /* signatures are parsed when a function is called: no table in RAM */
     L->traced = off; off += up8(nt * sizeof(uint16_t));
     L->ring = off; off += (size_t)L->row_bytes * c->ring_ticks;
     L->sessions = off; off += up8(L->n_sessions * sizeof(ad_session));
@@ -105,12 +105,45 @@ static int valid_name(const char *n)
     return !start;
 }
 
-static int parse_signature(const char *sig, ad_fn_rt *rt)
+/* A function's signature text, read one argument at a time when it is called (no table of
+ * parsed signatures in RAM): "(name:type,name:type)->type"; types may hold commas inside
+ * [] or {}. */
+typedef struct sig_it {
+    const char *p, *close;
+} sig_it;
+
+/* Check the whole signature; count its arguments and parse its return type. 0 or -1. */
+static int sig_begin(const char *sig, sig_it *it, ad_type *ret, uint8_t *n_args);
+
+/* The next argument into `a`: 1, or 0 after the last, or -1 when malformed. */
+static int sig_next(sig_it *it, ad_arg *a)
 {
-    /* (name:type,name:type)->type; types may hold commas inside [] or {} */
+    if (it->p >= it->close) return 0;
+    const char *colon = memchr(it->p, ':', (size_t)(it->close - it->p));
+    if (!colon) return -1;
+    const char *q = colon + 1;
+    int depth = 0;
+    while (q < it->close && !(depth == 0 && *q == ',')) {
+        if (*q == '[' || *q == '{') depth++;
+        else if (*q == ']' || *q == '}') depth--;
+        q++;
+    }
+    a->name = it->p;
+    a->name_len = (uint32_t)(colon - it->p);
+    a->type_text = colon + 1;
+    a->type_len = (uint32_t)(q - colon - 1);
+    if (ad_parse_type(a->type_text, a->type_len, &a->type) || a->type.base == AD_T_NONE
+            || a->type.base == AD_T_STRUCT || a->type.base == AD_T_BYTES)
+        return -1;
+    if (a->type.base == AD_T_STR) a->type.c_size = 0;
+    it->p = q < it->close ? q + 1 : q;
+    return 1;
+}
+
+static int sig_begin(const char *sig, sig_it *it, ad_type *ret, uint8_t *n_args)
+{
     const char *p = sig, *close;
     int depth = 0;
-    memset(rt, 0, sizeof *rt);
     if (*p != '(') return -1;
     p++;
     for (close = p; *close; close++) {
@@ -119,31 +152,19 @@ static int parse_signature(const char *sig, ad_fn_rt *rt)
         else if (*close == ')' && depth == 0) break;
     }
     if (*close != ')' || strncmp(close, ")->", 3)) return -1;
-    while (p < close) {
-        const char *colon = memchr(p, ':', (size_t)(close - p));
-        if (!colon || rt->n_args == AD_MAX_ARGS) return -1;
-        const char *q = colon + 1;
-        depth = 0;
-        while (q < close && !(depth == 0 && *q == ',')) {
-            if (*q == '[' || *q == '{') depth++;
-            else if (*q == ']' || *q == '}') depth--;
-            q++;
-        }
-        ad_arg *a = &rt->args[rt->n_args++];
-        a->name = p;
-        a->name_len = (uint32_t)(colon - p);
-        a->type_text = colon + 1;
-        a->type_len = (uint32_t)(q - colon - 1);
-        if (ad_parse_type(a->type_text, a->type_len, &a->type) || a->type.base == AD_T_NONE
-                || a->type.base == AD_T_STRUCT || a->type.base == AD_T_BYTES)
-            return -1;
-        if (a->type.base == AD_T_STR) a->type.c_size = 0;
-        p = q < close ? q + 1 : q;
-    }
-    const char *ret = close + 3;
-    if (ad_parse_type(ret, strlen(ret), &rt->ret)) return -1;
-    if (rt->ret.ndim == AD_VARLEN || rt->ret.base == AD_T_STRUCT || rt->ret.base == AD_T_BYTES)
+    const char *rtext = close + 3;
+    if (ad_parse_type(rtext, strlen(rtext), ret) || ret->ndim == AD_VARLEN
+            || ret->base == AD_T_STRUCT || ret->base == AD_T_BYTES)
         return -1;
+    sig_it count = {p, close};
+    ad_arg a;
+    int rc;
+    *n_args = 0;
+    while ((rc = sig_next(&count, &a)) == 1)
+        if (++*n_args > AD_MAX_ARGS) return -1;
+    if (rc < 0) return -1;
+    it->p = p;
+    it->close = close;
     return 0;
 }
 
@@ -175,7 +196,6 @@ ad_device *ad_init(void *arena, size_t arena_bytes, const ad_config *cfg, const 
     dev->fns = fns;
     dev->n_fns = (uint32_t)n_fns;
     dev->vrt = (ad_var_rt *)(base + L.vrt);
-    dev->frt = (ad_fn_rt *)(base + L.frt);
     dev->traced = (uint16_t *)(base + L.traced);
     dev->ring = base + L.ring;
     dev->row_bytes = L.row_bytes;
@@ -196,23 +216,28 @@ ad_device *ad_init(void *arena, size_t arena_bytes, const ad_config *cfg, const 
     for (size_t i = 0; i < n_vars; i++) {
         const ad_var *v = &vars[i];
         ad_var_rt *rt = &dev->vrt[i];
+        ad_type t;
         if (!v->name || !valid_name(v->name)) { ad_snprintf(why, why_len, "invalid name '%s': expected dotted identifiers such as axis.az.position", v->name ? v->name : "(null)"); return NULL; }
-        if (!v->type || ad_parse_type(v->type, strlen(v->type), &rt->type) || (rt->type.base >= AD_T_BYTES && rt->type.base != AD_T_STRUCT)) { ad_snprintf(why, why_len, "%s: unknown or unsupported type '%s'", v->name, v->type ? v->type : "(null)"); return NULL; }
-        if (rt->type.ndim == AD_VARLEN) { ad_snprintf(why, why_len, "%s: a variable cannot be of variable length (%s)", v->name, v->type); return NULL; }
-        if (rt->type.base == AD_T_STR) {
+        if (!v->type || ad_parse_type(v->type, strlen(v->type), &t) || (t.base >= AD_T_BYTES && t.base != AD_T_STRUCT)) { ad_snprintf(why, why_len, "%s: unknown or unsupported type '%s'", v->name, v->type ? v->type : "(null)"); return NULL; }
+        if (t.ndim == AD_VARLEN) { ad_snprintf(why, why_len, "%s: a variable cannot be of variable length (%s)", v->name, v->type); return NULL; }
+        if (t.base == AD_T_STR) {
             if (v->capacity < 1) { ad_snprintf(why, why_len, "%s: a str variable needs its buffer capacity", v->name); return NULL; }
-            rt->type.c_size = v->capacity;
+            t.c_size = v->capacity;
         }
         if (!v->ptr) { ad_snprintf(why, why_len, "%s: no storage (ptr)", v->name); return NULL; }
-        if ((v->has_min || v->has_max) && (rt->type.base == 0 || rt->type.base > 10)) { ad_snprintf(why, why_len, "%s: only numeric variables take min/max, not %s", v->name, v->type); return NULL; }
+        if ((v->has_min || v->has_max) && (t.base == 0 || t.base > 10)) { ad_snprintf(why, why_len, "%s: only numeric variables take min/max, not %s", v->name, v->type); return NULL; }
         if (v->has_min && v->has_max && v->min > v->max) { ad_snprintf(why, why_len, "%s: min %g is above max %g", v->name, v->min, v->max); return NULL; }
+        rt->base = t.base;
+        rt->ndim = t.ndim;
+        rt->count = t.count;
+        rt->c_size = t.c_size;
         rt->trace_col = -1;
         if (v->traced) {
-            if (rt->type.base > 10 || rt->type.ndim) { ad_snprintf(why, why_len, "%s: only numeric scalars can be traced, not %s", v->name, v->type); return NULL; }
+            if (t.base > 10 || t.ndim) { ad_snprintf(why, why_len, "%s: only numeric scalars can be traced, not %s", v->name, v->type); return NULL; }
             rt->trace_col = (int16_t)col;
             rt->ring_offset = off;
             dev->traced[col++] = (uint16_t)i;
-            off += rt->type.c_size;
+            off += t.c_size;
         }
         for (size_t j = 0; j < i; j++)
             if (!strcmp(vars[j].name, v->name)) { ad_snprintf(why, why_len, "'%s' is already registered", v->name); return NULL; }
@@ -220,7 +245,10 @@ ad_device *ad_init(void *arena, size_t arena_bytes, const ad_config *cfg, const 
     dev->n_traced = col;
     for (size_t i = 0; i < n_fns; i++) {
         if (!fns[i].name || !valid_name(fns[i].name) || !fns[i].fn) { ad_snprintf(why, why_len, "function %zu: invalid name or no callback", i); return NULL; }
-        if (!fns[i].signature || parse_signature(fns[i].signature, &dev->frt[i])) { ad_snprintf(why, why_len, "%s: bad signature '%s'; expected (name:type,...)->type", fns[i].name, fns[i].signature ? fns[i].signature : "(null)"); return NULL; }
+        sig_it it;
+        ad_type ret;
+        uint8_t n_args;
+        if (!fns[i].signature || sig_begin(fns[i].signature, &it, &ret, &n_args)) { ad_snprintf(why, why_len, "%s: bad signature '%s'; expected (name:type,...)->type", fns[i].name, fns[i].signature ? fns[i].signature : "(null)"); return NULL; }
         for (size_t j = 0; j < n_vars; j++)
             if (!strcmp(vars[j].name, fns[i].name)) { ad_snprintf(why, why_len, "'%s' is already registered", fns[i].name); return NULL; }
         for (size_t j = 0; j < i; j++)
@@ -256,7 +284,11 @@ static void send_error_raw(ad_device *dev, ad_sink sink, int has_seq, uint64_t s
     ad_wr_str(&w, "code");
     ad_wr_uint(&w, (uint64_t)code);
     ad_wr_str(&w, "message");
-    ad_wr_strn(&w, message, (uint32_t)(n > 1024 ? 1024 : n));
+    /* the reason, cut to what the scratch holds beside the frame's 40 other bytes */
+    size_t most = dev->cfg.max_reply_bytes - 48u;
+    if (most > 1024) most = 1024;
+    while (n > most) { n--; while (n && ((uint8_t)message[n] & 0xc0) == 0x80) n--; } /* whole UTF-8 */
+    ad_wr_strn(&w, message, (uint32_t)n);
     sink.send(sink.ctx, dev->scratch, w.used, 0);
 }
 
@@ -480,16 +512,22 @@ static void hint(const ad_device *dev, const char *name, uint32_t len, int want_
     if (n && used + 1 < out_len) { out[used] = '?'; out[used + 1] = 0; }
 }
 
-static int unknown_var(const ad_device *dev, const char *name, uint32_t len, char *why, size_t wl)
+/* 404 for an unknown variable (want_fn 0) or function (1): the other kind of the same name,
+ * or the names close to it. Not inlined: its hint buffer would otherwise sit in the stack
+ * frame of every request. */
+AD_NOINLINE static int unknown_name(const ad_device *dev, const char *name, uint32_t len,
+                                    int want_fn, char *why, size_t wl)
 {
     char h[160];
     int shown = (int)(len > 80 ? 80 : len);
-    if (find_fn(dev, name, len) >= 0) {
-        ad_snprintf(why, wl, "'%.*s' is a function, not a variable: call it with INVOKE", shown, name);
+    if (want_fn ? find_var(dev, name, len) >= 0 : find_fn(dev, name, len) >= 0) {
+        ad_snprintf(why, wl, want_fn ? "'%.*s' is a variable, not a function: READ, WRITE or stream it"
+                                     : "'%.*s' is a function, not a variable: call it with INVOKE",
+                     shown, name);
         return 404;
     }
-    hint(dev, name, len, 0, h, sizeof h);
-    ad_snprintf(why, wl, "no variable named '%.*s'%s", shown, name, h);
+    hint(dev, name, len, want_fn, h, sizeof h);
+    ad_snprintf(why, wl, "no %s named '%.*s'%s", want_fn ? "function" : "variable", shown, name, h);
     return 404;
 }
 
@@ -590,10 +628,26 @@ static int finish(ad_device *dev, ad_session *s, ad_wr *w, uint64_t seq, char *w
     return 0;
 }
 
+void ad_var_type(const ad_device *dev, uint32_t i, ad_type *out)
+{
+    const ad_var_rt *rt = &dev->vrt[i];
+    if (rt->ndim > 1) {
+        ad_parse_type(dev->vars[i].type, strlen(dev->vars[i].type), out);
+    } else {
+        memset(out, 0, sizeof *out);
+        out->base = rt->base;
+        out->ndim = rt->ndim;
+        out->shape[0] = rt->count;
+        out->count = rt->count;
+    }
+    out->c_size = rt->c_size;
+}
+
 static void read_value_locked(ad_device *dev, uint32_t idx, ad_wr *w)
 {
-    const ad_var *v = &dev->vars[idx];
-    ad_write_value(w, &dev->vrt[idx].type, v->type, v->ptr);
+    ad_type t;
+    ad_var_type(dev, idx, &t);
+    ad_write_value(w, &t, dev->vars[idx].type, dev->vars[idx].ptr);
 }
 
 /* ---- commands ----------------------------------------------------------------------------- */
@@ -604,6 +658,49 @@ typedef struct req {
     ad_val args;    /* the args map head */
 } req;
 
+static void write_list(const ad_device *dev, ad_wr *w, uint64_t seq, const char *pre,
+                       uint32_t plen)
+{
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < dev->n_vars; i++) n += !strncmp(dev->vars[i].name, pre, plen) || !plen;
+    for (uint32_t i = 0; i < dev->n_fns; i++) n += !strncmp(dev->fns[i].name, pre, plen) || !plen;
+    ok_head(w, seq, 1);
+    ad_wr_str(w, "entries");
+    ad_wr_array(w, n);
+    for (uint32_t i = 0; i < dev->n_vars; i++) {
+        const ad_var *v = &dev->vars[i];
+        if (plen && strncmp(v->name, pre, plen)) continue;
+        ad_wr_map(w, 6u + v->has_min + v->has_max);
+        ad_wr_str(w, "name"); ad_wr_str(w, v->name);
+        ad_wr_str(w, "type"); ad_wr_str(w, v->type);
+        ad_wr_str(w, "kind"); ad_wr_str(w, v->kind == AD_PARAMETER ? "parameter" : "signal");
+        ad_wr_str(w, "access"); ad_wr_str(w, v->access == AD_RW ? "rw" : "r");
+        ad_wr_str(w, "unit"); ad_wr_str(w, v->unit ? v->unit : "");
+        ad_wr_str(w, "doc"); ad_wr_str(w, v->doc ? v->doc : "");
+        if (v->has_min) { ad_wr_str(w, "min"); ad_wr_f64(w, v->min); }
+        if (v->has_max) { ad_wr_str(w, "max"); ad_wr_f64(w, v->max); }
+    }
+    for (uint32_t i = 0; i < dev->n_fns; i++) {
+        const ad_fn *fn = &dev->fns[i];
+        if (plen && strncmp(fn->name, pre, plen)) continue;
+        ad_wr_map(w, 6);
+        ad_wr_str(w, "name"); ad_wr_str(w, fn->name);
+        ad_wr_str(w, "type"); ad_wr_str(w, fn->signature);
+        ad_wr_str(w, "kind"); ad_wr_str(w, "function");
+        ad_wr_str(w, "access"); ad_wr_str(w, "x");
+        ad_wr_str(w, "unit"); ad_wr_str(w, "");
+        ad_wr_str(w, "doc"); ad_wr_str(w, fn->doc ? fn->doc : "");
+    }
+}
+
+static void spill_to_sink(void *ctx, const uint8_t *bytes, size_t n)
+{
+    const ad_sink *sink = (const ad_sink *)ctx;
+    sink->part(sink->ctx, bytes, n);
+}
+
+/* LIST grows with the registry: a reply larger than the scratch goes out in parts when the
+ * transport takes parts (the framed link, TCP), else it is refused (413, use a prefix). */
 static int cmd_list(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
 {
     field f[] = {{"prefix", F_STR, 0, 0, {0}, {0}}};
@@ -611,40 +708,16 @@ static int cmd_list(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
     if (rc) return rc;
     const char *pre = f[0].present ? (const char *)f[0].v.p : "";
     uint32_t plen = f[0].present ? f[0].v.n : 0;
-    uint32_t n = 0;
-    for (uint32_t i = 0; i < dev->n_vars; i++) n += !strncmp(dev->vars[i].name, pre, plen) || !plen;
-    for (uint32_t i = 0; i < dev->n_fns; i++) n += !strncmp(dev->fns[i].name, pre, plen) || !plen;
     ad_wr w;
     begin(dev, &w);
-    ok_head(&w, r->seq, 1);
-    ad_wr_str(&w, "entries");
-    ad_wr_array(&w, n);
-    for (uint32_t i = 0; i < dev->n_vars; i++) {
-        const ad_var *v = &dev->vars[i];
-        if (plen && strncmp(v->name, pre, plen)) continue;
-        ad_wr_map(&w, 6u + v->has_min + v->has_max);
-        ad_wr_str(&w, "name"); ad_wr_str(&w, v->name);
-        ad_wr_str(&w, "type"); ad_wr_str(&w, v->type);
-        ad_wr_str(&w, "kind"); ad_wr_str(&w, v->kind == AD_PARAMETER ? "parameter" : "signal");
-        ad_wr_str(&w, "access"); ad_wr_str(&w, v->access == AD_RW ? "rw" : "r");
-        ad_wr_str(&w, "unit"); ad_wr_str(&w, v->unit ? v->unit : "");
-        ad_wr_str(&w, "doc"); ad_wr_str(&w, v->doc ? v->doc : "");
-        if (v->has_min) { ad_wr_str(&w, "min"); ad_wr_f64(&w, v->min); }
-        if (v->has_max) { ad_wr_str(&w, "max"); ad_wr_f64(&w, v->max); }
-    }
-    for (uint32_t i = 0; i < dev->n_fns; i++) {
-        const ad_fn *fn = &dev->fns[i];
-        if (plen && strncmp(fn->name, pre, plen)) continue;
-        ad_wr_map(&w, 6);
-        ad_wr_str(&w, "name"); ad_wr_str(&w, fn->name);
-        ad_wr_str(&w, "type"); ad_wr_str(&w, fn->signature);
-        ad_wr_str(&w, "kind"); ad_wr_str(&w, "function");
-        ad_wr_str(&w, "access"); ad_wr_str(&w, "x");
-        ad_wr_str(&w, "unit"); ad_wr_str(&w, "");
-        ad_wr_str(&w, "doc"); ad_wr_str(&w, fn->doc ? fn->doc : "");
-    }
-    (void)s;
-    return finish(dev, s, &w, r->seq, why, wl);
+    write_list(dev, &w, r->seq, pre, plen);
+    if (!w.overflow || !s->sink.begin || s->sink.begin(s->sink.ctx, w.used))
+        return finish(dev, s, &w, r->seq, why, wl); /* whole, or 413 */
+    ad_wr_init_spill(&w, dev->scratch, dev->cfg.max_reply_bytes, spill_to_sink, &s->sink);
+    write_list(dev, &w, r->seq, pre, plen);
+    ad_wr_flush(&w);
+    s->sink.end(s->sink.ctx);
+    return 0;
 }
 
 static int cmd_define(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
@@ -673,16 +746,16 @@ static int cmd_define(ad_device *dev, ad_session *s, req *r, char *why, size_t w
         /* a message of the same names may still exist: the lookup below needs no room */
         need = 0;
     }
-    uint16_t stack_idx[256];
+    uint16_t stack_idx[64];
     uint16_t *idx = need ? (uint16_t *)(dev->msg_pool + dev->msg_pool_used + REC_HEAD)
-                         : (n <= 256 ? stack_idx : NULL);
+                         : (n <= 64 ? stack_idx : NULL);
     if (!idx) { ad_snprintf(why, wl, "the register is full (%u bytes); UNDEFINE some first", dev->msg_pool_bytes); return 429; }
     it = f[0].items;
     for (uint32_t k = 0; k < n; k++) {
         ad_val v;
         ad_rd_next(&it, &v);
         int i = find_var(dev, (const char *)v.p, v.n);
-        if (i < 0) return unknown_var(dev, (const char *)v.p, v.n, why, wl);
+        if (i < 0) return unknown_name(dev, (const char *)v.p, v.n, 0, why, wl);
         idx[k] = (uint16_t)i;
     }
     /* the same list already registered: the same ID */
@@ -832,7 +905,9 @@ static int cmd_write(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
     uint32_t off = 0;
     for (uint32_t k = 0; k < m.n; k++) {
         const ad_var *v = &dev->vars[m.idx[k]];
-        const ad_type *t = &dev->vrt[m.idx[k]].type;
+        ad_type type;
+        ad_var_type(dev, m.idx[k], &type);
+        const ad_type *t = &type;
         if (off + up8(t->c_size) > dev->stage_bytes) {
             ad_snprintf(why, wl, "WRITE of message %lld is larger than this device stages", (long long)id);
             return 413;
@@ -854,9 +929,9 @@ static int cmd_write(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
     ad_port_lock();
     off = 0;
     for (uint32_t k = 0; k < m.n; k++) {
-        const ad_type *t = &dev->vrt[m.idx[k]].type;
-        memcpy(dev->vars[m.idx[k]].ptr, dev->stage + off, t->c_size);
-        off += (uint32_t)up8(t->c_size);
+        uint32_t size = dev->vrt[m.idx[k]].c_size;
+        memcpy(dev->vars[m.idx[k]].ptr, dev->stage + off, size);
+        off += (uint32_t)up8(size);
     }
     ad_last_tick(dev, &tick, &t_us);
     ad_port_unlock();
@@ -953,7 +1028,7 @@ static int coerce_arg(ad_device *dev, ad_rd *rd, const ad_fn *fn, const ad_arg *
 
 static void write_result(ad_wr *w, ad_call *c)
 {
-    if (!c->has_result || c->rt->ret.base == AD_T_NONE) { ad_wr_nil(w); return; }
+    if (!c->has_result || c->ret.base == AD_T_NONE) { ad_wr_nil(w); return; }
     switch (c->result_kind) {
     case 1: ad_wr_f64(w, c->result.f); break;
     case 2: ad_wr_int(w, c->result.i); break;
@@ -972,13 +1047,20 @@ static void write_result(ad_wr *w, ad_call *c)
 }
 
 /* the declared return type decides; a mismatch is the device's bug: ERR 500 */
+static const char *return_type(const ad_fn *fn)
+{
+    const char *p = fn->signature;
+    while (*p && !(p[0] == ')' && p[1] == '-' && p[2] == '>')) p++;
+    return *p ? p + 3 : p;
+}
+
 static int check_result(ad_call *c, char *why, size_t wl)
 {
-    const ad_type *t = &c->rt->ret;
+    const ad_type *t = &c->ret;
     if (t->base == AD_T_NONE) return 0;
     if (!c->has_result) {
         ad_snprintf(why, wl, "%s returned no value; its declared type is %s", c->fn->name,
-                 strstr(c->fn->signature, ")->") + 3);
+                 return_type(c->fn));
         return 500;
     }
     int ok;
@@ -989,7 +1071,7 @@ static int check_result(ad_call *c, char *why, size_t wl)
     else ok = c->result_kind == 2 || c->result_kind == 3;
     if (!ok) {
         ad_snprintf(why, wl, "%s returned a value that does not match its declared type %s",
-                 c->fn->name, strstr(c->fn->signature, ")->") + 3);
+                 c->fn->name, return_type(c->fn));
         return 500;
     }
     return 0;
@@ -1033,22 +1115,15 @@ static int cmd_invoke(ad_device *dev, ad_session *s, req *r, char *why, size_t w
     const char *name = (const char *)f[0].v.p;
     uint32_t nlen = f[0].v.n;
     int i = find_fn(dev, name, nlen);
-    if (i < 0) {
-        char h[160];
-        int shown = (int)(nlen > 80 ? 80 : nlen);
-        if (find_var(dev, name, nlen) >= 0) {
-            ad_snprintf(why, wl, "'%.*s' is a variable, not a function: READ, WRITE or stream it", shown, name);
-            return 404;
-        }
-        hint(dev, name, nlen, 1, h, sizeof h);
-        ad_snprintf(why, wl, "no function named '%.*s'%s", shown, name, h);
-        return 404;
-    }
+    if (i < 0) return unknown_name(dev, name, nlen, 1, why, wl);
     const ad_fn *fn = &dev->fns[i];
-    const ad_fn_rt *rt = &dev->frt[i];
+    sig_it sig;
+    ad_type ret;
+    uint8_t n_args;
+    sig_begin(fn->signature, &sig, &ret, &n_args); /* checked at ad_init */
     uint32_t given = f[1].present ? f[1].v.n : 0;
-    if (given != rt->n_args) {
-        ad_snprintf(why, wl, "%s takes %u arguments %s, got %u", fn->name, rt->n_args, fn->signature, given);
+    if (given != n_args) {
+        ad_snprintf(why, wl, "%s takes %u arguments %s, got %u", fn->name, n_args, fn->signature, given);
         return 422;
     }
     ad_call *c = &s->call;
@@ -1056,12 +1131,15 @@ static int cmd_invoke(ad_device *dev, ad_session *s, req *r, char *why, size_t w
     c->dev = dev;
     c->session = s;
     c->fn = fn;
-    c->rt = rt;
+    c->n_args = n_args;
+    c->ret = ret;
     c->seq = r->seq;
     dev->argbuf_used = 0;
     ad_rd it = f[1].items;
-    for (uint32_t k = 0; k < rt->n_args; k++) {
-        rc = coerce_arg(dev, &it, fn, &rt->args[k], &c->args[k], why, wl);
+    for (uint32_t k = 0; k < n_args; k++) {
+        ad_arg a;
+        sig_next(&sig, &a);
+        rc = coerce_arg(dev, &it, fn, &a, &c->args[k], why, wl);
         if (rc) return rc;
     }
     ad_port_lock();
@@ -1368,7 +1446,7 @@ void ad_refuse_oversize(ad_device *dev, ad_session *s, uint64_t announced)
 
 void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len, int64_t now_us)
 {
-    char why[600];
+    char why[AD_WHY_BYTES];
     ad_limits lim = {dev->cfg.max_frame_bytes, dev->cfg.max_depth, dev->cfg.max_array_len,
                      dev->cfg.max_str_bytes};
     (void)now_us;
@@ -1483,7 +1561,7 @@ void ad_poll(ad_device *dev, int64_t now_us)
 }
 
 /* ---- function call API ---------------------------------------------------------------------- */
-uint32_t ad_arg_count(const ad_call *c) { return c->rt->n_args; }
+uint32_t ad_arg_count(const ad_call *c) { return c->n_args; }
 double ad_arg_f64(const ad_call *c, uint32_t i)
 {
     const ad_argval *a = &c->args[i];

@@ -37,6 +37,9 @@ struct ad_link {
     size_t held_len;
     uint8_t *tx;
     size_t tx_cap, tx_head, tx_tail;   /* ring of encoded bytes */
+    /* the frame being COBS-encoded into the ring: its open block's code byte (a 0x00
+     * placeholder until the block ends) at code_at; nothing from there on may be sent */
+    struct { size_t code_at; uint8_t code, open, broken; uint32_t crc; } enc;
     ad_session **chan;     /* [channels + 1] */
     chan_ctx *ctx;         /* [channels + 1] */
     ad_link_drain_fn drain;
@@ -46,8 +49,10 @@ struct ad_link {
 };
 
 static size_t cobs_max(size_t n) { return n + n / 254u + 2u; } /* code bytes and the 0x00 */
-/* The send ring holds two replies (one being sent while the next is built); a build for a
- * small MCU sets AD_LINK_TX_FRAMES 1 and drains synchronously. */
+/* The send ring holds AD_LINK_TX_FRAMES frames of max_reply_bytes: a stream packet is
+ * queued whole or dropped; a reply, or a LIST in parts, waits for the wire (drain) and may
+ * be larger than the ring. A host keeps two (one on the wire while the next is built); a
+ * small MCU sets 1 and drains synchronously. */
 #ifndef AD_LINK_TX_FRAMES
 #define AD_LINK_TX_FRAMES 2u
 #endif
@@ -70,51 +75,103 @@ static void tx_put(ad_link *l, uint8_t b)
     l->tx_head++;
 }
 
-/* COBS-encode the pieces (chan and kind, body, crc) plus the 0x00 into the ring. */
-static void tx_frame(ad_link *l, const uint8_t *head, size_t nh, const uint8_t *body, size_t nb,
-                     const uint8_t *tail, size_t nt)
+/* Room for `need` more bytes in the ring: wait for the wire (drain) unless `droppable`.
+ * Only the bytes before an open frame's code byte can be sent, so a ring larger than one
+ * COBS block (255 bytes) always makes progress. */
+static int tx_wait(ad_link *l, size_t need, int droppable)
 {
-    size_t code_at = l->tx_head;
-    uint8_t code = 1;
-    const uint8_t *parts[3] = {head, body, tail};
-    size_t lens[3] = {nh, nb, nt};
-    tx_put(l, 0);
-    for (int p = 0; p < 3; p++)
-        for (size_t i = 0; i < lens[p]; i++) {
-            uint8_t b = parts[p][i];
-            if (b) {
-                tx_put(l, b);
-                code++;
-            }
-            if (!b || code == 0xff) {
-                l->tx[code_at % l->tx_cap] = code;
-                code_at = l->tx_head;
-                code = 1;
-                tx_put(l, 0);
-            }
-        }
-    l->tx[code_at % l->tx_cap] = code;
-    tx_put(l, 0);
-    l->st.frames_out++;
-}
-
-/* Send one link frame; `droppable` frames are refused when the ring lacks room. */
-static int send_link(ad_link *l, uint8_t chan, uint8_t kind, const uint8_t *body, size_t n,
-                     int droppable)
-{
-    size_t need = cobs_max(n + 6u);
-    if (need > l->tx_cap) return -1;
     while (tx_free(l) < need) {
         if (droppable || !l->drain) return -1;
         size_t before = tx_used(l);
         l->drain(l->io);
         if (tx_used(l) == before) return -1; /* the wire is gone */
     }
-    uint8_t head[2] = {chan, kind}, tail[4];
-    uint32_t crc = ad_crc32(ad_crc32(0, head, 2), body, n);
-    for (int k = 0; k < 4; k++) tail[k] = (uint8_t)(crc >> (8 * k));
-    tx_frame(l, head, 2, body, n, tail, 4);
     return 0;
+}
+
+/* ---- the COBS encoder: a frame is begun, fed, ended; it may be larger than the ring ---- */
+static void enc_begin(ad_link *l, uint8_t chan, uint8_t kind);
+
+static void enc_byte(ad_link *l, uint8_t b)
+{
+    if (l->enc.broken || tx_wait(l, 2, 0)) { l->enc.broken = 1; return; }
+    if (b) {
+        tx_put(l, b);
+        l->enc.code++;
+    }
+    if (!b || l->enc.code == 0xff) {
+        l->tx[l->enc.code_at % l->tx_cap] = l->enc.code;
+        l->enc.code_at = l->tx_head;
+        l->enc.code = 1;
+        tx_put(l, 0);
+    }
+}
+
+static void enc_bytes(ad_link *l, const uint8_t *p, size_t n)
+{
+    l->enc.crc = ad_crc32(l->enc.crc, p, n);
+    for (size_t i = 0; i < n; i++) enc_byte(l, p[i]);
+}
+
+static void enc_begin(ad_link *l, uint8_t chan, uint8_t kind)
+{
+    uint8_t head[2] = {chan, kind};
+    l->enc.open = 1;
+    l->enc.broken = 0;
+    l->enc.crc = 0;
+    l->enc.code = 1;
+    l->enc.code_at = l->tx_head;
+    tx_put(l, 0); /* the first block's code byte (the caller made room) */
+    enc_bytes(l, head, 2);
+}
+
+static void enc_end(ad_link *l)
+{
+    uint8_t tail[4];
+    uint32_t crc = l->enc.crc;
+    for (int k = 0; k < 4; k++) tail[k] = (uint8_t)(crc >> (8 * k));
+    for (int k = 0; k < 4; k++) enc_byte(l, tail[k]);
+    if (!l->enc.broken && !tx_wait(l, 1, 0)) {
+        l->tx[l->enc.code_at % l->tx_cap] = l->enc.code;
+        tx_put(l, 0);
+        l->st.frames_out++;
+    }
+    /* a broken frame (the wire went away mid-frame) keeps its 0x00 placeholder: the
+     * receiver sees a frame end there, and drops the damaged frame (CRC) */
+    l->enc.open = 0;
+}
+
+/* Send one link frame; `droppable` frames go whole or not at all, others wait for room. */
+static int send_link(ad_link *l, uint8_t chan, uint8_t kind, const uint8_t *body, size_t n,
+                     int droppable)
+{
+    if (tx_wait(l, droppable ? cobs_max(n + 6u) + 1u : 1u, droppable)) return -1;
+    enc_begin(l, chan, kind);
+    enc_bytes(l, body, n);
+    enc_end(l);
+    return l->enc.broken ? -1 : 0;
+}
+
+/* A reply in parts (ad_sink.begin/part/end): LIST larger than the library's scratch. */
+static int sink_begin(void *ctx, size_t len)
+{
+    chan_ctx *c = (chan_ctx *)ctx;
+    (void)len;
+    if (tx_wait(c->link, 1, 0)) return -1;
+    enc_begin(c->link, c->id, AD_LINK_DATA);
+    return 0;
+}
+
+static void sink_part(void *ctx, const uint8_t *bytes, size_t n)
+{
+    chan_ctx *c = (chan_ctx *)ctx;
+    enc_bytes(c->link, bytes, n);
+}
+
+static void sink_end(void *ctx)
+{
+    chan_ctx *c = (chan_ctx *)ctx;
+    enc_end(c->link);
 }
 
 static size_t sink_room(void *ctx)
@@ -216,7 +273,7 @@ static int dispatch(ad_link *l, uint8_t *f, size_t n)
     case AD_LINK_OPEN: {
         if (!chan) break;
         close_channel(l, chan, 1001, "", 0);
-        ad_sink sink = {sink_room, sink_send, &l->ctx[chan]};
+        ad_sink sink = {sink_room, sink_send, &l->ctx[chan], sink_begin, sink_part, sink_end};
         l->chan[chan] = ad_open(l->dev, sink, l->now_us);
         if (!l->chan[chan]) close_channel(l, chan, 429, "refused", 1);
         break;
@@ -299,11 +356,11 @@ void ad_link_service(ad_link *l)
 
 size_t ad_link_take(ad_link *l, uint8_t *out, size_t max)
 {
-    size_t n = 0;
-    while (n < max && l->tx_tail < l->tx_head) {
+    size_t n = 0, end = l->enc.open ? l->enc.code_at : l->tx_head; /* not the open block */
+    while (n < max && l->tx_tail < end) {
         size_t at = l->tx_tail % l->tx_cap;
         size_t run = l->tx_cap - at;
-        size_t avail = l->tx_head - l->tx_tail;
+        size_t avail = end - l->tx_tail;
         if (run > avail) run = avail;
         if (run > max - n) run = max - n;
         memcpy(out + n, l->tx + at, run);

@@ -37,7 +37,7 @@ void ad_tick(ad_device *dev, uint64_t tick, int64_t t_us)
     for (uint32_t c = 0; c < dev->n_traced; c++) {
         uint16_t i = dev->traced[c];
         const ad_var_rt *rt = &dev->vrt[i];
-        memcpy(row + rt->ring_offset, dev->vars[i].ptr, rt->type.c_size);
+        memcpy(row + rt->ring_offset, dev->vars[i].ptr, rt->c_size);
     }
     int new_seg = 1;
     if (dev->n_seg) {
@@ -78,7 +78,7 @@ static uint32_t message_groups(const ad_device *dev, const ad_msg *m, col_group 
 {
     uint32_t n = 0;
     for (uint32_t k = 0; k < m->n; k++) {
-        const ad_type *t = &dev->vrt[m->idx[k]].type;
+        const ad_var_rt *t = &dev->vrt[m->idx[k]];
         uint32_t j;
         for (j = 0; j < n && g[j].dtype != t->base; j++) {}
         if (j == n) {
@@ -102,7 +102,7 @@ static void write_layout(ad_wr *w, const ad_device *dev, const ad_msg *m)
     char name[160];
     for (uint32_t k = 0; k < m->n; k++) {
         const ad_var *v = &dev->vars[m->idx[k]];
-        const ad_type *t = &dev->vrt[m->idx[k]].type;
+        const ad_var_rt *t = &dev->vrt[m->idx[k]];
         if (!t->ndim) { ad_wr_str(w, v->name); continue; }
         for (uint32_t e = 0; e < t->count; e++) {
             ad_snprintf(name, sizeof name, "%s[%u]", v->name, e);
@@ -120,7 +120,7 @@ static void write_layout(ad_wr *w, const ad_device *dev, const ad_msg *m)
         ad_wr_array(w, g[j].n_cols);
         uint32_t col = 0;
         for (uint32_t k = 0; k < m->n; k++) {
-            const ad_type *t = &dev->vrt[m->idx[k]].type;
+            const ad_var_rt *t = &dev->vrt[m->idx[k]];
             for (uint32_t e = 0; e < t->count; e++, col++)
                 if (t->base == g[j].dtype) ad_wr_uint(w, col);
         }
@@ -153,7 +153,7 @@ int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate, ad
     size_t used = 0;
     why[0] = 0;
     for (uint32_t k = 0; k < m.n; k++) {
-        const ad_type *t = &dev->vrt[m.idx[k]].type;
+        const ad_var_rt *t = &dev->vrt[m.idx[k]];
         if (t->base <= 10 && t->ndim != AD_VARLEN) continue;
         used += (size_t)ad_snprintf(why + used, used < wl ? wl - used : 0, "%s%s (%s)",
                                  used ? ", " : "cannot stream ", dev->vars[m.idx[k]].name,
@@ -327,13 +327,13 @@ static void encode_packet(ad_device *dev, ad_sampler *sp, const ad_msg *m, const
             const uint8_t *ring_row = dev->ring + (size_t)(r % dev->cfg.ring_ticks) * dev->row_bytes;
             for (uint32_t k = 0; k < m->n; k++) {
                 const ad_var_rt *rt = &dev->vrt[m->idx[k]];
-                if (rt->type.base != g[j].dtype) continue;
+                if (rt->base != g[j].dtype) continue;
                 if (rt->trace_col >= 0) {
                     ad_wr_raw(w, ring_row + rt->ring_offset, isz);
                 } else {
                     /* parameters and untraced signals: their value now (end of the block) */
                     ad_port_lock();
-                    ad_wr_raw(w, dev->vars[m->idx[k]].ptr, rt->type.count * isz);
+                    ad_wr_raw(w, dev->vars[m->idx[k]].ptr, rt->count * isz);
                     ad_port_unlock();
                 }
             }

@@ -452,7 +452,8 @@ void ad_write_value(ad_wr *w, const ad_type *t, const char *type_text, const voi
         return;
     }
     if (t->base == AD_T_STR) {
-        size_t n = strnlen((const char *)p, t->c_size);
+        const uint8_t *nul = memchr(p, 0, t->c_size); /* the buffer may be full, no NUL */
+        size_t n = nul ? (size_t)(nul - (const uint8_t *)p) : t->c_size;
         ad_wr_strn(w, (const char *)p, (uint32_t)n);
         return;
     }

@@ -219,6 +219,20 @@ static int conn_send(void *ctx, const uint8_t *frame, size_t len, int droppable)
     return 0;
 }
 
+/* a reply in parts (a LIST larger than the library's scratch): its length first, room for
+ * all of it now (the send ring grows to its limit), then the parts as they come */
+static int conn_begin(void *ctx, size_t len)
+{
+    conn *c = (conn *)ctx;
+    if (conn_room(c) < len + 4 || len > UINT32_MAX || tx_grow(c, len + 4)) return -1;
+    uint8_t head[4] = {(uint8_t)(len >> 24), (uint8_t)(len >> 16), (uint8_t)(len >> 8), (uint8_t)len};
+    tx_put(c, head, 4);
+    return 0;
+}
+
+static void conn_part(void *ctx, const uint8_t *bytes, size_t n) { tx_put((conn *)ctx, bytes, n); }
+static void conn_end(void *ctx) { (void)ctx; }
+
 static int conn_flush(conn *c)
 {
     while (c->tx_tail < c->tx_head) {
@@ -319,12 +333,20 @@ static int listen_tcp(const char *spec, char *url, size_t url_len)
 
 /* ---- the framed link ---------------------------------------------------------------------------- */
 static int LINK_FD = -1;
+/* The link's reply must wait for the wire: wait for the reader (the Relay) up to 10 s,
+ * while it is there; a closed other end (POLLHUP, EIO) is a wire that is gone. */
 static void link_drain(void *io)
 {
     ad_link *l = (ad_link *)io;
     uint8_t buf[4096];
     struct pollfd p = {LINK_FD, POLLOUT, 0};
-    if (poll(&p, 1, 1000) <= 0) return;
+    for (int waited = 0; waited < 100; waited++) {
+        int r = poll(&p, 1, 100);
+        if (r < 0 && errno != EINTR) return;
+        if (p.revents & (POLLERR | POLLNVAL)) return;
+        if (r > 0 && (p.revents & POLLOUT)) break;
+        if (STOP) return;
+    }
     size_t n = ad_link_take(l, buf, sizeof buf);
     size_t done = 0;
     while (done < n) {
@@ -454,7 +476,7 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
                 if (!c) {
                     close(fd); /* out of memory: refuse this one */
                 } else {
-                    ad_sink sink = {conn_room, conn_send, c};
+                    ad_sink sink = {conn_room, conn_send, c, conn_begin, conn_part, conn_end};
                     c->s = ad_open(dev, sink, now_us);
                     if (!c->s) begin_close(c);
                     c->next = conns;
