@@ -160,6 +160,9 @@ typedef struct ad_sink {
     int (*begin)(void *ctx, size_t len);
     void (*part)(void *ctx, const uint8_t *bytes, size_t n);
     void (*end)(void *ctx);
+    /* Optional: the stream packets this connection's transport holds, not yet sent (STATS
+     * queue_depths); NULL: reported as 0. */
+    size_t (*queued)(void *ctx);
 } ad_sink;
 
 typedef struct ad_session ad_session;

@@ -1242,6 +1242,12 @@ void ad_get_stats(const ad_device *dev, ad_stats *o)
     o->ring_lost_samples = dev->ring_lost;
 }
 
+/* packets go to the transport at once: its buffer is the queue */
+static uint64_t queued(const ad_session *c)
+{
+    return c->sink.queued ? c->sink.queued(c->sink.ctx) : 0;
+}
+
 static int cmd_stats(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
 {
     ad_stats st;
@@ -1266,7 +1272,7 @@ static int cmd_stats(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
         char id[16];
         ad_snprintf(id, sizeof id, "%u", c->id);
         ad_wr_str(&w, id);
-        ad_wr_uint(&w, 0); /* packets go to the transport at once; its own buffer holds them */
+        ad_wr_uint(&w, queued(c));
     }
     ad_wr_str(&w, "per_client"); ad_wr_array(&w, n);
     for (uint32_t i = 0; i < dev->n_sessions; i++) {
@@ -1277,7 +1283,7 @@ static int cmd_stats(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
         ad_wr_str(&w, "name"); ad_wr_str(&w, c->name);
         ad_wr_str(&w, "role"); ad_wr_str(&w, ROLE_NAMES[c->role]);
         ad_wr_str(&w, "streams"); ad_wr_uint(&w, c->n_streams);
-        ad_wr_str(&w, "queue_depth"); ad_wr_uint(&w, 0);
+        ad_wr_str(&w, "queue_depth"); ad_wr_uint(&w, queued(c));
         ad_wr_str(&w, "dropped_samples"); ad_wr_uint(&w, c->dropped_samples);
         ad_wr_str(&w, "dropped_packets"); ad_wr_uint(&w, c->dropped_packets);
     }
@@ -1435,6 +1441,11 @@ static const command COMMANDS[] = {
     {"BYE", AD_ROLE_NONE, S_HELLO | S_AUTH | S_READY, NULL},
 };
 #define N_COMMANDS (sizeof COMMANDS / sizeof COMMANDS[0])
+
+void ad_refuse(ad_device *dev, ad_session *s, int code, const char *why)
+{
+    if (s->used && !s->wants_close) fail(dev, s, 0, 0, code, why, 1);
+}
 
 void ad_refuse_oversize(ad_device *dev, ad_session *s, uint64_t announced)
 {

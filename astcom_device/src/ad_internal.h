@@ -196,6 +196,9 @@ int ad_stream_stop(ad_device *dev, ad_session *s, uint32_t msg);
 void ad_last_tick(ad_device *dev, int64_t *tick, int64_t *t_us);
 int64_t ad_round_half_up(double x);
 
+/* ERR nil `code` with `why`, then the session closes (a transport's refusal) */
+void ad_refuse(ad_device *dev, ad_session *s, int code, const char *why);
+
 /* sending (ad_device.c) */
 void ad_send_frame(ad_device *dev, ad_session *s, const ad_wr *w);
 

@@ -35,6 +35,8 @@ struct ad_link {
     int rx_skip;           /* discarding up to the next 0x00 */
     int held;              /* rx holds a decoded frame a channel cannot take yet */
     size_t held_len;
+    uint8_t *park;         /* frames of channels that wait (a deferred call): [chan][len u32][frame] */
+    size_t park_cap, park_len;
     uint8_t *tx;
     size_t tx_cap, tx_head, tx_tail;   /* ring of encoded bytes */
     /* the frame being COBS-encoded into the ring: its open block's code byte (a 0x00
@@ -56,12 +58,23 @@ static size_t cobs_max(size_t n) { return n + n / 254u + 2u; } /* code bytes and
 #ifndef AD_LINK_TX_FRAMES
 #define AD_LINK_TX_FRAMES 2u
 #endif
+/* A channel that cannot take a request yet (a deferred call runs there) would hold the
+ * link's input, every other channel's requests with it, and the relay's PINGs (a call
+ * longer than its 3 s timeout would lose the link). Its frames are parked instead, in
+ * order, in room for AD_LINK_PARK_FRAMES frames of max_frame_bytes; a channel that
+ * overflows the park is closed with ERR 429. A small MCU may set 0: then the link waits
+ * for the call (keep its calls short). */
+#ifndef AD_LINK_PARK_FRAMES
+#define AD_LINK_PARK_FRAMES 2u
+#endif
+#define PARK_HEAD 5u
 static size_t up8(size_t n) { return (n + 7u) & ~(size_t)7u; }
 
 size_t ad_link_bytes(uint32_t max_frame, uint32_t max_reply, uint32_t channels)
 {
     size_t frame_in = (size_t)max_frame + 6u, frame_out = (size_t)max_reply + 6u;
     return up8(sizeof(ad_link)) + up8(cobs_max(frame_in)) + up8(AD_LINK_TX_FRAMES * cobs_max(frame_out) + 64u)
+           + up8(AD_LINK_PARK_FRAMES * ((size_t)max_frame + PARK_HEAD))
            + up8((channels + 1u) * sizeof(ad_session *))
            + up8((channels + 1u) * sizeof(chan_ctx));
 }
@@ -203,6 +216,7 @@ ad_link *ad_link_init(void *mem, size_t mem_bytes, ad_device *dev, uint32_t max_
     p += up8(sizeof(ad_link));
     l->rx = p; l->rx_cap = cobs_max(frame_in); p += up8(l->rx_cap);
     l->tx = p; l->tx_cap = AD_LINK_TX_FRAMES * cobs_max(frame_out) + 64u; p += up8(l->tx_cap);
+    l->park = p; l->park_cap = AD_LINK_PARK_FRAMES * ((size_t)max_frame + PARK_HEAD); p += up8(l->park_cap);
     l->chan = (ad_session **)p; p += up8((channels + 1u) * sizeof(ad_session *));
     l->ctx = (chan_ctx *)p;
     l->dev = dev;
@@ -234,8 +248,63 @@ void ad_link_hello(ad_link *l)
     say_hello(l, boot);
 }
 
+/* ---- parked frames ---------------------------------------------------------------------- */
+static uint32_t park_rec_len(const uint8_t *rec)
+{
+    return (uint32_t)rec[1] | (uint32_t)rec[2] << 8 | (uint32_t)rec[3] << 16 | (uint32_t)rec[4] << 24;
+}
+
+static int chan_parked(const ad_link *l, uint8_t chan)
+{
+    for (size_t off = 0; off < l->park_len; off += PARK_HEAD + park_rec_len(l->park + off))
+        if (l->park[off] == chan) return 1;
+    return 0;
+}
+
+static int park(ad_link *l, uint8_t chan, const uint8_t *body, size_t n)
+{
+    if (l->park_len + PARK_HEAD + n > l->park_cap) return -1;
+    uint8_t *rec = l->park + l->park_len;
+    rec[0] = chan;
+    for (int k = 0; k < 4; k++) rec[1 + k] = (uint8_t)(n >> (8 * k));
+    memcpy(rec + PARK_HEAD, body, n);
+    l->park_len += PARK_HEAD + n;
+    return 0;
+}
+
+static void unpark_at(ad_link *l, size_t off)
+{
+    size_t size = PARK_HEAD + park_rec_len(l->park + off);
+    memmove(l->park + off, l->park + off + size, l->park_len - off - size);
+    l->park_len -= size;
+}
+
+/* Hand each channel its parked frames, in order, while it can take them. */
+static void unpark(ad_link *l)
+{
+    uint8_t waiting[32] = {0}; /* channels whose earlier frame still waits: keep their order */
+    size_t off = 0;
+    while (off < l->park_len) {
+        uint8_t chan = l->park[off];
+        ad_session *s = l->chan[chan];
+        if (!s) { unpark_at(l, off); continue; } /* the channel closed meanwhile */
+        if (!(waiting[chan >> 3] & (1u << (chan & 7)))
+                && (ad_can_receive(l->dev, s) || ad_wants_close(s, NULL, NULL))) {
+            ad_receive(l->dev, s, l->park + off + PARK_HEAD, park_rec_len(l->park + off), l->now_us);
+            unpark_at(l, off);
+            continue;
+        }
+        waiting[chan >> 3] |= (uint8_t)(1u << (chan & 7));
+        off += PARK_HEAD + park_rec_len(l->park + off);
+    }
+}
+
 static void close_channel(ad_link *l, uint8_t chan, int code, const char *reason, int tell)
 {
+    for (size_t off = 0; off < l->park_len;) { /* its parked frames go with it */
+        if (l->park[off] == chan) unpark_at(l, off);
+        else off += PARK_HEAD + park_rec_len(l->park + off);
+    }
     if (l->chan[chan]) {
         ad_close(l->dev, l->chan[chan]);
         l->chan[chan] = NULL;
@@ -273,7 +342,8 @@ static int dispatch(ad_link *l, uint8_t *f, size_t n)
     case AD_LINK_OPEN: {
         if (!chan) break;
         close_channel(l, chan, 1001, "", 0);
-        ad_sink sink = {sink_room, sink_send, &l->ctx[chan], sink_begin, sink_part, sink_end};
+        /* queue_depths: 0 here; a relayed client's packets wait in the Relay's queue */
+        ad_sink sink = {sink_room, sink_send, &l->ctx[chan], sink_begin, sink_part, sink_end, NULL};
         l->chan[chan] = ad_open(l->dev, sink, l->now_us);
         if (!l->chan[chan]) close_channel(l, chan, 429, "refused", 1);
         break;
@@ -284,7 +354,14 @@ static int dispatch(ad_link *l, uint8_t *f, size_t n)
     case AD_LINK_DATA: {
         ad_session *s = chan ? l->chan[chan] : NULL;
         if (!s) break; /* a late frame of a closed channel */
-        if (!ad_can_receive(l->dev, s) && !ad_wants_close(s, NULL, NULL)) return 1;
+        if ((!ad_can_receive(l->dev, s) && !ad_wants_close(s, NULL, NULL)) || chan_parked(l, chan)) {
+            if (!park(l, chan, body, len)) break; /* the other channels go on */
+            if (!l->park_cap) return 1;           /* no park (a small MCU): the link waits */
+            /* a client that sends more than the park holds while its call runs is cut off,
+             * rather than let it hold the link (and every other client) */
+            ad_refuse(l->dev, s, 429, "too many requests wait behind a call on this connection");
+            break;
+        }
         ad_receive(l->dev, s, body, len, l->now_us);
         break;
     }
@@ -345,6 +422,7 @@ int ad_link_can_feed(const ad_link *l) { return !l->held; }
 
 void ad_link_service(ad_link *l)
 {
+    unpark(l);
     if (l->held && !dispatch(l, l->rx, l->held_len)) l->held = 0;
     for (uint32_t c = 1; c <= l->channels; c++) {
         int code;

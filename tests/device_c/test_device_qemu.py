@@ -63,8 +63,9 @@ async def _session(monitor: str) -> dict:
         line = await asyncio.to_thread(qemu.stdout.readline)
         pty = re.search(r"(/dev/pts/\d+)", line)
         assert pty, f"QEMU did not give its serial port a pty: {line}"
+        # an emulated MCU on a loaded host may stall for seconds: a patient relay
         relay = subprocess.Popen([sys.executable, "-m", "astcom_client.cli", "relay", "--serial",
-                                  pty[1], "--listen", "ws://127.0.0.1:0"],
+                                  pty[1], "--listen", "ws://127.0.0.1:0", "--link-timeout", "30"],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         url = re.search(r"(ws://\S+)", await asyncio.to_thread(relay.stdout.readline))[1]
         async with await Client.connect(url, password=PASSWORD, timeout_s=10) as c:

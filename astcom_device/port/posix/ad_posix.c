@@ -145,6 +145,9 @@ typedef struct conn {
     size_t rx_cap, rx_len, rx_limit;   /* rx grows to the frame a header announces */
     uint8_t *tx;
     size_t tx_cap, tx_head, tx_tail, tx_limit; /* the send ring grows up to tx_limit */
+    size_t frames, data_frames; /* frames in the ring, of them stream packets (STATS) */
+    size_t frame_end;           /* where the frame at the tail ends */
+    int frame_is_data;
     int closing;           /* C_OPEN, C_FLUSH, C_DEAD or C_LINGER */
     int64_t closing_since; /* µs (monotonic) when the phase began */
     int lingered;          /* counted in n_linger instead of n_conns */
@@ -190,6 +193,7 @@ static int tx_grow(conn *c, size_t need)
     free(c->tx);
     c->tx = t;
     c->tx_cap = cap;
+    c->frame_end -= c->tx_tail;
     c->tx_tail = 0;
     c->tx_head = used;
     return 0;
@@ -206,6 +210,43 @@ static void tx_put(conn *c, const uint8_t *p, size_t n)
     }
 }
 
+/* ---- counting the frames in the ring: their length prefixes mark where each ends -------- */
+static void tx_peek(const conn *c, size_t at, uint8_t *out, size_t n)
+{
+    for (size_t i = 0; i < n; i++) out[i] = c->tx[(at + i) % c->tx_cap];
+}
+
+static int is_data(const uint8_t *frame_head) /* an array of 9 starting with "DATA" */
+{
+    return frame_head[0] == 0x99 && frame_head[1] == 0xa4;
+}
+
+static void frame_queued(conn *c, size_t len, int data)
+{
+    if (!c->frames) {
+        c->frame_end = c->tx_head + 4 + len;
+        c->frame_is_data = data;
+    }
+    c->frames++;
+    c->data_frames += data != 0;
+}
+
+static void frames_sent(conn *c)
+{
+    while (c->frames && c->tx_tail >= c->frame_end) {
+        c->frames--;
+        c->data_frames -= c->frame_is_data != 0;
+        if (!c->frames) break;
+        uint8_t h[6];
+        tx_peek(c, c->frame_end, h, 6);
+        size_t len = (size_t)h[0] << 24 | (size_t)h[1] << 16 | (size_t)h[2] << 8 | h[3];
+        c->frame_is_data = len >= 2 && is_data(h + 4);
+        c->frame_end += 4 + len;
+    }
+}
+
+static size_t conn_queued(void *ctx) { return ((conn *)ctx)->data_frames; }
+
 static int conn_send(void *ctx, const uint8_t *frame, size_t len, int droppable)
 {
     conn *c = (conn *)ctx;
@@ -213,6 +254,7 @@ static int conn_send(void *ctx, const uint8_t *frame, size_t len, int droppable)
         if (!droppable) begin_close(c); /* cannot happen while the reserve is kept */
         return -1;
     }
+    frame_queued(c, len, len >= 2 && is_data(frame));
     uint8_t head[4] = {(uint8_t)(len >> 24), (uint8_t)(len >> 16), (uint8_t)(len >> 8), (uint8_t)len};
     tx_put(c, head, 4);
     tx_put(c, frame, len);
@@ -225,6 +267,7 @@ static int conn_begin(void *ctx, size_t len)
 {
     conn *c = (conn *)ctx;
     if (conn_room(c) < len + 4 || len > UINT32_MAX || tx_grow(c, len + 4)) return -1;
+    frame_queued(c, len, 0);
     uint8_t head[4] = {(uint8_t)(len >> 24), (uint8_t)(len >> 16), (uint8_t)(len >> 8), (uint8_t)len};
     tx_put(c, head, 4);
     return 0;
@@ -245,6 +288,7 @@ static int conn_flush(conn *c)
             return -1;
         }
         c->tx_tail += (size_t)w;
+        frames_sent(c);
     }
     return 0;
 }
@@ -476,7 +520,8 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
                 if (!c) {
                     close(fd); /* out of memory: refuse this one */
                 } else {
-                    ad_sink sink = {conn_room, conn_send, c, conn_begin, conn_part, conn_end};
+                    ad_sink sink = {conn_room, conn_send, c, conn_begin, conn_part, conn_end,
+                                    conn_queued};
                     c->s = ad_open(dev, sink, now_us);
                     if (!c->s) begin_close(c);
                     c->next = conns;

@@ -169,13 +169,17 @@ int main(void)
                                              cfg.max_clients + cfg.max_pending);
     dev = ad_init(arena, sizeof arena, &cfg, vars, nv, fns, nf, why, sizeof why);
     uart_init();
-    if (!dev) {
+    if (dev) {
+        link = ad_link_init(link_mem, sizeof link_mem, dev, cfg.max_frame_bytes,
+                            cfg.max_reply_bytes, cfg.max_clients + cfg.max_pending, link_drain, NULL);
+        if (!link)
+            ad_snprintf(why, sizeof why, "the link needs %lu bytes; FW_LINK_BYTES is %lu",
+                        (unsigned long)fw_link_needed, (unsigned long)sizeof link_mem);
+    }
+    if (!dev || !link) { /* say why on the UART, in plain text, and stop */
         for (const char *p = why; *p; p++) { while (!(USART_SR & (1u << 7))) {} USART_DR = (uint8_t)*p; }
         for (;;) {}
     }
-    link = ad_link_init(link_mem, sizeof link_mem, dev, cfg.max_frame_bytes, cfg.max_reply_bytes,
-                        cfg.max_clients + cfg.max_pending, link_drain, NULL);
-    if (!link) for (;;) {}
     SYST_RVR = CPU_HZ / LOOP_HZ - 1;
     SYST_CVR = 0;
     SYST_CSR = 7; /* processor clock, interrupt, enable */
