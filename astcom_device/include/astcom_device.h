@@ -210,7 +210,9 @@ void ad_return_f64_array(ad_call *call, const double *v, uint32_t n);
 int ad_fail(ad_call *call, const char *message);
 /* Wait without blocking: `resume(call, user, now_us)` is called from ad_poll() until it
  * returns AD_OK (after ad_return_*) or fails. `state` keeps up to AD_CALL_STATE_BYTES
- * bytes for it. */
+ * bytes for it. The arguments (ad_arg_*) are valid in the first call only: copy what
+ * resume needs into the state. The connection's later requests wait for the answer (over
+ * the framed link, only that channel's). */
 #define AD_CALL_STATE_BYTES 32
 typedef int (*ad_resume_fn)(ad_call *call, void *user, int64_t now_us);
 int ad_defer(ad_call *call, ad_resume_fn resume);
