@@ -22,6 +22,7 @@ static void usage(void)
           "       [--observer-password P] [--extra N] [--duration S] [--stats FILE] [--warmup S]\n"
           "       [--rt-priority N]\n"
           "       [--max-clients N] [--max-pending N] [--auth-timeout S] [--max-frame-bytes N]\n"
+          "       [--max-pending-frame-bytes N] [--max-pending-frames N]\n"
           "       [--max-depth N] [--max-array-len N] [--max-str-bytes N] [--max-messages N]\n"
           "       [--max-names N] [--max-streams N] [--ring-ticks N] [--max-reply-bytes N]\n"
           "       [--link-channels N]\n"
@@ -70,6 +71,8 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--rt-priority")) o.rt_priority = (int)number(a, v);
         else if (!strcmp(a, "--max-clients")) cfg.max_clients = (uint32_t)number(a, v);
         else if (!strcmp(a, "--max-pending")) cfg.max_pending = (uint32_t)number(a, v);
+        else if (!strcmp(a, "--max-pending-frame-bytes")) cfg.max_pending_frame_bytes = (uint32_t)number(a, v);
+        else if (!strcmp(a, "--max-pending-frames")) cfg.max_pending_frames = (uint32_t)number(a, v);
         else if (!strcmp(a, "--auth-timeout")) cfg.auth_timeout_s = atof(v);
         else if (!strcmp(a, "--max-frame-bytes")) cfg.max_frame_bytes = (uint32_t)number(a, v);
         else if (!strcmp(a, "--max-depth")) cfg.max_depth = (uint32_t)number(a, v);

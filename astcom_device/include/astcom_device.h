@@ -105,6 +105,9 @@ typedef struct ad_config {
     uint32_t max_frame_bytes, max_depth, max_array_len, max_str_bytes;
     uint32_t max_messages, max_names_per_message, max_streams_per_client;
     uint32_t max_clients, max_pending;
+    /* before AUTH succeeds (with authentication on): frames of at most this size, and at
+     * most this many of them (the next is ERR 429 and a close) */
+    uint32_t max_pending_frame_bytes, max_pending_frames;
     double auth_timeout_s;
     uint32_t queue_packets;        /* announced; the sink's room decides what is dropped */
     /* device-side sizes */
@@ -185,6 +188,9 @@ int ad_wants_close(const ad_session *s, int *code, const char **reason);
 void ad_close(ad_device *dev, ad_session *s);
 /* Stop reading from a peer whose sink cannot take a reply now (back-pressure). */
 int ad_can_receive(const ad_device *dev, const ad_session *s);
+/* The largest frame the peer may send now (smaller before it has authenticated): a
+ * transport that reads a length first refuses a larger one with ad_refuse_oversize(). */
+uint32_t ad_frame_limit(const ad_device *dev, const ad_session *s);
 
 /* ---- function calls ------------------------------------------------------------------- */
 

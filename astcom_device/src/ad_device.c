@@ -26,6 +26,8 @@ void ad_config_defaults(ad_config *c)
     c->max_streams_per_client = 64;
     c->max_clients = 32;
     c->max_pending = 8;
+    c->max_pending_frame_bytes = 4096;
+    c->max_pending_frames = 16;
     c->auth_timeout_s = 10.0;
     c->queue_packets = 256;
     c->ring_ticks = 2048;
@@ -1310,7 +1312,7 @@ static void hello_reply(ad_device *dev, ad_session *s, uint64_t seq)
     ad_wr_str(&w, "role");
     if (s->role) ad_wr_str(&w, ROLE_NAMES[s->role]); else ad_wr_nil(&w);
     ad_wr_str(&w, "loop_rate_hz"); ad_wr_f64(&w, c->loop_rate_hz);
-    ad_wr_str(&w, "limits"); ad_wr_map(&w, 11);
+    ad_wr_str(&w, "limits"); ad_wr_map(&w, 13);
     ad_wr_str(&w, "max_frame_bytes"); ad_wr_uint(&w, c->max_frame_bytes);
     ad_wr_str(&w, "max_depth"); ad_wr_uint(&w, c->max_depth);
     ad_wr_str(&w, "max_array_len"); ad_wr_uint(&w, c->max_array_len);
@@ -1322,6 +1324,8 @@ static void hello_reply(ad_device *dev, ad_session *s, uint64_t seq)
     ad_wr_str(&w, "queue_packets"); ad_wr_uint(&w, c->queue_packets);
     ad_wr_str(&w, "max_clients"); ad_wr_uint(&w, c->max_clients);
     ad_wr_str(&w, "max_pending"); ad_wr_uint(&w, c->max_pending);
+    ad_wr_str(&w, "max_pending_frame_bytes"); ad_wr_uint(&w, c->max_pending_frame_bytes);
+    ad_wr_str(&w, "max_pending_frames"); ad_wr_uint(&w, c->max_pending_frames);
     ad_send_frame(dev, s, &w);
 }
 
@@ -1447,11 +1451,24 @@ void ad_refuse(ad_device *dev, ad_session *s, int code, const char *why)
     if (s->used && !s->wants_close) fail(dev, s, 0, 0, code, why, 1);
 }
 
+/* Before AUTH, a peer gets almost nothing (§8): small frames, and few of them. */
+static int pre_auth(const ad_device *dev, const ad_session *s)
+{
+    return auth_required(dev) && s->role == AD_ROLE_NONE;
+}
+
+uint32_t ad_frame_limit(const ad_device *dev, const ad_session *s)
+{
+    uint32_t small = dev->cfg.max_pending_frame_bytes;
+    return pre_auth(dev, s) && small < dev->cfg.max_frame_bytes ? small : dev->cfg.max_frame_bytes;
+}
+
 void ad_refuse_oversize(ad_device *dev, ad_session *s, uint64_t announced)
 {
     char why[160];
-    ad_snprintf(why, sizeof why, "frame of %llu bytes announced; the limit is %u bytes",
-             (unsigned long long)announced, dev->cfg.max_frame_bytes);
+    ad_snprintf(why, sizeof why, "frame of %llu bytes announced; the limit is %u bytes%s",
+             (unsigned long long)announced, ad_frame_limit(dev, s),
+             pre_auth(dev, s) ? " before authentication" : "");
     fail(dev, s, 0, 0, 413, why, 1);
 }
 
@@ -1464,6 +1481,15 @@ void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len,
     if (!s->used || s->state == AD_CLOSED || s->wants_close) return;
     int has_seq = 0;
     uint64_t seq = 0;
+    if (pre_auth(dev, s)) {
+        if (len > ad_frame_limit(dev, s)) { ad_refuse_oversize(dev, s, len); return; }
+        if (++s->frames_before_auth > dev->cfg.max_pending_frames) {
+            ad_snprintf(why, sizeof why, "more than %u frames before authenticating",
+                        dev->cfg.max_pending_frames);
+            fail(dev, s, 0, 0, 429, why, 1);
+            return;
+        }
+    }
     int code = ad_validate(frame, len, &lim, why, sizeof why);
     if (code == 413) { fail(dev, s, 0, 0, 413, why, 1); return; }
     req r;

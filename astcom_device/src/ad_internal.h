@@ -120,6 +120,7 @@ struct ad_session {
     uint8_t nonce[32];
     char name[65];
     uint32_t protocol_errors;
+    uint32_t frames_before_auth;
     uint32_t n_streams;
     uint64_t dropped_samples, dropped_packets;
     ad_call call;

@@ -102,7 +102,9 @@ def device_args(*, passwords: dict[str, str] | None = PASSWORDS, loop_rate_hz: f
              "auth_timeout_s": "--auth-timeout", "max_frame_bytes": "--max-frame-bytes",
              "max_depth": "--max-depth", "max_array_len": "--max-array-len",
              "max_str_bytes": "--max-str-bytes", "max_messages": "--max-messages",
-             "max_names_per_message": "--max-names", "max_streams_per_client": "--max-streams"}
+             "max_names_per_message": "--max-names", "max_streams_per_client": "--max-streams",
+             "max_pending_frame_bytes": "--max-pending-frame-bytes",
+             "max_pending_frames": "--max-pending-frames"}
     for key, value in config.items():
         if key not in names:
             raise TypeError(f"the C device has no option for {key}")

@@ -100,3 +100,28 @@ def test_without_authentication_hello_admits_at_most_max_clients(impl: str) -> N
             assert await b.recv() is None
     run(main())
 
+
+
+@impls
+def test_a_peer_gets_a_few_small_frames_before_authenticating(impl: str) -> None:
+    """§8: before AUTH at most max_pending_frames frames, each of max_pending_frame_bytes."""
+    async def main() -> None:
+        async with serve_impl(impl, scheme="tcp" if impl == "python" else None) as dut:
+            chatty = RawPeer(await dut.connect())
+            hello = await chatty.request("HELLO", {"version": "1.0"})
+            limits = hello[2]["limits"]
+            assert limits["max_pending_frames"] == 16 and limits["max_pending_frame_bytes"] == 4096
+            for _ in range(15):  # 16 frames in all are answered
+                assert (await chatty.request("PING"))[0] == "OK"
+            frame = await chatty.request("PING")
+            assert frame[0] == "ERR" and frame[1] is None and frame[2]["code"] == TooMany.code
+            assert "16 frames before authenticating" in frame[2]["message"]
+            assert await chatty.recv() is None
+            big = RawPeer(await dut.connect())
+            await big.send(["HELLO", 1, {"version": "1.0", "client": "x" * 5000}])
+            frame = await big.recv()
+            assert frame[0] == "ERR" and frame[2]["code"] in (413, 400)
+            assert await big.recv() is None
+            async with await dut.client() as client:  # after AUTH the full limits apply
+                assert await client.invoke("math.sum", [1.0] * 1000) == 1000.0
+    run(main())

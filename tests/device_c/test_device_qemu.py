@@ -67,7 +67,14 @@ async def _session(monitor: str) -> dict:
         relay = subprocess.Popen([sys.executable, "-m", "astcom_client.cli", "relay", "--serial",
                                   pty[1], "--listen", "ws://127.0.0.1:0", "--link-timeout", "30"],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        url = re.search(r"(ws://\S+)", await asyncio.to_thread(relay.stdout.readline))[1]
+        line = await asyncio.to_thread(relay.stdout.readline)
+        url = re.search(r"(ws://\S+)", line)[1]
+        if "link up" not in line:  # the firmware did not start: its memory, most likely
+            sym = symbols()
+            link, arena = read_words(monitor, sym["fw_link_needed"], 2)
+            raise AssertionError(f"the firmware does not answer ({line.strip()}); it needs "
+                                 f"an arena of {arena} and a link of {link} bytes "
+                                 "(FW_ARENA_BYTES, FW_LINK_BYTES in firmware.mk)")
         async with await Client.connect(url, password=PASSWORD, timeout_s=10) as c:
             out = {"hello": c.hello, "entries": await c.list(),
                    "read": await c.read(["mount.tick", "extra.s00", "extra.s03"])}
@@ -130,9 +137,11 @@ def test_the_firmware_in_qemu_answers_hello_list_read_and_streams_through_the_re
         phase = 2 * np.pi * 5.0 * ticks / 10_000.0
         np.testing.assert_allclose(p.column("extra.s00"), np.sin(phase), atol=2e-5)
         np.testing.assert_allclose(p.column("extra.s03"), np.sin(phase + 3), atol=2e-5)
-    # the memory it was built with is the memory the library says it needs (firmware.mk)
+    # the memory it was built with holds what the library says it needs, and not much more
+    # (firmware.mk: a struct that grows needs FW_ARENA_BYTES raised)
     text = (DEVICE_DIR / "port" / "stm32" / "firmware.mk").read_text()
     built = {k: int(v) for k, v in re.findall(r"-DFW_(ARENA|LINK)_BYTES=(\d+)u", text)}
-    assert out["needed"] == [built["LINK"], built["ARENA"]]
+    for name, needed in zip(("LINK", "ARENA"), out["needed"], strict=True):
+        assert 0 <= built[name] - needed <= 256, (name, needed, built[name])
     print(f"firmware stack: {out['stack_bytes'] - out['stack_unused']} of {out['stack_bytes']} bytes used")
     assert out["stack_unused"] >= STACK_MARGIN_BYTES, out["stack_unused"]

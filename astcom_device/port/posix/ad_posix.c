@@ -313,13 +313,13 @@ static conn *conn_new(int fd, const ad_config *cfg, const ad_posix_opts *o)
     return c;
 }
 
-static void parse_frames(ad_device *dev, conn *c, uint32_t max_frame, int64_t now_us)
+static void parse_frames(ad_device *dev, conn *c, int64_t now_us)
 {
     size_t off = 0;
     while (!c->closing && c->s && c->rx_len - off >= 4) {
         uint8_t *p = c->rx + off;
         uint32_t size = (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
-        if (size > max_frame) {
+        if (size > ad_frame_limit(dev, c->s)) {
             ad_refuse_oversize(dev, c->s, size);
             begin_close(c);
             break;
@@ -549,7 +549,7 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
                     c->closing = C_DEAD;
                 }
             }
-            if (c->s && c->closing != C_DEAD) parse_frames(dev, c, cfg->max_frame_bytes, now_us);
+            if (c->s && c->closing != C_DEAD) parse_frames(dev, c, now_us);
         }
         if (link && ki >= 0) {
             if (pf[ki].revents & POLLIN) {
@@ -562,7 +562,7 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
         ad_poll(dev, now_us);
         for (conn *c = conns; c; c = c->next) {
             /* frames left in rx while a call was pending or the sink was full */
-            if (c->s && c->closing == C_OPEN && c->rx_len >= 4) parse_frames(dev, c, cfg->max_frame_bytes, now_us);
+            if (c->s && c->closing == C_OPEN && c->rx_len >= 4) parse_frames(dev, c, now_us);
         }
         if (link) {
             ad_link_service(link);
