@@ -179,8 +179,14 @@ void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len,
 /* A frame the transport had to refuse before it was whole (its length prefix was over
  * max_frame_bytes): ERR 413 and close. */
 void ad_refuse_oversize(ad_device *dev, ad_session *s, uint64_t announced);
-/* Streams, auth timeouts and deferred calls. Call often (every ms or so). */
+/* Streams, auth timeouts and deferred calls. Call often (every ms or so), or when
+ * ad_poll_delay_us() says. */
 void ad_poll(ad_device *dev, int64_t now_us);
+/* How long (µs) the communication loop may sleep before ad_poll() has work: until the
+ * next stream packet is due, the next auth timeout, at most `max_us`; 1 ms while a
+ * deferred call runs. A loop that sleeps this long (waking early for I/O) does what one
+ * that polls every millisecond does, with far fewer wake-ups. */
+int64_t ad_poll_delay_us(const ad_device *dev, int64_t now_us, int64_t max_us);
 /* True when the library wants the transport closed (after BYE or an error that
  * closes); `code`/`reason` say why (reason may be ""). The frames before are sent. */
 int ad_wants_close(const ad_session *s, int *code, const char **reason);

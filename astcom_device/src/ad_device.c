@@ -1597,6 +1597,22 @@ void ad_poll(ad_device *dev, int64_t now_us)
     ad_stream_poll(dev);
 }
 
+int64_t ad_poll_delay_us(const ad_device *dev, int64_t now_us, int64_t max_us)
+{
+    int64_t delay = max_us;
+    if (dev->pending_calls) return delay < 1000 ? delay : 1000;
+    int64_t limit_us = (int64_t)(dev->cfg.auth_timeout_s * 1e6);
+    for (uint32_t i = 0; i < dev->n_sessions; i++) {
+        const ad_session *s = &dev->sessions[i];
+        if (!s->used || s->wants_close || s->state == AD_READY || s->state == AD_CLOSED) continue;
+        int64_t left = s->opened_us + limit_us - now_us;
+        if (left < delay) delay = left;
+    }
+    int64_t streams = ad_stream_delay_us((ad_device *)dev);
+    if (streams < delay) delay = streams;
+    return delay > 0 ? delay : 0;
+}
+
 /* ---- function call API ---------------------------------------------------------------------- */
 uint32_t ad_arg_count(const ad_call *c) { return c->n_args; }
 double ad_arg_f64(const ad_call *c, uint32_t i)

@@ -189,6 +189,8 @@ int ad_msg_find(ad_device *dev, uint32_t id, ad_msg *out);
 
 /* streams (ad_stream.c) */
 void ad_stream_poll(ad_device *dev);
+/* µs until the first sampler has a whole packet in the ring (INT64_MAX: no stream) */
+int64_t ad_stream_delay_us(ad_device *dev);
 void ad_stream_drop_session(ad_device *dev, ad_session *s);
 void ad_stream_drop_message(ad_device *dev, ad_session *s, uint32_t msg);
 int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate_hz, ad_wr *w,

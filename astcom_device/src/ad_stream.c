@@ -325,18 +325,27 @@ static void encode_packet(ad_device *dev, ad_sampler *sp, const ad_msg *m, const
         for (uint32_t i = 0; i < n; i++) {
             uint64_t r = row + (uint64_t)i * sp->k;
             const uint8_t *ring_row = dev->ring + (size_t)(r % dev->cfg.ring_ticks) * dev->row_bytes;
+            /* columns that lie side by side in the ring row are copied in one run */
+            const uint8_t *run = NULL;
+            uint32_t run_len = 0;
             for (uint32_t k = 0; k < m->n; k++) {
                 const ad_var_rt *rt = &dev->vrt[m->idx[k]];
                 if (rt->base != g[j].dtype) continue;
                 if (rt->trace_col >= 0) {
-                    ad_wr_raw(w, ring_row + rt->ring_offset, isz);
+                    const uint8_t *p = ring_row + rt->ring_offset;
+                    if (run && run + run_len == p) { run_len += isz; continue; }
+                    if (run) ad_wr_raw(w, run, run_len);
+                    run = p;
+                    run_len = isz;
                 } else {
+                    if (run) { ad_wr_raw(w, run, run_len); run = NULL; }
                     /* parameters and untraced signals: their value now (end of the block) */
                     ad_port_lock();
                     ad_wr_raw(w, dev->vars[m->idx[k]].ptr, rt->count * isz);
                     ad_port_unlock();
                 }
             }
+            if (run) ad_wr_raw(w, run, run_len);
         }
     }
 }
@@ -406,6 +415,24 @@ static void poll_sampler(ad_device *dev, ad_sampler *sp, const ring_view *v)
         }
         sp->next_tick = tick + (uint64_t)n * sp->k;
     }
+}
+
+int64_t ad_stream_delay_us(ad_device *dev)
+{
+    int64_t tick, t_us, best = INT64_MAX;
+    ad_port_lock();
+    ad_last_tick(dev, &tick, &t_us);
+    ad_port_unlock();
+    for (uint32_t i = 0; i < dev->cfg.max_samplers; i++) {
+        const ad_sampler *sp = &dev->samplers[i];
+        if (!sp->used) continue;
+        /* its packet is whole when the tick of its last sample is in the ring */
+        double last = (double)sp->next_tick + (double)(sp->spp - 1u) * (double)sp->k;
+        double ticks = last - (double)tick;
+        int64_t us = ticks <= 0 ? 0 : (int64_t)(ticks * dev->tick_us);
+        if (us < best) best = us;
+    }
+    return best;
 }
 
 void ad_stream_poll(ad_device *dev)

@@ -16,6 +16,7 @@
 #include <string.h>
 #include <sys/random.h>
 #include <sys/socket.h>
+#include <sys/uio.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
@@ -256,8 +257,27 @@ static int conn_send(void *ctx, const uint8_t *frame, size_t len, int droppable)
     }
     frame_queued(c, len, len >= 2 && is_data(frame));
     uint8_t head[4] = {(uint8_t)(len >> 24), (uint8_t)(len >> 16), (uint8_t)(len >> 8), (uint8_t)len};
+    size_t sent = 0;
+    if (c->tx_head == c->tx_tail && c->closing != C_LINGER) {
+        /* nothing waits: straight to the socket, no copy into the ring unless it is full */
+        struct iovec iov[2] = {{head, 4}, {(void *)frame, len}};
+        struct msghdr mh;
+        memset(&mh, 0, sizeof mh);
+        mh.msg_iov = iov;
+        mh.msg_iovlen = 2;
+        ssize_t w = sendmsg(c->fd, &mh, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (w > 0) sent = (size_t)w;
+        if (sent == len + 4) {
+            c->tx_head += sent; /* as if it went through the ring */
+            c->tx_tail += sent;
+            frames_sent(c);
+            return 0;
+        }
+    }
     tx_put(c, head, 4);
     tx_put(c, frame, len);
+    c->tx_tail += sent;
+    frames_sent(c);
     return 0;
 }
 
@@ -509,7 +529,12 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
             pc[n - base] = c;
             n++;
         }
-        poll(pf, (nfds_t)n, 1);
+        /* sleep until a stream packet or an auth timeout is due (or I/O), 1..50 ms; a
+         * link waiting for room, or a deferred call, wakes every millisecond */
+        int64_t delay_us = ad_poll_delay_us(dev, mono_ns() / 1000, 50000);
+        int wait_ms = (int)((delay_us + 999) / 1000);
+        if (wait_ms < 1 || (link && (link_in_off < link_in_len || !ad_link_can_feed(link)))) wait_ms = 1;
+        poll(pf, (nfds_t)n, wait_ms);
         int64_t now_us = mono_ns() / 1000;
         if (li >= 0 && (pf[li].revents & POLLIN)) {
             int fd = accept4(lfd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
