@@ -209,8 +209,13 @@ int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate, ad
         uint32_t overhead = 96 + ng * (8 + 40);
         uint64_t fit = row_bytes ? (dev->cfg.max_reply_bytes - overhead) / row_bytes : spp;
         uint64_t by_len = cols ? dev->cfg.max_array_len / cols : spp;
+        /* a packet spans at most half the ring: the other half is the time the
+         * communication side has to build it before its first row is overwritten (a
+         * 20-ms ring with 20-ms packets would leave none) */
+        uint64_t by_ring = dev->cfg.ring_ticks / 2u / k;
         if (spp > fit) spp = fit;
         if (spp > by_len) spp = by_len;
+        if (spp > by_ring) spp = by_ring;
         if (spp < 1) spp = 1;
         sp->spp = (uint32_t)spp;
         int64_t tick, t_us;
