@@ -74,18 +74,26 @@ class _Client:
         self.close_code: int | None = None
         self.close_reason = ""
         self.dropped_packets = 0
+        self.queued_packets = 0  # stream packets in `queue`
 
     def push(self, frame: bytes) -> None:
         if frame.startswith(_DATA_PREFIX):
-            streams = sum(1 for f in self.queue if f.startswith(_DATA_PREFIX))
-            if streams >= self.queue_packets:
-                for i, f in enumerate(self.queue):
+            if self.queued_packets >= self.queue_packets:
+                for i, f in enumerate(self.queue):  # the oldest packet (replies stay)
                     if f.startswith(_DATA_PREFIX):
                         del self.queue[i]
                         self.dropped_packets += 1
+                        self.queued_packets -= 1
                         break
+            self.queued_packets += 1
         self.queue.append(frame)
         self.wake.set()
+
+    def pop(self) -> bytes:
+        frame = self.queue.popleft()
+        if frame.startswith(_DATA_PREFIX):
+            self.queued_packets -= 1
+        return frame
 
     def end(self, code: int, reason: str) -> None:
         if self.close_code is None:
@@ -341,7 +349,7 @@ class Relay:
                 await client.wake.wait()
                 client.wake.clear()
                 while client.queue:
-                    await client.transport.send(client.queue.popleft())
+                    await client.transport.send(client.pop())
                 if client.close_code is not None:
                     break
         except Exception:  # the client went away; its reader ends the session

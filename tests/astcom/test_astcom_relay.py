@@ -82,16 +82,16 @@ async def relay_on(device: ScriptedDevice, **config):
         device.close()
 
 
-async def ws_client(relay: Relay):
-    return await connect(relay.urls[0], proxy=None, compression=None)
+async def ws_client(relay: Relay, **options):
+    return await connect(relay.urls[0], proxy=None, compression=None, **options)
 
 
 @contextlib.asynccontextmanager
-async def one_client(**config):
+async def one_client(client_options: dict | None = None, **config):
     """A scripted device, a Relay on it, and one client whose channel the device opened."""
     device = ScriptedDevice()
     async with relay_on(device, **config) as relay:
-        ws = await ws_client(relay)
+        ws = await ws_client(relay, **(client_options or {}))
         await device.next(LinkKind.OPEN)
         yield device, relay, ws
 
@@ -186,3 +186,30 @@ def test_the_device_closing_a_channel_closes_that_client_only_after_its_last_fra
             await asyncio.wait_for(a.wait_closed(), 5)
             await b.ping()  # the other client is untouched
     run(main())
+
+
+def test_a_client_that_does_not_read_loses_its_oldest_packets_never_a_reply():
+    async def main():
+        # the client's own library keeps one message: what it does not read stays in the Relay
+        async with one_client({"max_queue": 1}, queue_packets=4) as (device, relay, ws):
+            chan = 1
+            payload = b"\x01" * 900_000  # large packets: the sockets' buffers fill quickly
+            for seq in range(30):
+                device.send(chan, LinkKind.DATA,
+                            msgpack.packb(["DATA", 1, seq, 0, 0, 1.0, 1, 1, [payload]]))
+            device.send(chan, LinkKind.DATA, msgpack.packb(["OK", 7, {}]))
+            await device.writer.drain()
+            await asyncio.sleep(1.0)  # the Relay has it all; the client has read nothing
+            frames = []
+            while True:
+                frame = await next_message(ws)
+                frames.append(frame)
+                if frame[0] == "OK":
+                    break
+            return frames, relay
+
+    frames, relay = run(main(), timeout_s=60)
+    seqs = [f[2] for f in frames if f[0] == "DATA"]
+    assert frames[-1] == ["OK", 7, {}]  # the reply, after every packet sent before it
+    assert seqs == sorted(seqs) and seqs[-1] == 29  # the newest kept, in order
+    assert len(seqs) < 30  # the oldest beyond the queue (and the sockets' buffers) dropped
