@@ -311,7 +311,8 @@ class Relay:
             # After the end (the device closed the channel, or the frame was refused) the
             # client's frames already on their way are read and dropped until its close
             # arrives: a reader that stops would leave the WebSocket's closing handshake
-            # stuck behind them (close_timeout bounds a client that never stops).
+            # stuck behind them (up to 1 MiB of them: beyond, a flood is not read on).
+            dropped = 0
             while True:
                 try:
                     frame = await transport.recv()
@@ -325,6 +326,9 @@ class Relay:
                 if frame is None:
                     break
                 if client.close_code is not None:
+                    dropped += len(frame)
+                    if dropped > 1 << 20:  # a flood, not frames in flight: read no more
+                        break
                     continue
                 if len(frame) > self.max_frame_bytes:
                     message = (f"frame of {len(frame)} bytes exceeds the limit of "

@@ -42,9 +42,11 @@ log = logging.getLogger("astcom.transports")
 
 _READ_CHUNK = 1 << 16
 _WS_CLOSE_CODES = {1000: 1000, 413: 1009, 429: 1013, 503: 1001}
-# How long a closing connection reads (and drops) what its peer still sends, so that the
-# peer receives our last frames: the ERR that says why it is cut off.
+# How long, and how much, a closing connection reads (and drops) of what its peer still
+# sends, so that the peer receives our last frames (the ERR that says why it is cut off);
+# a flood beyond that is not read on.
 _LINGER_S = 2.0
+_LINGER_BYTES = 1 << 20
 
 
 class Transport(Protocol):
@@ -146,9 +148,10 @@ class WebSocketTransport:
 
     async def _drop_incoming(self) -> None:
         # a reader of our own may be in recv() already (ConcurrencyError): then it drains
+        dropped = 0
         with contextlib.suppress(Exception):
-            while True:
-                await self._ws.recv()
+            while dropped < _LINGER_BYTES:
+                dropped += len(await self._ws.recv())
 
 
 class TcpTransport:
@@ -195,9 +198,10 @@ class TcpTransport:
             with contextlib.suppress(Exception):
                 if self._writer.can_write_eof():
                     self._writer.write_eof()
+                    dropped = 0
                     async with asyncio.timeout(_LINGER_S):
-                        while await self._reader.read(_READ_CHUNK):
-                            pass
+                        while dropped < _LINGER_BYTES and (data := await self._reader.read(_READ_CHUNK)):
+                            dropped += len(data)
             self._writer.close()
         with contextlib.suppress(Exception):
             await asyncio.wait_for(self._writer.wait_closed(), 2.0)

@@ -138,6 +138,7 @@ static void write_stats(const char *path)
  * would never see why it was cut off. Each phase lasts at most CLOSE_WAIT_US. */
 enum { C_OPEN, C_FLUSH, C_DEAD, C_LINGER };
 #define CLOSE_WAIT_US 2000000
+#define LINGER_BYTES (1u << 20)
 
 typedef struct conn {
     int fd;
@@ -562,6 +563,8 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
                     uint8_t sink[4096];
                     ssize_t r = recv(c->fd, sink, sizeof sink, MSG_DONTWAIT);
                     if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR)) c->closing = C_DEAD;
+                    /* frames in flight, not a flood: beyond LINGER_BYTES it is not read on */
+                    if (r > 0 && (c->rx_len += (size_t)r) > LINGER_BYTES) c->closing = C_DEAD;
                 }
                 continue;
             }
@@ -609,6 +612,7 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
                     c->closing = C_LINGER;
                     c->closing_since = now_us;
                     c->lingered = 1;
+                    c->rx_len = 0; /* from now on: the bytes dropped */
                     n_conns--;
                     n_linger++;
                 }

@@ -3,7 +3,7 @@
  * connection a receive buffer and a send ring that start at 4 KiB and 16 KiB and grow
  * to what the connection needs, up to max_frame_bytes + 4 and 2 × max_reply_bytes +
  * tx_extra_bytes; freed when it leaves. At most max_clients + max_pending + 1
- * connections hold a slot at once, and as many more may linger (up to 2 s each) while
+ * connections hold a slot at once, and as many more may linger (2 s, 1 MiB at most) while
  * their peers read the last frames (the TCP close is not a reset). The tick thread runs
  * late ticks back to back; more than 2 s behind, it gives them up (counted). */
 #ifndef AD_POSIX_H
