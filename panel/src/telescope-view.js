@@ -92,6 +92,7 @@ const targetOf = (params) => ['star', 'radec', 'altaz'].map((k) => params?.[k]).
 
 /** Return the words of a command as sent: "slew Sun", "track Vega for 60 s", "park". */
 export function commandText(cmd, params = {}) {
+  if (cmd === 'offset') return offsetText(params);
   const target = targetOf(params);
   const duration = params.duration_s ? ` for ${params.duration_s} s` : '';
   return `${cmd}${target ? ` ${target}` : ''}${duration}`;
@@ -117,6 +118,9 @@ export function commandOutcome(cmd, { result, error } = {}) {
     return { outcome: 'started', text: `${result.phase}${id}` };
   }
   if (result && typeof result === 'object' && result.mount_state) return { outcome: 'done', text: `done (mount ${result.mount_state})` };
+  if (result && typeof result === 'object' && typeof result.lead_ms === 'number') {
+    return { outcome: 'done', text: `done: acts ${result.lead_ms.toFixed(0)} ms after acceptance (${result.sent})` };
+  }
   return { outcome: 'done', text: 'done' };
 }
 
@@ -124,7 +128,7 @@ export function commandOutcome(cmd, { result, error } = {}) {
  * Program block outcomes in the order shown, with their style; counts of outcomes not
  * listed are shown after them, neutral (a server newer than the page).
  */
-export const PROGRAM_OUTCOMES = [['done', 'done'], ['late', 'warn'], ['missed', 'warn'], ['faulted', 'bad'], ['stopped', 'ended']];
+export const PROGRAM_OUTCOMES = [['done', 'done'], ['degraded', 'warn'], ['late', 'warn'], ['missed', 'warn'], ['faulted', 'bad'], ['stopped', 'ended']];
 
 // summary keys that are integers but not outcome counts
 const NOT_OUTCOMES = new Set(['blocks']);
@@ -143,11 +147,29 @@ export function programOutcomes(summary) {
  * Figures of an operation's `info` shown on the Operation card: [label, key, format] with
  * format(value, info) -> text. A key absent from `info` is not shown.
  */
+const arcsecText = (v, decimals) => `${Number(v).toFixed(decimals)}″`;
 export const OPERATION_INFO_ROWS = [
   ['Slew time', 'slew_time_s', (v) => `${Number(v).toFixed(1)} s`],
   ['Left', 'seconds_left', (v) => `${Number(v).toFixed(0)} s`],
   ['Resumes', 'resumes', (v) => String(v)],
+  // a finished track (docs/vss-api.md, "Operation object"): the error on target is the truth;
+  // what the server chose to send apart from the target is shown apart
+  ['On target RMS', 'tracking_rms_arcsec', (v) => arcsecText(v, 3)],
+  ['On target peak', 'tracking_peak_arcsec', (v) => arcsecText(v, 3)],
+  ['Off target', 'off_target_s', (v, info) => `${Number(v).toFixed(1)} s beyond ${info.off_target_threshold_arcsec ?? 5}″`],
+  ['Planned deviation', 'planned_deviation_peak_arcsec',
+    (v, info) => `${arcsecText(v, 1)}${info.planned_deviation?.length ? ` (${info.planned_deviation.join(', ')})` : ''}`],
+  ['Following RMS', 'following_rms_arcsec', (v) => arcsecText(v, 3)],
+  ['Outcome', 'outcome', (v) => (v === 'degraded' ? 'degraded: off target' : String(v))],
+  ['Closed loop', 'closed_loop', (v) => `${v.state ?? '—'}: ${v.accepted ?? 0} frames used, ${v.refused ?? 0} refused, ${v.held ?? 0} held`],
 ];
+
+/** `offset dec add +5″`, `offset path add +1.5 s`, `offset all reset`: a hand pad's command. */
+function offsetText(p) {
+  const value = p.seconds != null ? ` ${p.seconds > 0 ? '+' : ''}${p.seconds} s`
+    : p.arcsec != null ? ` ${p.arcsec > 0 ? '+' : ''}${p.arcsec}″` : '';
+  return `offset ${p.axis} ${p.op ?? 'add'}${value}`;
+}
 
 /** Return [{label, text, key}] of the OPERATION_INFO_ROWS present in `op.info`. */
 export function operationFigures(op) {

@@ -12,13 +12,13 @@ from typing import Annotated
 
 import typer
 
-from virtualstar.astro import AstroError, avoidance_from_options
-from virtualstar.astro.site import site_from_options
 from virtualstar.cli.status import fail
 from virtualstar.launcher import DEFAULT_ENDPOINT_PORT, EndpointUnavailable
-from virtualstar.server import DEFAULT_PORT, AccessConfig, VssError, build_server
-from virtualstar.server.access import check_listen
-from virtualstar.server.server import parse_listen_url
+from virtualstar.vss_client import DEFAULT_SERVER_URL
+
+# The server, the astronomy and the emulator are imported when the command runs: --help
+# stays fast (benchmarks/bench_cli_startup.py; tests/test_import_rules.py). The launcher
+# imports the emulator only when it starts one.
 
 __all__ = ["server"]
 
@@ -66,7 +66,7 @@ def server(
         "--allow-origin", help="A web page origin allowed to connect, e.g. http://panel:8080 "
         "(repeat for more; default: pages served from loopback only).")] = None,
     listen: Annotated[str, typer.Option(
-        "--listen", help="Where clients connect: ws://HOST:PORT.")] = f"ws://127.0.0.1:{DEFAULT_PORT}",
+        "--listen", help="Where clients connect: ws://HOST:PORT.")] = DEFAULT_SERVER_URL,
     site_file: Annotated[Path | None, typer.Option(
         "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a \\[site] table (and optionally \\[safety]).")] = None,
     site: Annotated[str | None, typer.Option(
@@ -85,9 +85,27 @@ def server(
         "--pointing-model", help="Pointing model JSON file to apply (observed → encoder).")] = None,
     passive: Annotated[bool, typer.Option(
         "--passive", help="Only watch the mount; refuse commands that move it.")] = False,
+    camera: Annotated[str | None, typer.Option(
+        "--camera", help="With --mount: ASTCom URL of a guide camera device (e.g. "
+        "`guide-camera`'s) for closed-loop tracking (vs track --closed-loop).")] = None,
+    camera_password: Annotated[str | None, typer.Option(
+        "--camera-password", envvar="VS_CAMERA_PASSWORD", show_default=False,
+        help="Password of the guide camera's endpoint.")] = None,
+    camera_sim: Annotated[Path | None, typer.Option(
+        "--camera-sim", help="With --emulator: run a simulated guide camera beside it, seeing "
+        "the truth in this TOML file (docs/guide-camera.md), for closed-loop tracking.")] = None,
+    camera_listen: Annotated[str, typer.Option(
+        "--camera-listen", help="With --camera-sim: where the simulated camera's ASTCom "
+        "endpoint listens for other clients (panel, recorder).")] = "ws://127.0.0.1:0",
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log connection events.")] = False,
 ) -> None:
     """Serve clients (vs status/slew/track/...) until Ctrl-C; the mount is fed continuously."""
+    from virtualstar.astro import AstroError, avoidance_from_options
+    from virtualstar.astro.site import site_from_options
+    from virtualstar.server import AccessConfig, VssError
+    from virtualstar.server.access import check_listen
+    from virtualstar.server.server import parse_listen_url
+
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
                         format="%(asctime)s %(name)s: %(message)s")
     if emulator == (mount is not None):
@@ -139,6 +157,8 @@ def server(
                                        moon_radius_deg=moon_radius, horizon_file=horizon)
     except AstroError as exc:
         raise fail(str(exc)) from None
+    cameras = _camera_options(emulator, camera, camera_password, camera_sim, camera_listen,
+                              the_site)
     _warn_once_about_earth_orientation(start_us)
     try:
         if emulator:
@@ -146,11 +166,14 @@ def server(
             if pace != 1.0:
                 from virtualstar.lockstep import LockstepClock
 
+                # --speed max: as fast as the CPU allows while a client waits for an
+                # operation, real time otherwise (docs/vss.md, "Time modes")
                 clock = LockstepClock(start_us if start_us is not None
-                                      else time.time_ns() // 1000, pace=pace)
+                                      else time.time_ns() // 1000, pace=pace,
+                                      idle_pace=1.0 if pace is None else None)
             serve = _serve_embedded(clock, start_us, password, listen, the_site, mapping,
                                     pointing_model, passive, geometry_arcsec, zones, access,
-                                    f"ws://127.0.0.1:{endpoint_port}")
+                                    f"ws://127.0.0.1:{endpoint_port}", cameras)
             if clock is None:
                 asyncio.run(serve)
             else:
@@ -159,7 +182,7 @@ def server(
                 run_lockstep(serve, clock)
         else:
             asyncio.run(_serve(pace, mount, password, mapping, listen, the_site,
-                               pointing_model, passive, zones, access))
+                               pointing_model, passive, zones, access, cameras))
     except VssError as exc:
         raise fail(str(exc)) from None
     except EndpointUnavailable as exc:
@@ -167,6 +190,28 @@ def server(
                    1) from None
     except OSError as exc:
         raise fail(f"cannot listen on {listen}: {exc.strerror or exc}", 1) from None
+
+
+def _camera_options(emulator: bool, url: str | None, password: str | None,
+                    sim: Path | None, listen: str, site) -> dict:
+    """The guide camera options: {} (none), {"camera": link} or {"camera": sim, "camera_url"}."""
+    if sim is not None:
+        if not emulator:
+            raise fail("--camera-sim runs a simulated camera beside --emulator; with --mount, "
+                       "run `guide-camera` beside the mount and give --camera URL")
+        from virtualstar.launcher import camera_from_file
+
+        try:
+            return {"camera": camera_from_file(sim, site), "camera_url": listen}
+        except ValueError as exc:
+            raise fail(f"--camera-sim: {exc}") from None
+    if url is not None:
+        if emulator:
+            raise fail("--camera URL goes with --mount; with --emulator use --camera-sim FILE")
+        from virtualstar.server.camera_link import CameraLinkConfig
+
+        return {"camera": CameraLinkConfig(url, password or None)}
+    return {}
 
 
 def _warn_once_about_earth_orientation(start_us: int | None) -> None:
@@ -209,7 +254,7 @@ def _stop_event() -> asyncio.Event:
 
 async def _serve_embedded(clock, start_us, password, listen, site, mapping,
                           pointing_model, passive, geometry_arcsec, zones, access,
-                          emulator_url) -> None:
+                          emulator_url, cameras) -> None:
     from virtualstar.launcher import embedded_vss
 
     # The emulator's own ASTCom endpoint inherits the server's protection: with API
@@ -230,15 +275,20 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
                             observer_password=observer_password, emulator_url=emulator_url,
                             geometry_arcsec=geometry_arcsec,
                             mapping_path=mapping, active=not passive,
-                            pointing_model=pointing_model, zones=zones, access=access) as vss:
+                            pointing_model=pointing_model, zones=zones, access=access,
+                            **cameras) as vss:
         if clock is None:
             mode = "real time"
-        elif clock.pace is None:
-            mode = "lockstep simulated time, as fast as the CPU allows"
+        elif clock.busy_pace is None:
+            mode = ("lockstep simulated time, as fast as the CPU allows while a client waits "
+                    "for an operation, real time otherwise")
         else:
             mode = f"lockstep simulated time, up to x{clock.pace:g}"
         typer.echo(f"VirtualStar Server on {vss.url} (mount: embedded emulator, {mode}; its "
                    f"ASTCom endpoint for other clients: {vss.emulator.url})")
+        if vss.camera is not None:
+            typer.echo(f"simulated guide camera on {vss.camera.url}"
+                       + (" (the same passwords)" if guard else ""))
         if guard:
             typer.echo(f"The emulator's ASTCom endpoint takes {guard}.")
         await stop.wait()
@@ -246,11 +296,13 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
 
 
 async def _serve(speed, mount, password, mapping, listen, site, pointing_model, passive,
-                 zones, access) -> None:
+                 zones, access, cameras) -> None:
+    from virtualstar.server import build_server
+
     stop = _stop_event()
     vss = build_server(mount_url=mount, password=password, mapping_path=mapping, site=site,
                        speed=speed, active=not passive, pointing_model=pointing_model,
-                       zones=zones, access=access)
+                       zones=zones, access=access, **cameras)
     try:
         url = await vss.start(listen)
         where = mount + (f", a simulated mount at x{speed:g}" if speed != 1 else "")

@@ -30,11 +30,15 @@ from virtualstar.astro.constants import SIDEREAL_RATE_ARCSEC_S
 from virtualstar.files import FileRefused, read_text_file_async
 
 from .exceptions import BadRequest, TargetUnreachable, UnknownCommand, VssError
+from .offsets import OffsetLimits
 from .operations import Phase
+from .steering import MAX_OFFSET_ARCSEC, MAX_PATH_S, check_offset
 from .targets import parse_target
 from .telescope import Operation, Telescope
 
 __all__ = ["COMMANDS", "Command", "Within", "dispatch", "within"]
+
+LOOSEST_LIMITS = OffsetLimits(36_000.0, 36_000.0)  # the widest a server may be configured
 
 
 @dataclass(frozen=True)
@@ -112,6 +116,7 @@ class TrackParams(TargetParams):
     duration_s: float | None = within(0.0, ONE_DAY_S, "seconds", above=True)
     wait: bool = False
     max_wait_s: float | None = within(0.0, ONE_DAY_S, "seconds")
+    closed_loop: bool = False  # guided by the guide camera (needs the server's --camera)
 
     def validate(self) -> None:
         if self.tle is None:
@@ -148,6 +153,21 @@ class GuideParams:
     east_arcsec: float = within(-1e6, 1e6, "arcsec", default=0.0)
     rate_arcsec_s: float = within(0.0, 1e6, "arcsec/s", above=True,
                                   default=DEFAULT_GUIDE_RATE_ARCSEC_S)
+
+
+@dataclass(frozen=True)
+class OffsetParams:
+    # ra, dec, az, el, path, transverse (or all, with op=reset)
+    axis: str = field(metadata={"max_chars": 16})
+    op: str = text(8, default="add")  # add, set, rate, reset
+    # arcsec (rate: arcsec/s; the server's offset limits apply on top: steering.py)
+    arcsec: float | None = within(-MAX_OFFSET_ARCSEC, MAX_OFFSET_ARCSEC, "arcsec")
+    # path only: seconds of time (rate: s/s)
+    seconds: float | None = within(-MAX_PATH_S, MAX_PATH_S, "seconds")
+
+    def validate(self) -> None:
+        # names and combinations here; the rate against the server's own limits in steering
+        check_offset(self.axis, self.op, self.arcsec, self.seconds, LOOSEST_LIMITS)
 
 
 @dataclass(frozen=True)
@@ -205,6 +225,9 @@ class Command:
     doc: str
     role: Role = Role.OPERATOR  # the lowest role that may send it
     ends_program: bool = False  # a client's command ends a running program first
+    # its answer waits for mount time to pass (an operation landing or ending, the mount at
+    # rest, a program's end): `vs server --emulator --speed max` runs ahead only then
+    awaits_mount_time: bool = False
 
 
 def _check(cls: type, params: dict[str, Any], cmd: str) -> Any:
@@ -309,13 +332,14 @@ async def _slew(t: Telescope, p: TargetParams) -> Any:
 async def _track(t: Telescope, p: TrackParams) -> Any:
     if p.tle is not None:
         sat = _satellite(p.tle, p.sat)
-        op = await t.track_satellite(sat, max_wait_s=p.max_wait_s, allow_sun=p.allow_sun)
+        op = await t.track_satellite(sat, max_wait_s=p.max_wait_s, allow_sun=p.allow_sun,
+                                     closed_loop=p.closed_loop)
         return await _result(op, wait_done=p.wait, accepted=p.answer_on_accept)
     target, name, fixed = parse_target(p.target_fields)
     if fixed is not None:
         raise BadRequest("track: a fixed az/el does not move; use slew for it")
     op = await t.follow_target(target, name, kind="track", duration_s=p.duration_s,
-                               allow_sun=p.allow_sun)
+                               allow_sun=p.allow_sun, closed_loop=p.closed_loop)
     return await _result(op, wait_done=p.wait, accepted=p.answer_on_accept)
 
 
@@ -368,6 +392,10 @@ async def _move(t: Telescope, p: MoveParams) -> Any:
 
 async def _guide(t: Telescope, p: GuideParams) -> Any:
     return await t.guide(p.north_arcsec, p.east_arcsec, p.rate_arcsec_s)
+
+
+async def _offset(t: Telescope, p: OffsetParams) -> Any:
+    return await t.steering.offset(p.axis, p.op, arcsec=p.arcsec, seconds=p.seconds)
 
 
 async def _stop(t: Telescope, p: StopParams) -> Any:
@@ -442,30 +470,36 @@ COMMANDS: dict[str, Command] = {
                       role=Role.OBSERVER),
     "slew": Command(TargetParams, _slew, "Slew to a target; sky targets are then tracked. "
                     "Answers when landed.",
-                    ends_program=True),
+                    ends_program=True, awaits_mount_time=True),
     "track": Command(TrackParams, _track, "Track a sky target or a satellite pass; answers "
                      "when tracking has begun (satellite: when the pass is planned), or at the "
                      "end with wait=true.",
-                     ends_program=True),
+                     ends_program=True, awaits_mount_time=True),
     "pointing_sample": Command(SampleParams, _pointing_sample, "Point at a target, hold, and "
                                "measure the star's offset with the guide camera (needs the "
                                "guide_measure role); answers with star, encoder, offset and "
                                "on-axis places.",
-                               ends_program=True),
+                               ends_program=True, awaits_mount_time=True),
     "move": Command(MoveParams, _move, "Turn the axes at az_rate_deg_s / el_rate_deg_s (a hand "
                     "pad) until stop, another command, or just before a limit or zone; answers "
                     "once moving.",
-                    ends_program=True),
+                    ends_program=True, awaits_mount_time=True),
     "guide": Command(GuideParams, _guide, "A guide pulse: offset the sky target being tracked "
                      "by north_arcsec / east_arcsec at rate_arcsec_s; answers with when the pulse "
                      "runs (mount µs) and the total offset."),
+    "offset": Command(OffsetParams, _offset, "Offset the running track (PWI4-style): axis ra, "
+                      "dec, az, el (arcsec), path (seconds of time, or arcsec along the track), "
+                      "transverse (arcsec across it); op add, set, rate (per second) or reset; "
+                      "applied gradually within the offset limits from 20 ms after acceptance "
+                      "(replace_from); answers with from_us, reached_us, lead_ms and the "
+                      "offsets."),
     "stop": Command(StopParams, _stop, "Stop the operation, bring the mount to rest; "
                     "reset_faults=true also clears latched faults.",
-                    ends_program=True),
+                    ends_program=True, awaits_mount_time=True),
     "reset_faults": Command(NoParams, _reset, "Stop and clear the mount's latched faults.",
-                            ends_program=True),
+                            ends_program=True, awaits_mount_time=True),
     "park": Command(ParkParams, _park, "Slew to the park position and power off.",
-                    ends_program=True),
+                    ends_program=True, awaits_mount_time=True),
     "set_mode": Command(ModeParams, _mode, "mode=active (commands move the mount) or passive "
                         "(watch only).",
                         ends_program=True),
@@ -476,10 +510,11 @@ COMMANDS: dict[str, Command] = {
                       "window; series=true adds per-bin values.",
                       role=Role.OBSERVER),
     "wait": Command(WaitParams, _wait, "Wait until the running operation ends; return its summary.",
-                    role=Role.OBSERVER),
+                    role=Role.OBSERVER, awaits_mount_time=True),
     "run_plan": Command(RunPlanParams, _run_plan, "Run a plan (vs plan's JSON) block by block, "
                         "re-planning after a missed, late or faulted block; answers when it "
-                        "has begun, or at its end with wait=true."),
+                        "has begun, or at its end with wait=true.",
+                        awaits_mount_time=True),
     "program": Command(NoParams, _program, "The program run: state, current block, the "
                        "blocks done with their tracking figures, re-plans, the plan.",
                        role=Role.OBSERVER),
@@ -488,6 +523,7 @@ COMMANDS: dict[str, Command] = {
                    "their client and role, connections, failed logins; {events, last_seq, dropped}.",
                    role=Role.OBSERVER),
 }
+
 
 
 async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any], *,
@@ -503,7 +539,10 @@ async def dispatch(telescope: Telescope, cmd: str, params: dict[str, Any], *,
     checked = _check(command.params, params, cmd)
     if ends_program and command.ends_program and telescope.programs.running:
         await telescope.programs.cancel(f"ended by a client's {cmd}")
-    return await command.handler(telescope, checked)
+    if not command.awaits_mount_time:
+        return await command.handler(telescope, checked)
+    with telescope.clock.awaited():  # a client waits: lockstep time may run ahead meanwhile
+        return await command.handler(telescope, checked)
 
 
 async def execute(telescope: Telescope, cmd: str, params: dict[str, Any]) -> Any:

@@ -17,6 +17,7 @@
     ├── StaleElements (ValueError)                  stale_tle        TLE too old for the mount time, or the satellite decayed
     ├── InExclusionZone (ValueError)                exclusion_zone   the target or the slew's path is too near the Sun (or Moon)
     ├── NotTracking (RuntimeError)                  not_tracking     a guide pulse needs a sky target being tracked
+    ├── NoCamera (LookupError)                      no_camera        a closed loop needs a guide camera (--camera)
     ├── NotArrived (RuntimeError)                   not_arrived      the mount is not where the target is (how far: in the message)
     ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
     ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
@@ -36,6 +37,7 @@ __all__ = [
     "MountRejected",
     "MountUnavailable",
     "NotActive",
+    "NoCamera",
     "NotArrived",
     "NotTracking",
     "OperationAborted",
@@ -180,6 +182,12 @@ class NotTracking(RuntimeError, VssError):
     """A guide pulse arrived while no sky target is being tracked (nothing to offset)."""
 
     code = "not_tracking"
+
+
+class NoCamera(LookupError, VssError):
+    """A closed loop was asked for but the server has no guide camera."""
+
+    code = "no_camera"
 
 
 class Throttled(PermissionError, VssError):

@@ -95,7 +95,8 @@ class ProgramControl:
                 from None
         self.t._check_can_move()
         runner = ProgramRunner(plan, program, _TelescopeApi(self.t, execute),
-                               on_change=self._changed, done_before=history)
+                               on_change=self._changed, done_before=history,
+                               degraded_s=self.t.config.degraded_after_s)
         self.runner = runner
         self.task = asyncio.get_running_loop().create_task(self._run(runner),
                                                            name="vss-program")

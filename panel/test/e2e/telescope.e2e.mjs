@@ -19,7 +19,8 @@ const step = (result, name) => {
 };
 const field = (page, name) => page.textContent(`#tab-Telescope [data-field="${name}"]`).then((t) => t.trim());
 const BOARD_FIELDS = ['target', 'kind', 'phase', 'mode', 'mount-state', 'encoder-az', 'encoder-el', 'observed-az',
-  'observed-el', 'ra', 'dec', 'mount-time', 'rms-1s', 'on-sky-rms-1s', 'pointing-model', 'clock-offset', 'mount-link'];
+  'observed-el', 'ra', 'dec', 'mount-time', 'rms-1s', 'on-sky-rms-1s', 'on-target-rms-1s', 'planned-1s',
+  'pointing-model', 'clock-offset', 'mount-link'];
 const readBoard = async (page) => Object.fromEntries(await Promise.all(BOARD_FIELDS.map(async (f) => [f, await field(page, f)])));
 /** Wait until the board has drawn a status polled after this moment. */
 async function nextPoll(page) {
@@ -69,6 +70,19 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), join
     result.trackingOperation = await page.evaluate(() => JSON.parse(JSON.stringify(window.panelTelescope.state.operation)));
     await page.screenshot({ path: join(ARTIFACTS, 'telescope.png') });
     step(result, 'tracking Vega shown');
+
+    // the hand pad: an arrow key (focused) and a button, 5″ steps on the sky
+    await page.selectOption('select[name=hand-pad-frame]', 'sky');
+    await page.selectOption('select[name=hand-pad-step]', '5');
+    await page.focus('[data-testid=hand-pad]');
+    await page.keyboard.press('ArrowUp');
+    await page.click('[data-testid=hand-pad] button.pad-left');
+    await waitField(page, 'offset-dec', '^5\\.000″$', 30_000);
+    await waitField(page, 'offset-ra', '^5\\.000″$', 30_000);
+    result.handPad = { dec: await field(page, 'offset-dec'), ra: await field(page, 'offset-ra'),
+      mode: await field(page, 'corrections-mode'), labels: await page.$$eval('[data-testid=hand-pad] .hand-pad-grid button', (b) => b.map((x) => x.textContent.trim())),
+      corrections: await page.evaluate(() => JSON.parse(JSON.stringify(window.panelTelescope.state.corrections))) };
+    step(result, 'hand pad offsets');
 
     await page.click('[data-testid=stop-all]');
     await page.waitForFunction(() => /VSS: stop done/.test(document.querySelector('[data-testid=stop-outcome]')?.textContent ?? ''), null, { timeout: 30_000 });

@@ -80,9 +80,9 @@ test('command outcomes: refused, failed, ended, started and done, each with the 
 });
 
 test('program outcome counts in order, blocks left out, outcomes a newer server adds shown too', () => {
-  const summary = { blocks: 5, done: 2, late: 1, missed: 0, faulted: 1, stopped: 1, degraded: 3, observed_hours: 0.5 };
+  const summary = { blocks: 5, done: 2, late: 1, missed: 0, faulted: 1, stopped: 1, degraded: 3, postponed: 4, observed_hours: 0.5 };
   assert.deepEqual(programOutcomes(summary).map((o) => [o.name, o.count, o.style]), [
-    ['done', 2, 'done'], ['late', 1, 'warn'], ['missed', 0, 'warn'], ['faulted', 1, 'bad'], ['stopped', 1, 'ended'], ['degraded', 3, 'unknown']]);
+    ['done', 2, 'done'], ['degraded', 3, 'warn'], ['late', 1, 'warn'], ['missed', 0, 'warn'], ['faulted', 1, 'bad'], ['stopped', 1, 'ended'], ['postponed', 4, 'unknown']]);
   assert.deepEqual(programOutcomes(null), []);
 });
 
@@ -90,6 +90,14 @@ test('operation figures come from the table, in its order, only when present', (
   assert.deepEqual(operationFigures(op('tracking', { seconds_left: 12.4, slew_time_s: 20.04 })).map((f) => [f.label, f.text]),
     [['Slew time', '20.0 s'], ['Left', '12 s']]);
   assert.ok(OPERATION_INFO_ROWS.every(([label, key, format]) => label && key && typeof format === 'function'));
+});
+
+test('a finished track shows the error on target, the planned deviation apart, and degraded', () => {
+  const info = { tracking_rms_arcsec: 15556.73, off_target_s: 54.45, off_target_threshold_arcsec: 5,
+    planned_deviation_peak_arcsec: 34097.7, planned_deviation: ['keyhole'], following_rms_arcsec: 0.0855, outcome: 'degraded' };
+  assert.deepEqual(operationFigures(op('done', info)).map((f) => [f.label, f.text]), [
+    ['On target RMS', '15556.730″'], ['Off target', '54.5 s beyond 5″'], ['Planned deviation', '34097.7″ (keyhole)'],
+    ['Following RMS', '0.086″'], ['Outcome', 'degraded: off target']]);
 });
 
 test('the last known place stays when the mount goes away, marked as kept', () => {
