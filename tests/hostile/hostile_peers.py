@@ -168,8 +168,9 @@ class ServerProcess:
 
 @contextlib.contextmanager
 def vs_server(tmp: Path, *args: str, passwords: bool = True) -> Iterator[ServerProcess]:
-    """Run `vs server --emulator ARGS` with the operator/observer passwords (a free port),
-    until the block ends; then SIGTERM it as Ctrl-C would."""
+    """Run `vs server --emulator ARGS` with the operator/observer passwords (free ports for
+    it and its emulator's endpoint: the default 8741 may be taken by another run on the
+    machine), until the block ends; then SIGTERM it as Ctrl-C would."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         url = f"ws://127.0.0.1:{s.getsockname()[1]}"
@@ -180,7 +181,7 @@ def vs_server(tmp: Path, *args: str, passwords: bool = True) -> Iterator[ServerP
     with err_path.open("w") as err:
         proc = subprocess.Popen(
             [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
-             "--emulator", *secrets, *args, "--listen", url],
+             "--emulator", "--endpoint-port", "0", *secrets, *args, "--listen", url],
             stdout=subprocess.PIPE, stderr=err, text=True,
             env={**env, "PYTHONUNBUFFERED": "1"})
     try:
