@@ -65,7 +65,7 @@ from .trajectories import (
 )
 
 if TYPE_CHECKING:
-    from .telescope import Telescope
+    from .station import Station
 
 __all__ = ["follow_sky_target", "hold_fixed", "measure_pointing", "move_at_rates",
            "track_satellite_pass"]
@@ -104,7 +104,7 @@ async def run_beside(main: Awaitable[T], feeder: Feeder) -> T:
         await asyncio.wait({feeding, main_task})
 
 
-async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int | None = None,
+async def acquire(t: Station, op: Operation, path: Path, *, not_before_us: int | None = None,
                   end_us: int | None = None, allow_sun: bool = False) -> tuple[RampIn, Feeder]:
     """Slew to the run-up of `path` and start following it; return the run-up and its feeder."""
     cfg = t.config
@@ -156,7 +156,7 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
                             f"cannot keep up with ×{t.config.speed:g} simulated time")
 
 
-async def goto_safely(t: Telescope, op: Operation, az_rad: float, el_rad: float, what: str, *,
+async def goto_safely(t: Station, op: Operation, az_rad: float, el_rad: float, what: str, *,
                       allow_sun: bool, stow: bool = False):
     """Slew to encoder angles along a path out of the Sun/Moon zones (a detour if need be)."""
     here = await t.motion.position()
@@ -171,13 +171,13 @@ async def goto_safely(t: Telescope, op: Operation, az_rad: float, el_rad: float,
     return pos
 
 
-async def prepare(t: Telescope, op: Operation) -> None:
+async def prepare(t: Station, op: Operation) -> None:
     t.supervisor.phase(op, Phase.PREPARING)
     await t.motion.prepare()
 
 
 # ---------------------------------------------------------------------- procedures
-async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
+async def follow_sky_target(t: Station, op: Operation, target: Any, *,
                             duration_s: float | None, allow_sun: bool = False) -> dict[str, Any]:
     """Slew to a sky target, verify the landing, track it (for `duration_s`, or until ended).
 
@@ -232,7 +232,7 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
     return {**result, **tracking_figures(s)}
 
 
-async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, *,
+async def hold_fixed(t: Station, op: Operation, az_deg: float, el_deg: float, *,
                      power_off: bool, allow_sun: bool = False, stow: bool = False) -> dict[str, Any]:
     """Slew to a fixed observed direction, verify the landing and hold (park: power off)."""
     await prepare(t, op)
@@ -250,7 +250,7 @@ async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, 
             "landed_us": pos.t_us}
 
 
-async def _slew_to_fixed(t: Telescope, op: Operation, here, az_deg: float, el_deg: float,
+async def _slew_to_fixed(t: Station, op: Operation, here, az_deg: float, el_deg: float,
                          at_us: int, name: str, *, allow_sun: bool, stow: bool = False):
     """Slew to the encoder place of an observed direction (through the pointing model, in
     the cable wrap nearest `here`) as it is at `at_us`; return (landed position, enc az, el)."""
@@ -263,7 +263,7 @@ async def _slew_to_fixed(t: Telescope, op: Operation, here, az_deg: float, el_de
     return pos, enc_az, enc_el
 
 
-async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_rate_deg_s: float,
+async def move_at_rates(t: Station, op: Operation, az_rate_deg_s: float, el_rate_deg_s: float,
                         *, allow_sun: bool = False) -> dict[str, Any]:
     """Turn the axes at constant rates from where the mount rests (a hand pad; ASCOM MoveAxis).
 
@@ -308,7 +308,7 @@ async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_ra
     return {"ended": why, "moved_until_us": end_us}
 
 
-def _move_end(t: Telescope, start: np.ndarray, v: np.ndarray, join_us: int, ramp_s: float,
+def _move_end(t: Station, start: np.ndarray, v: np.ndarray, join_us: int, ramp_s: float,
               allow_sun: bool) -> tuple[int, str]:
     """When a move at rates `v` (from `start` at `join_us`) must begin its run-out, and why."""
     lim = t.limits
@@ -335,7 +335,7 @@ def _move_end(t: Telescope, start: np.ndarray, v: np.ndarray, join_us: int, ramp
     return join_us + int(run_s * 1e6), why
 
 
-async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, *,
+async def measure_pointing(t: Station, op: Operation, target: Any, name: str, *,
                            settle_s: float, allow_sun: bool = False) -> dict[str, Any]:
     """Point at a sky target's place at the exposure instant, hold, and measure with the camera.
 
@@ -376,7 +376,7 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
         "pointing_model": t.model_source or None}}
 
 
-async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
+async def track_satellite_pass(t: Station, op: Operation, sat: Satellite, *,
                                max_wait_s: float | None, allow_sun: bool = False) -> dict[str, Any]:
     """Track the next pass of `sat` that can still be reached, or the one in progress.
 
@@ -438,7 +438,7 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
 
 
 # ---------------------------------------------------------------------- helpers
-def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, int, str | None]:
+def _safe_part(t: Station, plan, join_us: int, allow_sun: bool) -> tuple[int, int, str | None]:
     """Return (join, end, why it ends early or None) of the pass stretch outside every zone.
 
     (`acquire` then keeps the run-up's rest point outside too.)
@@ -462,7 +462,7 @@ def tracking_figures(s) -> dict[str, Any]:
             "clock_error_peak_arcsec": s.clock_error_peak_arcsec}
 
 
-def _observed_deg(t: Telescope, target: Any, t_us: int) -> tuple[float, float]:
+def _observed_deg(t: Station, target: Any, t_us: int) -> tuple[float, float]:
     o = observe_mount_times(target, np.array([t_us], np.int64), t.config.site, t.eop)
     return math.degrees(float(o.az_rad[0])) % 360.0, math.degrees(float(o.el_rad[0]))
 
@@ -491,7 +491,7 @@ def _sgp4_errors(sat: Satellite, now_us: int):
             "(e.g. from CelesTrak); `vs where --tle FILE` gives the same warning") from None
 
 
-def _choose_pass(t: Telescope, sat: Satellite, here):
+def _choose_pass(t: Station, sat: Satellite, here):
     cfg = t.config
     start = UtcTimes.from_unix_us(here.t_us - int(PASS_LOOKBACK_S * 1e6))
     with _sgp4_errors(sat, here.t_us), warnings.catch_warnings():

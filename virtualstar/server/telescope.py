@@ -56,8 +56,8 @@ from .exceptions import (
 )
 from .feeder import FeederConfig
 from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, GuideOffsets
+from .link_interface import MountBackend
 from .motion import Motion
-from .mount_link import MountLink
 from .operations import TERMINAL, Operation, Phase
 from .programs import ProgramControl
 from .safety import HOLD_LOOKAHEAD_S, Safety
@@ -141,9 +141,9 @@ class TelescopeConfig:
 
 
 class Telescope:
-    """Drive one mount through a `MountLink`; emit events through `emit(kind, data)`."""
+    """Drive one mount through its mount link (`link_interface.MountBackend`); emit events through `emit(kind, data)`."""
 
-    def __init__(self, link: MountLink, config: TelescopeConfig, clock: MountClock | None = None,
+    def __init__(self, link: MountBackend, config: TelescopeConfig, clock: MountClock | None = None,
                  emit: Callable[[str, dict[str, Any]], None] | None = None) -> None:
         self.link = link
         self.config = config
@@ -381,7 +381,7 @@ class Telescope:
                             min_lead_s=min(0.5, cfg.start_lead_s / 2))
 
     # ------------------------------------------------------------------ commands
-    def _check_can_move(self) -> None:
+    def check_can_move(self) -> None:
         """Refuse a moving command on a passive server or without a mount (again under the lock)."""
         if not self.active:
             raise NotActive("the server is passive (it only watches the mount): run "
@@ -393,7 +393,7 @@ class Telescope:
     async def follow_target(self, target, name: str, *, kind: str = "track",
                             duration_s: float | None = None, allow_sun: bool = False) -> Operation:
         """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped)."""
-        self._check_can_move()
+        self.check_can_move()
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.follow_sky_target(self, op, target, duration_s=duration_s,
@@ -413,7 +413,7 @@ class Telescope:
     async def _start(self, kind: str, name: str, procedure, *, resumable: bool = False,
                      allow_sun: bool = False, check=None) -> Operation:
         async def checks() -> None:
-            self._check_can_move()  # it may have gone passive while this waited for the lock
+            self.check_can_move()  # it may have gone passive while this waited for the lock
             if check is not None:
                 await check()
 
@@ -433,7 +433,7 @@ class Telescope:
         A hold must stay out of the Sun/Moon zones for the next hour (the Sun drifts
         15°/h); the park position is exempt (the stow is the safe place).
         """
-        self._check_can_move()
+        self.check_can_move()
         lim = self.limits
         lowest = lim.el_min_deg - self.config.horizon_deg if kind == "park" else lim.el_min_deg
         if not lowest <= el_deg <= lim.el_max_deg:
@@ -475,7 +475,7 @@ class Telescope:
                                "star_el_deg) -> [dx_arcsec, dy_arcsec] function)")
         if not settle_s >= 0:
             raise BadRequest(f"settle_s={settle_s}: expected >= 0 mount seconds")
-        self._check_can_move()
+        self.check_can_move()
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.measure_pointing(self, op, target, name, settle_s=settle_s,
@@ -502,7 +502,7 @@ class Telescope:
                                  f"±{top:g}°/s")
         if az_rate_deg_s == 0.0 and el_rate_deg_s == 0.0:
             raise BadRequest("move: both rates are 0; send stop to end a move")
-        self._check_can_move()
+        self.check_can_move()
         name = f"move az {az_rate_deg_s:+g}°/s el {el_rate_deg_s:+g}°/s"
 
         async def procedure(op: Operation) -> dict[str, Any]:
@@ -549,7 +549,7 @@ class Telescope:
     async def track_satellite(self, sat: Satellite, *, max_wait_s: float | None = None,
                               allow_sun: bool = False) -> Operation:
         """Track the pass of `sat` in progress, or the next one above the horizon limit."""
-        self._check_can_move()
+        self.check_can_move()
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.track_satellite_pass(self, op, sat, max_wait_s=max_wait_s,

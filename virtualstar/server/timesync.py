@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 from .clock import MountClock
 from .exceptions import VssError
-from .mount_link import MountLink
+from .link_interface import MountBackend
 
 __all__ = ["ARM_WINDOW_US", "TimeSync", "TimeSyncStatus"]
 
@@ -57,7 +57,7 @@ class TimeSyncStatus:
 class TimeSync:
     """Periodically sync the mount clock to UTC and measure its offset."""
 
-    def __init__(self, link: MountLink, clock: MountClock, *, simulated: bool,
+    def __init__(self, link: MountBackend, clock: MountClock, *, simulated: bool,
                  period_s: float = 10.0,
                  on_offset: Callable[[int, int], None] | None = None) -> None:
         self.link = link
