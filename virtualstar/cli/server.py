@@ -38,7 +38,9 @@ def server(
         "--seed", help="With --emulator: draw hidden pointing errors (>= 100 arcsec RMS) from this "
         "seed, as `mount-emulator --seed N` does.")] = None,
     mount: Annotated[str | None, typer.Option(
-        "--mount", help="ASTCom URL of the mount, e.g. ws://mount:8765 (instead of --emulator).")] = None,
+        "--mount", help="The mount, instead of --emulator: an ASTCom URL (ws://mount:8765), an "
+        "ASCOM Alpaca telescope alpaca://HOST:PORT/N, or an INDI telescope "
+        "indi://HOST:PORT/DEVICE (see docs/mount-backends.md).")] = None,
     password: Annotated[str | None, typer.Option(
         "--password", envvar="ASTCOM_PASSWORD", help="Operator password of the mount's ASTCom "
         "endpoint (the server's own API passwords: --operator-password, --observer-password).")] = None,

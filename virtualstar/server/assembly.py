@@ -9,7 +9,9 @@ from typing import Any
 from virtualstar.astro import Site, load_site
 
 from .access import AccessConfig
+from .backends import is_rate_mount_url, open_rate_mount
 from .clock import MountClock, PacedClock
+from .exceptions import BadRequest
 from .mapping import load_mapping
 from .mount_link import LinkConfig, MountLink
 from .server import VssServer
@@ -28,6 +30,9 @@ def build_server(*, mount_url: str, password: str | None = None,
                  **telescope_options) -> VssServer:
     """Return a VssServer for the mount at `mount_url` (not started yet).
 
+    mount_url: an ASTCom URL (ws://, tcp://...), or alpaca://HOST:PORT/N or
+    indi://HOST:PORT/DEVICE for a driver's mount (`backends`).
+
     speed: mount seconds per wall second of a mount that runs by itself (> 1 for a
     free-running simulated emulator); simulated defaults to speed != 1.
     clock: a `virtualstar.lockstep.LockstepClock` shared with an embedded emulator
@@ -35,12 +40,20 @@ def build_server(*, mount_url: str, password: str | None = None,
     opening the in-memory connection to it. access: the API's passwords and allowed
     origins (default: none, loopback pages only). Raises MappingError, BadRequest.
     """
-    mapping = load_mapping(mapping_path)
-    link = MountLink(LinkConfig(mount_url, password, connector=connector), mapping)
+    the_site = site or load_site()
+    if is_rate_mount_url(mount_url):
+        # an Alpaca or INDI driver: real time on the host clock, the VSS closing the loop
+        if mapping_path is not None or speed != 1.0 or clock is not None:
+            raise BadRequest(f"{mount_url}: --mapping and --speed apply to ASTCom mounts only "
+                             "(an Alpaca or INDI driver runs in real time)")
+        link = open_rate_mount(mount_url, the_site)
+    else:
+        link = MountLink(LinkConfig(mount_url, password, connector=connector),
+                         load_mapping(mapping_path))
     lockstep = clock is not None and clock.lockstep
     if lockstep:
         speed, simulated = float(getattr(clock, "pace", None) or 0.0), True
-    config = TelescopeConfig(site=site or load_site(), speed=speed,
+    config = TelescopeConfig(site=the_site, speed=speed,
                              simulated=(speed != 1.0) if simulated is None else simulated,
                              lockstep=lockstep, active=active, **telescope_options)
     telescope = Telescope(link, config, clock or PacedClock(speed))

@@ -18,6 +18,7 @@
     ├── NotTracking (RuntimeError)                  not_tracking     a guide pulse needs a sky target being tracked
     ├── NotArrived (RuntimeError)                   not_arrived      the mount is not where the target is (how far: in the message)
     ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
+    ├── Unsupported (RuntimeError)                  unsupported      the mount's backend cannot do this (its capabilities)
     ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
     └── InternalError (RuntimeError)                internal         a bug: reported, the server keeps running
 """
@@ -40,6 +41,7 @@ __all__ = [
     "StaleElements",
     "TargetUnreachable",
     "TrackingLost",
+    "Unsupported",
     "Unauthorized",
     "UnknownCommand",
     "VssError",
@@ -166,3 +168,9 @@ class NotTracking(RuntimeError, VssError):
     """A guide pulse arrived while no sky target is being tracked (nothing to offset)."""
 
     code = "not_tracking"
+
+
+class Unsupported(RuntimeError, VssError):
+    """The mount's backend cannot do what was asked (its capabilities say so)."""
+
+    code = "unsupported"

@@ -48,6 +48,7 @@ from virtualstar.astro import (
 from virtualstar.astro.constants import ARCSEC_PER_RAD
 from virtualstar.astro.exceptions import SatelliteError
 
+from . import rate_procedures
 from .exceptions import InExclusionZone, StaleElements, TargetUnreachable
 from .feeder import Feeder
 from .operations import Operation, Phase
@@ -106,7 +107,15 @@ async def run_beside(main: Awaitable[T], feeder: Feeder) -> T:
 
 async def acquire(t: Station, op: Operation, path: Path, *, not_before_us: int | None = None,
                   end_us: int | None = None, allow_sun: bool = False) -> tuple[RampIn, Feeder]:
-    """Slew to the run-up of `path` and start following it; return the run-up and its feeder."""
+    """Slew to the run-up of `path` and start following it; return the run-up and its feeder.
+
+    A mount without a trajectory buffer is joined by a goto to a point ahead and
+    followed by a closed rate loop (`rate_procedures.acquire_by_rates`): the same
+    shape comes back (the join and what keeps the mount on the path).
+    """
+    if not t.link.capabilities.trajectory_buffer:
+        return await rate_procedures.acquire_by_rates(t, op, path, not_before_us=not_before_us,
+                                                      end_us=end_us, allow_sun=allow_sun)
     cfg = t.config
     lead_s = cfg.start_lead_s
     plan = 0
@@ -171,6 +180,15 @@ async def goto_safely(t: Station, op: Operation, az_rad: float, el_rad: float, w
     return pos
 
 
+async def verify_joined(t: Station, ramp, feeder, what: str) -> float:
+    """Compare the mount with the path after the join: the encoders at the same mount time
+    (a trajectory buffer), or the rate loop's last report at its own time (rate axes)."""
+    tolerance = t.config.arrival_tolerance_arcsec
+    if t.link.capabilities.trajectory_buffer:
+        return await t.motion.verify_on_path(ramp, tolerance, what)
+    return feeder.verify(tolerance, what)
+
+
 async def prepare(t: Station, op: Operation) -> None:
     t.supervisor.phase(op, Phase.PREPARING)
     await t.motion.prepare()
@@ -198,8 +216,7 @@ async def follow_sky_target(t: Station, op: Operation, target: Any, *,
         await t.motion.wait_until(ramp.join_us)
         t.supervisor.phase(op, Phase.SETTLING)
         await t.motion.wait_until(settled_us)
-        err = await t.motion.verify_on_path(ramp, cfg.arrival_tolerance_arcsec,
-                                            f"landing on {op.target}")
+        err = await verify_joined(t, ramp, feeder, f"landing on {op.target}")
         s = t.errors.stats(ramp.join_us, settled_us)
         landing = {"slew_time_s": (ramp.join_us - here.t_us) / 1e6,
                    "landing_rms_arcsec": s.rms_arcsec, "landing_peak_arcsec": s.peak_arcsec,
@@ -221,7 +238,10 @@ async def follow_sky_target(t: Station, op: Operation, target: Any, *,
             raise
         # the next chunk would leave the limits or enter a zone: the points already
         # buffered stop short of it; let them play out, then rest
-        await t.motion.wait_until(feeder.stats.last_point_us - 200_000)
+        if t.link.capabilities.trajectory_buffer:
+            await t.motion.wait_until(feeder.stats.last_point_us - 200_000)
+        else:
+            await feeder.halt_rates()
         why = ("the target left the limits" if isinstance(exc, TargetUnreachable)
                else "stopped before entering the exclusion zone")
         result = {"ended": f"{why}: {exc}", "tracking_to_us": await t.motion.mount_time_us()}
@@ -292,8 +312,14 @@ async def move_at_rates(t: Station, op: Operation, az_rate_deg_s: float, el_rate
     ramp = RampIn(path, join_us, ramp_s)
     t.supervisor.phase(op, Phase.SLEWING, az_rate_deg_s=az_rate_deg_s,
                        el_rate_deg_s=el_rate_deg_s, stops_at_utc=iso_utc(end_us), stops_for=why)
-    feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
-                                             on_points=t.note_points)
+    if not t.link.capabilities.trajectory_buffer:
+        # the driver turns at the rates at once: the move starts here, without a run-up
+        path = ConstantRatePath(here.t_us + int(lead_s * 1e6), here.az_rad, here.el_rad,
+                                float(v[0]), float(v[1]), end_us)
+        ramp, feeder = rate_procedures.follow_now(t, path, path.at_us)
+    else:
+        feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
+                                                 on_points=t.note_points)
     if feeder is None:
         raise TargetUnreachable("the host was too slow to start the move; send it again")
     t.supervisor.begun(op)
@@ -398,12 +424,19 @@ async def track_satellite_pass(t: Station, op: Operation, sat: Satellite, *,
     with _sgp4_errors(sat, here.t_us):
         plan = plan_satellite_pass(
             sat, cfg.site, choice.join_us, set_us, step_s=cfg.sat_grid_s, limits=t.limits,
-            track_rate_limit_deg_s=t.track_rate_limit_deg_s * cfg.keyhole_rate_fraction,
+            track_rate_limit_deg_s=(t.track_rate_limit_deg_s * cfg.keyhole_rate_fraction
+                                    if not t.link.capabilities.equatorial else 1e9),
             accel_limit_deg_s2=t.limits.az_max_accel_deg_s2, eop=t.eop, model=t.model,
             current_az_rad=here.az_rad)
     join_us, set_us, stops = _safe_part(t, plan, choice.join_us, allow_sun)
     if stops is not None:
         op.info["zone_stop"] = stops
+    caps = t.link.capabilities
+    if caps.equatorial:
+        join_us, set_us, turns = rate_procedures.equatorial_stretch(
+            t, plan.path.between(join_us, set_us), join_us, cfg.min_pass_track_s)
+        if turns is not None:
+            op.info["geometry_stop"] = turns
     plan = dataclasses.replace(plan, path=plan.path.between(join_us, set_us))
     t.supervisor.phase(op, Phase.PLANNED, slew_from_us=here.t_us, pass_start_us=join_us,
                        pass_end_us=set_us, pass_start_utc=iso_utc(join_us, 3),
@@ -416,7 +449,8 @@ async def track_satellite_pass(t: Station, op: Operation, sat: Satellite, *,
                        max_az_rate_deg_s=plan.max_az_rate_deg_s)
     t.supervisor.begun(op)
     # run out to rest after set, and hold: stopping a little late costs nothing
-    path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
+    path = (RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
+            if caps.trajectory_buffer else plan.path)
     ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
                                  allow_sun=allow_sun)
 
@@ -424,8 +458,7 @@ async def track_satellite_pass(t: Station, op: Operation, sat: Satellite, *,
         await t.motion.wait_until(ramp.join_us)
         t.supervisor.phase(op, Phase.SETTLING, tracking_from_us=ramp.join_us)
         await t.motion.wait_until(ramp.join_us + int(cfg.settle_s * 1e6))
-        err = await t.motion.verify_on_path(ramp, cfg.arrival_tolerance_arcsec,
-                                            f"joining the pass of {sat.name}")
+        err = await verify_joined(t, ramp, feeder, f"joining the pass of {sat.name}")
         t.supervisor.phase(op, Phase.TRACKING, join_error_arcsec=err)
         return min(await t.motion.wait_until(set_us, op.info), set_us)
 

@@ -230,13 +230,23 @@ class Telescope:
             self._spawn(self._after_connecting(), "vss-after-connecting")
         elif kind == "mount_disconnected":
             self._mount_state = None
-            self.supervisor.interrupt(MountUnavailable("lost the connection to the mount"))
+            if self.link.capabilities.trajectory_buffer:
+                self.supervisor.interrupt(MountUnavailable("lost the connection to the mount"))
+            else:
+                # a mount told rates keeps turning at them: an operation on it cannot wait
+                # for the link to come back, it ends with a fault (the link told it to stop)
+                self.last_fault = f"lost the driver: {data.get('reason', 'connection lost')}"
+                self.supervisor.interrupt(MountFault(
+                    f"lost the {self.link.capabilities.backend} driver in the middle of the "
+                    f"operation ({data.get('reason', 'connection lost')}); the mount was told "
+                    "to stop"))
 
     async def _after_connecting(self) -> None:
         for attempt in range(5):  # a loaded host may time a first request out: try again
             try:
                 await self._read_limits()
-                await self._start_error_stream()
+                if self.link.capabilities.error_stream:
+                    await self._start_error_stream()
                 return
             except VssError as exc:
                 log.warning("after connecting (attempt %d): %s", attempt + 1, exc)
@@ -627,6 +637,7 @@ class Telescope:
                                "time_sync": self.timesync.status.as_dict(),
                                "safety": self._safety_doc(),
                                "limits": dataclasses.asdict(self.limits),
+                               "backend": self.link.describe(),
                                "tracking_error": {f"{w}s": self.errors.window(w).as_dict()
                                                   for w in (1, 10, 60)}}
         if not self.link.connected:

@@ -74,7 +74,10 @@ class TimeSync:
         The measurement before the sync is the drift accumulated since the last one (the
         worst offset of the period), the one after it what the sync left.
         """
-        if not self.active:
+        if not self.active or not self.link.capabilities.time_sync:
+            # a driver without a PPS clock keeps its own time (host UTC): only measured
+            if not self.link.capabilities.time_sync:
+                self.status.mode = "verify only (the driver keeps its own time)"
             await self.verify()
             return
         if self.simulated:
