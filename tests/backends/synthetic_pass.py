@@ -49,8 +49,10 @@ def _satrec(epoch_unix_s: float, raan_rad: float, u_rad: float) -> Satrec:
 
 def synthetic_pass_tle(site_lat_deg: float, site_lon_deg: float, height_m: float,
                        culmination_unix_s: float, max_el_deg: float = 70.0,
-                       name: str = "ISS-LIKE") -> tuple[str, str, str]:
-    """Return (name, line1, line2) of a pass over the site culminating near the given time."""
+                       name: str = "ISS-LIKE",
+                       away_from_az_deg: float | None = None) -> tuple[str, str, str]:
+    """Return (name, line1, line2) of a pass over the site culminating near the given time
+    (at least 90° of azimuth from `away_from_az_deg` at culmination, when given)."""
     from skyfield.api import EarthSatellite, load, wgs84
 
     ts = load.timescale(builtin=True)
@@ -65,9 +67,13 @@ def synthetic_pass_tle(site_lat_deg: float, site_lon_deg: float, height_m: float
         sat = _satrec(culmination_unix_s, raan0 + math.radians(shift_deg), u0)
         l1, l2 = export_tle(sat)
         es = EarthSatellite(l1, l2, name, ts)
-        alt = (es - site).at(times).altaz()[0].degrees
+        alt_a, az_a, _ = (es - site).at(times).altaz()
+        alt = alt_a.degrees
         k = int(np.argmax(alt))
         score = abs(alt[k] - max_el_deg) + abs(k * 2.0 - 400.0) / 100.0
+        if away_from_az_deg is not None:
+            off = abs((az_a.degrees[k] - away_from_az_deg + 180.0) % 360.0 - 180.0)
+            score += 100.0 if off < 90.0 else 0.0
         if best is None or score < best[0]:
             best = (score, l1, l2)
     return name, best[1], best[2]

@@ -131,15 +131,26 @@ class AlpacaDriver:
         can_park = bool(await self.get("canpark"))
         can_guide = bool(await self.get("canpulseguide"))
         try:
-            driver_site = (float(await self.get("sitelatitude")),
-                           float(await self.get("sitelongitude")),
-                           float(await self.get("siteelevation")))
+            driver_site = await self._site(site)
         except MountRejected:
             driver_site = None
         geometry = self.geometry or _GEOMETRY.get(mode, "german")
         return DriverInfo(name=name, geometry=geometry,
                           max_rate_deg_s=min(rates) or 1.0, rate_step_arcsec_s=None,
                           can_park=can_park, can_pulse_guide=can_guide, site=driver_site)
+
+    async def _site(self, site: Site) -> tuple[float, float, float]:
+        """The driver's site; the VSS's is sent first when it differs (the VSS's is the truth)."""
+        here = (float(await self.get("sitelatitude")), float(await self.get("sitelongitude")),
+                float(await self.get("siteelevation")))
+        if abs(here[0] - site.lat_deg) > 1e-6 or abs((here[1] - site.lon_deg + 180) % 360 - 180) \
+                > 1e-6:
+            await self.put("sitelatitude", SiteLatitude=repr(site.lat_deg))
+            await self.put("sitelongitude", SiteLongitude=repr(site.lon_deg))
+            await self.put("siteelevation", SiteElevation=repr(site.height_m))
+            here = (float(await self.get("sitelatitude")), float(await self.get("sitelongitude")),
+                    float(await self.get("siteelevation")))
+        return here
 
     async def close(self) -> None:
         if self._session is not None:

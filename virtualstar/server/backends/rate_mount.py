@@ -406,7 +406,7 @@ class RateMountLink:
         if moving:
             self._fresh.append(moved)
         if moved:
-            if old is None or self.fresh_reads():
+            if old is None or self.fresh_reads() or rep.received_us is not None:
                 # the driver answers with where the mount is when asked
                 t_us, spread = mid, (after - before) // 2
             else:
