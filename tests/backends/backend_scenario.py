@@ -243,7 +243,7 @@ async def scenario(kind: str, out_dir: Path) -> dict:
                    "humidity": site.humidity, "wavelength_um": site.wavelength_um}
     sim = Simulator(kind, out_dir)
     sim.start()
-    vss = build_server(mount_url=sim.url, site=site)
+    vss = build_server(mount_url=sim.url, site=site, signals_url="ws://127.0.0.1:0")
     url = await vss.start("ws://127.0.0.1:0")
     t = vss.telescope
     obs = Observer(sim)
@@ -263,9 +263,25 @@ async def scenario(kind: str, out_dir: Path) -> dict:
                                    duration_s=STAR_TRACK_S)
         await op.begun
         k = obs.mark()
+        # the recorder records the backend's reports like any signal, meanwhile
+        store = out_dir / "store"
+        rec = await asyncio.create_subprocess_exec(
+            str(BIN / "vs"), "record", t.signals.url, "report.ra_deg", "report.dec_deg",
+            "rate.axis1_arcsec_s", "error.sky_arcsec", "--rate", "50", "--duration",
+            str(STAR_TRACK_S - 5), "--store", f"parquet:{store}",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+        _out, rec_err = await rec.communicate()
         await wait_op(op, STAR_TRACK_S + 60)
         doc["star_op"] = op_doc(op)
         doc["star_samples"] = obs.since(k)
+        q = await asyncio.create_subprocess_exec(
+            str(BIN / "vs"), "data", "query", str(store), "--to", "end", "--json",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+        q_out, q_err = await q.communicate()
+        doc["recorded"] = {"record_exit": rec.returncode, "record_stderr": rec_err.decode()[-1500:],
+                           "query_exit": q.returncode, "query_stderr": q_err.decode()[-1500:],
+                           "data": json.loads(q_out) if q.returncode == 0 else None,
+                           "report_period_s": t.link.stats.period_s()}
 
         # 2. the Sun: refused before anything moves
         try:
@@ -276,16 +292,20 @@ async def scenario(kind: str, out_dir: Path) -> dict:
                                   "message": str(exc)}
 
         # 3. a slew whose straight path would cross the Sun zone goes round it
-        el = min(max(sun_azel[1], 25.0), 60.0)
-        off = min(170.0, 50.0 / math.cos(math.radians(el)))  # 50° from the Sun on the sky
+        # on either side of the Sun in azimuth, 50° from it on the sky, both on the same side
+        # of north (the VSS reports azimuths 0..360°): the straight way passes the Sun
+        el = 35.0 if sun_azel[1] > 30 else 25.0
+        off = 50.0 / math.cos(math.radians(el))
+        if not off < sun_azel[0] < 360.0 - off:
+            doc["errors"].append(f"the Sun's azimuth {sun_azel[0]:.1f}° leaves no room")
         a = ((sun_azel[0] - off) % 360.0, el)
         b = ((sun_azel[0] + off) % 360.0, el)
         op = await t.slew_altaz(*a)
-        await wait_op(op, 120)
+        await wait_op(op, 300)
         doc["route_first"] = op_doc(op)
         k = obs.mark()
         op = await t.slew_altaz(*b)
-        await wait_op(op, 180)
+        await wait_op(op, 300)
         doc["route_op"] = op_doc(op)
         doc["route_samples"] = obs.since(k)
         doc["route_ends"] = [a, b]

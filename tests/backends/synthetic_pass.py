@@ -43,7 +43,8 @@ def _satrec(epoch_unix_s: float, raan_rad: float, u_rad: float) -> Satrec:
     epoch_days = epoch_unix_s / 86400.0 + 2440587.5 - 2433281.5  # days since 1949-12-31 00:00
     sat = Satrec()
     sat.sgp4init(WGS72, "i", 99999, epoch_days, 1e-5, 0.0, 0.0, 0.0005, 0.0,
-                 math.radians(INCLINATION_DEG), u_rad, n_rad_min, raan_rad % (2 * math.pi))
+                 math.radians(INCLINATION_DEG), u_rad % (2 * math.pi), n_rad_min,
+                 raan_rad % (2 * math.pi))
     return sat
 
 

@@ -281,6 +281,28 @@ def test_a_driver_killed_mid_track_ends_the_track_with_a_fault_and_no_runaway(se
 def test_vs_run_of_a_small_plan_on_the_simulator(seen):
     run = seen["run"]
     assert run["plan_exit"] == 0 and run["run_exit"] == 0, run.get("stderr")
-    blocks = run["record"]["blocks"]
+    blocks = run["record"]["records"]
     assert len(blocks) == 1 and blocks[0]["outcome"] == "done", blocks
     assert blocks[0]["on_sky_rms_arcsec"] < 3.0
+
+
+def test_the_recorder_records_the_backends_reports_rates_and_errors(seen):
+    """`vs server --signals` serves each report as an ASTCom tick; `vs record` stores them at
+    the rate the driver reports, and the stored places are the simulator's own."""
+    rec = seen["recorded"]
+    assert rec["record_exit"] == 0 and rec["query_exit"] == 0, rec
+    data = rec["data"]
+    t = np.asarray(data["t_us"], np.int64) / 1e6
+    ra = np.asarray(data["values"]["report.ra_deg"])
+    dec = np.asarray(data["values"]["report.dec_deg"])
+    err = np.asarray(data["values"]["error.sky_arcsec"])
+    span = t[-1] - t[0]
+    assert span > 5.0
+    # at the rate the driver reports (measured by the backend), give or take a loaded host
+    assert len(t) >= 0.5 * span / rec["report_period_s"], (len(t), span, rec["report_period_s"])
+    # each stored place is where the simulator was: astropy's star at that time, as tracked
+    truth = star_apparent(seen["star"], t, seen)
+    sky = sky_errors_arcsec(np.column_stack([t, ra / 15.0, dec]), truth)
+    assert np.median(sky) < 3.0, sky
+    # the error signal is the VSS's own measure of the same thing
+    assert np.nanmedian(err) < 3.0 and np.all(np.isfinite(err[len(err) // 2:]))

@@ -58,6 +58,9 @@ def server(
         "(repeat for more; default: pages served from loopback only).")] = None,
     listen: Annotated[str, typer.Option(
         "--listen", help="Where clients connect: ws://HOST:PORT.")] = f"ws://127.0.0.1:{DEFAULT_PORT}",
+    signals: Annotated[str | None, typer.Option(
+        "--signals", help="With an alpaca:// or indi:// mount: serve its reports (place, rates, "
+        "error) as ASTCom signals here, e.g. ws://127.0.0.1:8767, for `vs record`.")] = None,
     site_file: Annotated[Path | None, typer.Option(
         "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a \\[site] table (and optionally \\[safety]).")] = None,
     site: Annotated[str | None, typer.Option(
@@ -87,6 +90,10 @@ def server(
     if not emulator and pace is None:
         raise fail("--speed max only applies to --emulator (lockstep needs the emulator in this "
                    "process); give --speed X for a simulated mount running at X times real time")
+    if signals is not None and (emulator or mount is None or "://" not in mount
+                                or mount.split("://")[0] not in ("alpaca", "indi")):
+        raise fail("--signals applies to an alpaca:// or indi:// mount (an ASTCom mount "
+                   "streams its own signals: record them from its endpoint)")
     if not emulator and start is not None:
         raise fail("--start only applies to --emulator (a mount keeps its own clock)")
     geometry_arcsec = None
@@ -141,7 +148,7 @@ def server(
                 run_lockstep(serve, clock)
         else:
             asyncio.run(_serve(pace, mount, password, mapping, listen, the_site,
-                               pointing_model, passive, zones, access))
+                               pointing_model, passive, zones, access, signals))
     except VssError as exc:
         raise fail(str(exc)) from None
     except OSError as exc:
@@ -208,15 +215,17 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
 
 
 async def _serve(speed, mount, password, mapping, listen, site, pointing_model, passive,
-                 zones, access) -> None:
+                 zones, access, signals=None) -> None:
     stop = _stop_event()
     vss = build_server(mount_url=mount, password=password, mapping_path=mapping, site=site,
                        speed=speed, active=not passive, pointing_model=pointing_model,
-                       zones=zones, access=access)
+                       zones=zones, access=access, signals_url=signals)
     try:
         url = await vss.start(listen)
         where = mount + (f", a simulated mount at x{speed:g}" if speed != 1 else "")
         typer.echo(f"VirtualStar Server on {url} (mount: {where})")
+        if vss.telescope.signals is not None:
+            typer.echo(f"the mount's reports as ASTCom signals on {vss.telescope.signals.url}")
         await stop.wait()
     finally:
         await vss.close()

@@ -26,7 +26,7 @@ def build_server(*, mount_url: str, password: str | None = None,
                  pointing_model: str | Path | None = None, heartbeat_s: float = 1.0,
                  clock: MountClock | None = None,
                  connector: Callable[[], Awaitable[Any]] | None = None,
-                 access: AccessConfig | None = None,
+                 access: AccessConfig | None = None, signals_url: str | None = None,
                  **telescope_options) -> VssServer:
     """Return a VssServer for the mount at `mount_url` (not started yet).
 
@@ -38,7 +38,9 @@ def build_server(*, mount_url: str, password: str | None = None,
     clock: a `virtualstar.lockstep.LockstepClock` shared with an embedded emulator
     (lockstep simulated time; `speed` is then its pace, 0 for none), with `connector`
     opening the in-memory connection to it. access: the API's passwords and allowed
-    origins (default: none, loopback pages only). Raises MappingError, BadRequest.
+    origins (default: none, loopback pages only). signals_url: where an Alpaca or INDI
+    mount's reports are served as ASTCom signals for the recorder (`backend_signals`).
+    Raises MappingError, BadRequest.
     """
     the_site = site or load_site()
     if is_rate_mount_url(mount_url):
@@ -57,6 +59,7 @@ def build_server(*, mount_url: str, password: str | None = None,
                              simulated=(speed != 1.0) if simulated is None else simulated,
                              lockstep=lockstep, active=active, **telescope_options)
     telescope = Telescope(link, config, clock or PacedClock(speed))
+    telescope.signals_url = signals_url
     if pointing_model is not None:
         telescope.load_model(str(pointing_model))
     return VssServer(telescope, heartbeat_s=heartbeat_s, access=access)

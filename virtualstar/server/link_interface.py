@@ -50,6 +50,7 @@ class MountCapabilities:
     max_rate_deg_s: float | None = None  # the largest axis rate the driver accepts
     rate_step_arcsec_s: float | None = None  # the resolution of a commanded rate
     tracks_sidereal: bool = False  # the mount's own sidereal tracking can be switched on
+    goto_tolerance_arcsec: float | None = None  # a goto lands within this (None: exactly)
 
     def __post_init__(self) -> None:
         if self.geometry not in GEOMETRIES:

@@ -174,10 +174,23 @@ async def goto_safely(t: Station, op: Operation, az_rad: float, el_rad: float, w
     if len(legs) > 1:
         op.info["detour_deg"] = [[round(math.degrees(a), 3), round(math.degrees(e), 3)]
                                  for a, e in legs[:-1]]
+    if not t.link.capabilities.trajectory_buffer:
+        # a driver's goto takes its own path: short legs keep it near the checked one
+        legs = rate_procedures.short_legs(here, legs)
     pos = None
-    for leg_az, leg_el in legs:
+    for k, (leg_az, leg_el) in enumerate(legs):
+        if k < len(legs) - 1 and not t.link.capabilities.trajectory_buffer:
+            await t.link.call("goto_place", math.degrees(leg_az), math.degrees(leg_el))
+            continue
         pos = await t.motion.goto(leg_az, leg_el, t.limits)
     return pos
+
+
+def _place_tolerance(t: Station) -> float:
+    """How close a slew to a fixed place must land: the arrival tolerance, or the goto
+    accuracy a mount without a trajectory buffer declares (its driver lands the goto)."""
+    return max(t.config.arrival_tolerance_arcsec,
+               t.link.capabilities.goto_tolerance_arcsec or 0.0)
 
 
 async def verify_joined(t: Station, ramp, feeder, what: str) -> float:
@@ -260,8 +273,7 @@ async def hold_fixed(t: Station, op: Operation, az_deg: float, el_deg: float, *,
     pos, enc_az, enc_el = await _slew_to_fixed(t, op, here, az_deg % 360.0, el_deg, here.t_us,
                                                op.target, allow_sun=allow_sun, stow=stow)
     t.supervisor.phase(op, Phase.SETTLING)
-    err = t.motion.verify_at(pos, enc_az, enc_el, t.config.arrival_tolerance_arcsec,
-                             f"slew to {op.target}")
+    err = t.motion.verify_at(pos, enc_az, enc_el, _place_tolerance(t), f"slew to {op.target}")
     if power_off:
         t.supervisor.phase(op, Phase.ENDING)
         await t.link.call("power_off")
@@ -369,7 +381,6 @@ async def measure_pointing(t: Station, op: Operation, target: Any, name: str, *,
     model, if one is loaded) and *held* there, so the encoders and the star's place
     given to the camera refer to the same instant however long the requests take.
     """
-    cfg = t.config
     await prepare(t, op)
     here = await t.motion.position()
     # where the star will be when the mount has landed and settled
@@ -383,7 +394,7 @@ async def measure_pointing(t: Station, op: Operation, target: Any, name: str, *,
     t.safety.check_place(star_az, star_el, t_exp, name, allow_sun=allow_sun)
     pos, enc_az, enc_el = await _slew_to_fixed(t, op, here, star_az, star_el, t_exp, name,
                                                allow_sun=allow_sun)
-    t.motion.verify_at(pos, enc_az, enc_el, cfg.arrival_tolerance_arcsec, f"slew to {name}")
+    t.motion.verify_at(pos, enc_az, enc_el, _place_tolerance(t), f"slew to {name}")
     t.supervisor.phase(op, Phase.MEASURING)
     await t.motion.wait_until(max(pos.t_us + int(settle_s * 1e6), t_exp), op.info)
     v = await t.link.read(["az_position", "el_position", "mount_time"])

@@ -163,8 +163,22 @@ class RateFollower:
 
     # ------------------------------------------------------------------ the loop
     async def run(self) -> None:
+        try:
+            await self._run()
+        finally:
+            if hasattr(self.link, "demand"):
+                self.link.demand = None
+
+    def _demand(self, t_us: int) -> tuple[float, float]:
+        """The path's native place at a mount time (the link's per-report error)."""
+        p = self.frame.sample(self.path, np.array([max(t_us, self.join_us)], np.int64))
+        return float(p.az_rad[0]), float(p.el_rad[0])
+
+    async def _run(self) -> None:
         if not getattr(self.link, "signs_measured", True):
             await self._probe_signs()
+        if hasattr(self.link, "demand"):
+            self.link.demand = self._demand
         self.stats.signs = tuple(getattr(self.link, "axis_signs", (1.0, 1.0)))
         last_t = 0
         while not self.done:
@@ -342,6 +356,3 @@ class RateFollower:
                              "time's uncertainty)", err)
         return err
 
-
-def wall_now_us() -> int:
-    return time.time_ns() // 1000

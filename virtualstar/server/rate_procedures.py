@@ -35,6 +35,29 @@ MAX_JOIN_PLANS = 6
 POLE_RATE_FRACTION = 0.9  # the right-ascension axis may use this much of its rate limit
 
 
+ROUTE_STEP_DEG = 20.0  # a goto leg round a zone is at most this long
+
+
+def short_legs(here, legs: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Split route legs (encoder az/el, rad) into steps of at most `ROUTE_STEP_DEG`.
+
+    A driver's goto moves its own axes its own way; on a short leg that way stays near
+    the straight one the route was checked along.
+    """
+    if len(legs) < 2:
+        return legs  # the straight way is clear: one goto
+    out: list[tuple[float, float]] = []
+    az0, el0 = here.az_rad, here.el_rad
+    for az1, el1 in legs:
+        d_az = az1 - az0  # the way the route was checked (not the shortest way round)
+        span = math.degrees(math.hypot(d_az * math.cos(0.5 * (el0 + el1)), el1 - el0))
+        n = max(1, math.ceil(span / ROUTE_STEP_DEG))
+        for k in range(1, n + 1):
+            out.append((az0 + d_az * k / n, el0 + (el1 - el0) * k / n))
+        az0, el0 = az1, el1
+    return out
+
+
 def frame_of(t: Station) -> NativeFrame:
     return NativeFrame(t.link.capabilities, t.config.site, t.eop)
 
@@ -46,13 +69,17 @@ def require_rates(t: Station) -> None:
                           "rate axes): it can point at a target but not follow it")
 
 
-def goto_estimate_s(t: Station, az_rad: float, el_rad: float, here) -> float:
-    """How long a goto from `here` takes, from the distance and the driver's top rate."""
-    dist = math.degrees(math.acos(max(-1.0, min(1.0, math.sin(el_rad) * math.sin(here.el_rad)
-                                                 + math.cos(el_rad) * math.cos(here.el_rad)
-                                                 * math.cos(az_rad - here.az_rad)))))
+def route_estimate_s(t: Station, here, legs: list[tuple[float, float]]) -> float:
+    """How long the gotos along `legs` take: 1.5× their length at the driver's top rate,
+    and `GOTO_SETTLE_S` each (the driver's end of slew is seen a few reports late)."""
     rate = t.link.capabilities.max_rate_deg_s or 1.0
-    return 1.5 * dist / rate + GOTO_SETTLE_S
+    total, az0, el0 = 0.0, here.az_rad, here.el_rad
+    for az1, el1 in legs:
+        total += math.degrees(math.acos(max(-1.0, min(1.0, math.sin(el0) * math.sin(el1)
+                                                      + math.cos(el0) * math.cos(el1)
+                                                      * math.cos(az1 - az0)))))
+        az0, el0 = az1, el1
+    return 1.5 * total / rate + GOTO_SETTLE_S * len(legs)
 
 
 async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
@@ -64,11 +91,16 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
     margin_s = JOIN_MARGIN_S
     for plan in range(MAX_JOIN_PLANS):
         here = await t.motion.position()
-        first = path.sample(np.array([max(here.t_us, not_before_us or 0)], np.int64))
-        slew_s = goto_estimate_s(t, float(first.az_rad[0]), float(first.el_rad[0]), here)
-        join_us = here.t_us + int((slew_s + margin_s) * 1e6)
-        if not_before_us is not None:
-            join_us = max(join_us, int(not_before_us))
+        join_us = max(here.t_us, not_before_us or 0)
+        for _ in range(2):  # the route (a detour round a zone) sets the goto's length
+            at = path.sample(np.array([join_us], np.int64))
+            legs = short_legs(here, t.safety.route(
+                here.az_rad, here.el_rad, float(at.az_rad[0]), float(at.el_rad[0]), here.t_us,
+                f"the join point of {op.target}", allow_sun=allow_sun))
+            slew_s = route_estimate_s(t, here, legs)
+            join_us = here.t_us + int((slew_s + margin_s) * 1e6)
+            if not_before_us is not None:
+                join_us = max(join_us, int(not_before_us))
         if end_us is not None and join_us > end_us - 10_000_000:
             raise TargetUnreachable(f"too little of the path is left to join it: it ends "
                                     f"{(end_us - here.t_us) / 1e6:.0f} s from now")
@@ -81,8 +113,9 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
         if len(legs) > 1:
             op.info["detour_deg"] = [[round(math.degrees(a), 3), round(math.degrees(e), 3)]
                                      for a, e in legs[:-1]]
-        for leg_az, leg_el in legs[:-1]:
-            await t.motion.goto(leg_az, leg_el, t.limits)
+        steps = short_legs(here, legs)
+        for leg_az, leg_el in steps[:-1]:  # waypoints round a zone
+            await t.link.call("goto_place", math.degrees(leg_az), math.degrees(leg_el))
         ra_dec = frame.place(path, np.array([join_us], np.int64))
         await t.link.call("goto_native", float(ra_dec[0][0]), float(ra_dec[1][0]))
         landed_us = await t.motion.mount_time_us()

@@ -172,6 +172,8 @@ class Telescope:
         self._guide: tuple[int, GuideOffsets] | None = None  # (operation id, its offsets)
         self.log = EventLog("vss")
         self.last_mount_us: int | None = None  # the newest tracking-error sample's time
+        self.signals_url: str | None = None  # where a rate-driven mount's reports are served
+        self.signals = None
 
     def log_event(self, level: str, kind: str, message: str, **fields: Any) -> None:
         """Log an event at the mount time last seen; before any sample, the lockstep
@@ -191,9 +193,21 @@ class Telescope:
     async def start(self) -> None:
         """Connect to the mount and start the background tasks."""
         self.link.on_event = self._on_link_event
+        if self.signals_url is not None:
+            await self._serve_signals(self.signals_url)
         self.link.start()
         self._spawn(self._watch(), "vss-watch")
         self._spawn(self.timesync.run(), "vss-timesync")
+
+    async def _serve_signals(self, url: str) -> None:
+        """Serve a rate-driven mount's reports as ASTCom signals (backend_signals.py)."""
+        if not hasattr(self.link, "report_listeners"):
+            raise BadRequest("--signals: this mount streams its own signals over ASTCom; "
+                             "record them from its endpoint")
+        from .backend_signals import ReportSignals
+
+        self.signals = ReportSignals(self.link)
+        await self.signals.serve(url)
 
     async def close(self) -> None:
         """Stop everything: a running operation is ended (the mount brought to rest), tasks too."""
@@ -206,6 +220,8 @@ class Telescope:
         if tasks:
             await asyncio.wait(tasks)
         await self.link.stop()
+        if self.signals is not None:
+            await self.signals.close()
 
     async def first_samples(self, timeout_s: float) -> None:
         """Wait until the error stream has delivered samples (the VSS is fully up)."""
@@ -637,7 +653,8 @@ class Telescope:
                                "time_sync": self.timesync.status.as_dict(),
                                "safety": self._safety_doc(),
                                "limits": dataclasses.asdict(self.limits),
-                               "backend": self.link.describe(),
+                               "backend": {**self.link.describe(), "signals_url":
+                                           self.signals.url if self.signals else None},
                                "tracking_error": {f"{w}s": self.errors.window(w).as_dict()
                                                   for w in (1, 10, 60)}}
         if not self.link.connected:

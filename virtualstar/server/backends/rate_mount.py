@@ -59,6 +59,7 @@ log = logging.getLogger("virtualstar.server.mount")
 
 STATE_CODES = {name: code for code, name in enumerate(STATE_NAMES)}
 PLACE_TOLERANCE_ARCSEC = 2.0  # a fixed place is reached within this (then held, tracking off)
+GOTO_TOLERANCE_ARCSEC = 15.0  # a fixed place held by a goto mount is verified within this
 REST_TOLERANCE_ARCSEC = 1.0  # two reports this close, a driver period apart: at rest
 STALE_S = 3.0  # wall seconds without an answer from the driver: lost
 CALL_LOG = 4096
@@ -67,8 +68,8 @@ _ROLES = ("az_position", "el_position", "axis1_position", "axis2_position", "rep
           "mount_time", "free_points", "az_error", "el_error", "az_fault_text", "el_fault_text",
           "az_slew_rate_limit", "el_slew_rate_limit", "az_track_rate_limit",
           "el_track_rate_limit", "slewing", "side_of_pier", "axis1_rate", "axis2_rate")
-_FUNCTIONS = ("power_on", "power_off", "stop", "slew", "goto_native", "set_rates", "traj_reset",
-              "reset_faults")
+_FUNCTIONS = ("power_on", "power_off", "stop", "slew", "goto_place", "goto_native", "set_rates",
+              "traj_reset", "reset_faults")
 
 
 @dataclass(frozen=True)
@@ -209,6 +210,10 @@ class RateMountLink:
         # commands (`rate_loop.RateFollower`), kept for the connection
         self.axis_signs = (1.0, 1.0)
         self.signs_measured = False
+        # the place the followed path wants at a mount time (native axes, rad), set by the
+        # rate loop while it follows: each report's error is taken against it on arrival
+        self.demand: Callable[[int], tuple[float, float]] | None = None
+        self.report_listeners: list[Callable[[dict[str, Any]], None]] = []
 
     # ------------------------------------------------------------------ interface
     @property
@@ -225,7 +230,8 @@ class RateMountLink:
             backend=self.backend, geometry=info.geometry, trajectory_buffer=False,
             rate_axes=True, goto=True, park=info.can_park, guide=True, time_sync=False,
             error_stream=False, max_rate_deg_s=info.max_rate_deg_s,
-            rate_step_arcsec_s=info.rate_step_arcsec_s, tracks_sidereal=True)
+            rate_step_arcsec_s=info.rate_step_arcsec_s, tracks_sidereal=True,
+            goto_tolerance_arcsec=GOTO_TOLERANCE_ARCSEC)
 
     def describe(self) -> dict[str, Any]:
         rep = self._report
@@ -418,6 +424,7 @@ class RateMountLink:
             self.stats.reports += 1
             self._new_report.set()
             self._new_report = asyncio.Event()
+            self._tell(self._report, after - before if rep.received_us is None else 0)
         else:
             old.read_us = mid
             old.flags = rep
@@ -427,6 +434,31 @@ class RateMountLink:
                 self._new_report.set()
                 self._new_report = asyncio.Event()
         self._update_rest()
+
+    def _tell(self, rep: _Report, latency_us: int) -> None:
+        """Hand a new report to the listeners (the recorder's signals), with its error."""
+        if not self.report_listeners:
+            return
+        az, el = self._observed(rep.ra_rad, rep.dec_rad, rep.t_us)
+        row: dict[str, Any] = {
+            "t_us": rep.t_us, "report.ra_deg": math.degrees(rep.ra_rad) % 360.0,
+            "report.dec_deg": math.degrees(rep.dec_rad), "report.az_deg": math.degrees(az),
+            "report.el_deg": math.degrees(el), "report.age_s": latency_us / 2e6,
+            "report.time_uncertainty_s": rep.spread_us / 1e6,
+            "rate.axis1_arcsec_s": self._rates_rad_s[0] * ARCSEC_PER_RAD,
+            "rate.axis2_arcsec_s": self._rates_rad_s[1] * ARCSEC_PER_RAD}
+        if self.demand is not None:
+            d1, d2 = self.demand(rep.t_us)
+            e1 = ((d1 - rep.ra_rad + math.pi) % (2 * math.pi) - math.pi) * math.cos(rep.dec_rad)
+            e2 = d2 - rep.dec_rad
+            row.update({"error.axis1_arcsec": e1 * ARCSEC_PER_RAD,
+                        "error.axis2_arcsec": e2 * ARCSEC_PER_RAD,
+                        "error.sky_arcsec": math.hypot(e1, e2) * ARCSEC_PER_RAD})
+        for listener in self.report_listeners:
+            try:
+                listener(row)
+            except Exception:  # a listener never breaks the link
+                log.exception("report listener failed")
 
     def fresh_reads(self) -> bool:
         """Measured: nearly every read of a moving mount gave a new place (the driver answers
@@ -609,21 +641,28 @@ class RateMountLink:
         await self._send(self.driver.set_tracking(True))
         await self._goto_and_wait(ra_rad, dec_rad)
 
-    async def _do_slew(self, az_deg: float, el_deg: float) -> None:
+    async def _do_goto_place(self, az_deg: float, el_deg: float) -> None:
+        """One goto to a fixed observed place (a waypoint round a zone), tracking off."""
+        await self._do_slew(az_deg, el_deg, attempts=1)
+
+    async def _do_slew(self, az_deg: float, el_deg: float, attempts: int = 3) -> None:
         """Go to a fixed observed place and stay there (tracking off): gotos to where that
-        place is on the sky when the mount lands, until the reports agree within tolerance."""
+        place is on the sky when the mount lands, until the reports agree within
+        `PLACE_TOLERANCE_ARCSEC` or a goto no longer gets closer (the driver's accuracy)."""
         self._rates_rad_s = (0.0, 0.0)
         await self._send(self.driver.set_rates(0.0, 0.0))
         await self._send(self.driver.set_tracking(False))
         az, el = math.radians(az_deg % 360.0), math.radians(el_deg)
-        speed = math.radians((self.info.slew_rate_deg_s if self.info else None) or 2.0)
-        for _attempt in range(6):
+        speed = math.radians((self.info.slew_rate_deg_s if self.info else None) or 5.0)
+        last = math.inf
+        for _attempt in range(attempts):
             rep = self._require()
             here_az, here_el = self._observed(rep.ra_rad, rep.dec_rad, _now_us())
             dist = math.acos(max(-1.0, min(1.0, math.sin(el) * math.sin(here_el) + math.cos(el)
                                            * math.cos(here_el) * math.cos(az - here_az))))
-            if dist * ARCSEC_PER_RAD <= PLACE_TOLERANCE_ARCSEC:
+            if dist * ARCSEC_PER_RAD <= PLACE_TOLERANCE_ARCSEC or dist >= 0.7 * last:
                 break
+            last = dist
             land_us = _now_us() + int((dist / speed + 2 * (self.stats.period_s() or 0.25)) * 1e6)
             ra, dec = observed_to_apparent_radec(np.array([az]), np.array([el]),
                                                  np.array([land_us], np.int64),
