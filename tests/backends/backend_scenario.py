@@ -343,7 +343,10 @@ async def scenario(kind: str, out_dir: Path) -> dict:
             doc["errors"].append("the operation did not end within 30 s of the kill")
         doc["kill_op"] = op_doc(op)
         doc["kill_fault_after_s"] = time.time() - killed
+        # what the VSS sent between the kill and the fault (a command already on its way,
+        # and the stop), and after the fault
         doc["calls_after_kill"] = [c.role for c in t.link.calls if c.seq > calls_before]
+        calls_before = len(t.link.calls) and t.link.calls[-1].seq
         obs.close()
         sim.start()
         await t.link.wait_connected(60)

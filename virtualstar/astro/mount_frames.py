@@ -20,12 +20,12 @@ Radians in, radians out; `t_us` are int64 mount times (µs since 1970, UTC).
 from __future__ import annotations
 
 import math
+import warnings
 
 import erfa
 import numpy as np
 
 from .earth_orientation import EarthOrientation
-from .equatorial import local_sidereal_time_hours
 from .observed import (
     enu_to_azel,
     observe_enu,
@@ -88,7 +88,12 @@ def apparent_radec_to_observed(ra_rad: np.ndarray, dec_rad: np.ndarray, t_us: np
 def hour_angle_rad(ra_rad: np.ndarray, t_us: np.ndarray, site: Site,
                    eop: EarthOrientation) -> np.ndarray:
     """Return the local apparent hour angle (rad, −π..π) of right ascensions of date."""
-    t = np.atleast_1d(np.asarray(t_us, np.int64))
-    last = np.array([local_sidereal_time_hours(int(x), site.lon_deg, eop) for x in t])
-    ha = np.radians(last * 15.0) - np.asarray(ra_rad, float)
+    t = UtcTimes.from_unix_us(np.atleast_1d(np.asarray(t_us, np.int64)))
+    dut1, _xp, _yp = eop.interpolate(t.jd1, t.jd2, warn=False)
+    ut1 = t.ut1(dut1)
+    tt1, tt2 = t.tt()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", erfa.ErfaWarning)
+        gst = erfa.gst06a(ut1[0], ut1[1], tt1, tt2)  # as local_sidereal_time_hours, vectorised
+    ha = gst + site.lon_rad - np.asarray(ra_rad, float)
     return (ha + math.pi) % (2 * math.pi) - math.pi

@@ -71,7 +71,6 @@ class IndiDriver:
         self._pushed = asyncio.Event()
         self._place: tuple[float, float, int] | None = None  # ra_h, dec_deg, arrival µs
         self._read_place: tuple[float, float, int] | None = None
-        self._custom_mode = False
 
     # ------------------------------------------------------------------ connection
     async def open(self, site: Site) -> DriverInfo:
@@ -126,7 +125,6 @@ class IndiDriver:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await self._task
         self._client, self._task, self._place, self._read_place = None, None, None, None
-        self._custom_mode = False
 
     def _vector(self, name: str):
         client = self._client
@@ -219,11 +217,11 @@ class IndiDriver:
         await self._send("TELESCOPE_TRACK_RATE",
                          {"TRACK_RATE_RA": SIDEREAL_RATE_ARCSEC_S - ra_deg_s * 3600.0,
                           "TRACK_RATE_DE": dec_deg_s * 3600.0})
-        if not self._custom_mode and (ra_deg_s or dec_deg_s):
-            members = {m: ("On" if m == "TRACK_CUSTOM" else "Off")
-                       for m in self._vector("TELESCOPE_TRACK_MODE").members()}
-            await self._send("TELESCOPE_TRACK_MODE", members)
-            self._custom_mode = True
+        mode = self._vector("TELESCOPE_TRACK_MODE")
+        if (ra_deg_s or dec_deg_s) and mode["TRACK_CUSTOM"] != "On":
+            # the driver's own mode, not a remembered one (a goto or abort may reset it)
+            await self._send("TELESCOPE_TRACK_MODE",
+                             {m: ("On" if m == "TRACK_CUSTOM" else "Off") for m in mode.members()})
 
     async def set_tracking(self, on: bool) -> None:
         await self._send("TELESCOPE_TRACK_STATE", {"TRACK_ON": "On" if on else "Off",

@@ -387,15 +387,21 @@ class RateMountLink:
     async def _poll(self) -> None:
         """Read the driver as fast as it updates (or take its pushes) until it stops answering."""
         last_ok = time.monotonic()
+        failures = 0
         while True:
             try:
                 got = await self._driver_read()
             except (OSError, TimeoutError, MountRejected) as exc:
-                if time.monotonic() - last_ok > self.config.stale_s:
-                    self.last_error = f"no answer for {self.config.stale_s:g} s: {exc}"
+                failures += 1
+                # lost: no answer for `stale_s`, and more than one try (a host that stalled
+                # this loop for seconds makes one request time out, not the driver)
+                if failures >= 3 and time.monotonic() - last_ok > self.config.stale_s:
+                    self.last_error = (f"no answer for {self.config.stale_s:g} s: "
+                                       f"{exc or type(exc).__name__}")
                     return
                 await asyncio.sleep(0.05)
                 continue
+            failures = 0
             last_ok = time.monotonic()
             await self._take(got)
             if self.driver.poll_s:
