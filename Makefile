@@ -6,6 +6,11 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test test-under-load lint bench clean
 
+# The suite runs in TEST_WORKERS processes (pytest-xdist), each test module kept in one worker
+# so its module fixtures start once; `make test TEST_WORKERS=0` runs it in one process.
+TEST_WORKERS ?= 4
+PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope
+
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
@@ -23,13 +28,13 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
-	$(PY) -m pytest -q
+	$(PYTEST)
 
 # The suite with two CPU-burning processes beside it (2 cores): nothing may depend on host speed.
 test-under-load: $(STAMP)
 	$(PY) -c 'while True: pass' & b1=$$!; $(PY) -c 'while True: pass' & b2=$$!; \
 	trap 'kill $$b1 $$b2 2>/dev/null' EXIT; \
-	$(VENV)/bin/ruff check . && $(PY) -m pytest -q
+	$(VENV)/bin/ruff check . && $(PYTEST)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

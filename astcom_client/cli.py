@@ -282,6 +282,60 @@ def _print_stream_summary(summary: dict[str, Any]) -> None:
     out.print(table)
 
 
+@app.command("relay")
+def relay_command(
+        serial: Annotated[str | None, typer.Option(
+            "--serial", help="The device's framed link on a tty or pty, e.g. /dev/ttyUSB0.")] = None,
+        tcp: Annotated[str | None, typer.Option(
+            "--tcp", help="The device's framed link as a TCP stream, HOST:PORT.")] = None,
+        listen: Annotated[list[str] | None, typer.Option(
+            "--listen", help="Where clients connect: ws://HOST:PORT or tcp://HOST:PORT "
+                             "(repeatable; port 0 picks a free one).")] = None,
+        allowed_origin: Annotated[list[str] | None, typer.Option(
+            "--allowed-origin", help="Web pages that may connect (default: loopback pages); "
+                                     "'*' for any.")] = None,
+        queue_packets: Annotated[int, typer.Option(
+            "--queue-packets", min=1, help="Stream packets queued per slow client before the "
+                                           "oldest is dropped.")] = 256) -> None:
+    """Carry one device link (serial/SPI or TCP, framed as in the protocol's §11) to many clients.
+
+    Every client gets its own session on the device (handshake, password, streams); the
+    relay only carries frames. Link loss or a device restart closes the clients with
+    ERR 503 saying why. Stop with Ctrl-C.
+    """
+    from .relay import Relay, RelayConfig
+
+    if (serial is None) == (tcp is None):
+        raise _fail("give exactly one device link: --serial DEV or --tcp HOST:PORT", 2)
+    try:
+        config = RelayConfig(serial=serial, tcp=tcp, listen=tuple(listen or ["ws://127.0.0.1:8765"]),
+                             allowed_origins=tuple(allowed_origin) if allowed_origin else None,
+                             queue_packets=queue_packets)
+        for url in config.listen:
+            parse_url(url)
+    except ValueError as exc:
+        raise _fail(str(exc), 2) from None
+
+    async def run() -> None:
+        relay = Relay(config)
+        urls = await relay.start()
+        link = serial or f"tcp://{tcp}"
+        state = "up" if relay.link_up.is_set() else f"down ({relay.down_reason})"
+        print(f"relay listening on {' '.join(urls)} for the device on {link} (link {state})",
+              flush=True)
+        try:
+            await asyncio.Event().wait()
+        finally:
+            await relay.close()
+
+    try:
+        asyncio.run(run())
+    except KeyboardInterrupt:
+        pass
+    except OSError as exc:
+        raise _fail(f"the relay cannot start: {exc}", 2) from None
+
+
 def main() -> None:
     """Run the `astcom` command line."""
     np.set_printoptions(precision=9)

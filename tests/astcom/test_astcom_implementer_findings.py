@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import websockets
 from astcom_helpers import PASSWORDS, RawPeer, device_in_thread, memory_client, run, served
+from device_impls import ALL_IMPLS, serve_impl
 
 from astcom_client.codec import Codec, CodecLimits
 from astcom_client.exceptions import LimitExceeded, MalformedFrame
@@ -22,18 +23,19 @@ def error_of(frame) -> tuple[int, str]:
     return frame[2]["code"], frame[2]["message"]
 
 
-async def logged_in_peer(endpoint) -> RawPeer:
-    peer = RawPeer(endpoint.connect_in_memory())
+async def logged_in_peer(dut) -> RawPeer:
+    peer = RawPeer(await dut.connect())
     assert (await peer.login())[0] == "OK"
     return peer
 
 
 @pytest.mark.parametrize("rate_hz", [1e-16, 5e-324, 1e-12, 1000 / MAX_PERIOD_TICKS / 2])
-def test_a_stream_rate_below_one_sample_per_2_32_ticks_is_refused_and_the_connection_stays(
+@pytest.mark.parametrize("impl", ALL_IMPLS)
+def test_a_stream_rate_below_one_sample_per_2_32_ticks_is_refused_and_the_connection_stays(impl: str,
         rate_hz: float) -> None:
     async def main() -> None:
-        async with served() as (_, endpoint, _):
-            peer = await logged_in_peer(endpoint)
+        async with serve_impl(impl) as dut:
+            peer = await logged_in_peer(dut)
             msg = (await peer.request("DEFINE", {"names": ["counter"]}))[2]["msg"]
             code, text = error_of(await peer.request("STREAM_START", {"msg": msg,
                                                                        "rate_hz": rate_hz}))
@@ -80,10 +82,11 @@ def test_hello_announces_the_loop_rate_as_a_float_on_the_wire() -> None:
 
 
 @pytest.mark.parametrize("seq", [True, -1, 2**63, 1.5, "7"])
-def test_an_error_about_an_invalid_seq_carries_nil(seq) -> None:
+@pytest.mark.parametrize("impl", ALL_IMPLS)
+def test_an_error_about_an_invalid_seq_carries_nil(impl: str, seq) -> None:
     async def main() -> None:
-        async with served() as (_, endpoint, _):
-            peer = await logged_in_peer(endpoint)
+        async with serve_impl(impl) as dut:
+            peer = await logged_in_peer(dut)
             await peer.send_raw(msgpack.packb(["PING", seq, {}]))
             reply = await peer.recv()
             assert reply[0] == "ERR" and reply[1] is None and reply[2]["code"] == 400
@@ -97,10 +100,11 @@ def test_an_ndarray_with_a_nonzero_reserved_field_is_refused() -> None:
         Codec().decode(frame)
 
 
-def test_bool_elements_are_refused_in_a_numeric_array_as_a_bool_scalar_is() -> None:
+@pytest.mark.parametrize("impl", ALL_IMPLS)
+def test_bool_elements_are_refused_in_a_numeric_array_as_a_bool_scalar_is(impl: str) -> None:
     async def main() -> None:
-        async with served() as (_, endpoint, _):
-            peer = await logged_in_peer(endpoint)
+        async with serve_impl(impl) as dut:
+            peer = await logged_in_peer(dut)
             for args in ([[1.0, True]], [np.array([True, False])]):
                 code, text = error_of(await peer.request("INVOKE", {"name": "math.sum",
                                                                      "args": args}))
@@ -124,10 +128,11 @@ def test_the_426_close_says_why() -> None:
     run(main())
 
 
-def test_define_of_a_function_says_it_is_a_function_and_invoke_of_a_variable_likewise() -> None:
+@pytest.mark.parametrize("impl", ALL_IMPLS)
+def test_define_of_a_function_says_it_is_a_function_and_invoke_of_a_variable_likewise(impl: str) -> None:
     async def main() -> None:
-        async with served() as (_, endpoint, _):
-            peer = await logged_in_peer(endpoint)
+        async with serve_impl(impl) as dut:
+            peer = await logged_in_peer(dut)
             code, text = error_of(await peer.request("DEFINE", {"names": ["math.add"]}))
             assert code == 404 and "is a function" in text and "did you mean" not in text
             code, text = error_of(await peer.request("INVOKE", {"name": "counter"}))

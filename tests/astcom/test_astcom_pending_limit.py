@@ -1,26 +1,42 @@
-"""Connections that have not authenticated have their own limit and never lock clients out."""
+"""Connections that have not authenticated have their own limit and never lock clients out.
+
+Against every device implementation (tests/astcom/device_impls.py).
+"""
 
 import asyncio
 
 import pytest
-from astcom_helpers import RawPeer, memory_client, run, served, settle
+from astcom_helpers import RawPeer, run, settle
+from device_impls import ALL_IMPLS, serve_impl
 
 from astcom_client import TooMany
 
 
-async def idle_peer(endpoint) -> RawPeer:
+async def let_it_see(dut) -> None:
+    """Give the device time to notice a connection or a close."""
+    if dut.impl == "python":
+        await settle()
+    else:
+        await asyncio.sleep(0.05)
+
+
+async def idle_peer(dut) -> RawPeer:
     """Return a peer that connected and says nothing (it waits for auth_timeout_s)."""
-    peer = RawPeer(endpoint.connect_in_memory())
-    await settle()
+    peer = RawPeer(await dut.connect())
+    await let_it_see(dut)
     return peer
 
 
-def test_peers_waiting_to_authenticate_do_not_take_the_slots_of_clients() -> None:
+impls = pytest.mark.parametrize("impl", ALL_IMPLS)
+
+
+@impls
+def test_peers_waiting_to_authenticate_do_not_take_the_slots_of_clients(impl: str) -> None:
     async def main() -> None:
-        async with served(max_clients=2, max_pending=2) as (_, endpoint, _):
-            await idle_peer(endpoint)
-            first = await memory_client(endpoint)
-            second = await memory_client(endpoint)  # 1 idle peer + 2 clients: all admitted
+        async with serve_impl(impl, max_clients=2, max_pending=2) as dut:
+            await idle_peer(dut)
+            first = await dut.client()
+            second = await dut.client()  # 1 idle peer + 2 clients: all admitted
             stats = await first.stats()
             assert stats["clients"] == 3 and stats["pending"] == 1
             assert await second.invoke("math.add", 1.0, 2.0) == 3.0
@@ -29,34 +45,36 @@ def test_peers_waiting_to_authenticate_do_not_take_the_slots_of_clients() -> Non
     run(main())
 
 
-def test_peers_beyond_the_pending_limit_are_refused_with_a_clear_error() -> None:
+@impls
+def test_peers_beyond_the_pending_limit_are_refused_with_a_clear_error(impl: str) -> None:
     async def main() -> None:
-        async with served(max_clients=4, max_pending=2, auth_timeout_s=0.3) as (_, endpoint, _):
-            client = await memory_client(endpoint)
-            await idle_peer(endpoint)
-            await idle_peer(endpoint)
-            refused = RawPeer(endpoint.connect_in_memory())
+        async with serve_impl(impl, max_clients=4, max_pending=2, auth_timeout_s=0.3) as dut:
+            client = await dut.client()
+            await idle_peer(dut)
+            await idle_peer(dut)
+            refused = RawPeer(await dut.connect())
             frame = await refused.recv()
             assert frame[0] == "ERR" and frame[1] is None and frame[2]["code"] == TooMany.code
             assert "waiting to authenticate" in frame[2]["message"]
             assert "at most 2" in frame[2]["message"]
             assert await refused.recv() is None
             with pytest.raises(TooMany, match="waiting to authenticate"):
-                await memory_client(endpoint)
+                await dut.client()
             assert "counter" in await client.read(["counter"])  # the authenticated one is unaffected
             # once the idle peers time out, their pending slots are free again
             await asyncio.sleep(0.5)
-            again = await memory_client(endpoint)
+            again = await dut.client()
             assert (await again.stats())["pending"] == 0
             await again.close()
             await client.close()
     run(main())
 
 
-def test_authenticating_beyond_max_clients_is_refused_at_auth() -> None:
+@impls
+def test_authenticating_beyond_max_clients_is_refused_at_auth(impl: str) -> None:
     async def main() -> None:
-        async with served(max_clients=1) as (_, endpoint, _):
-            a, b = RawPeer(endpoint.connect_in_memory()), RawPeer(endpoint.connect_in_memory())
+        async with serve_impl(impl, max_clients=1) as dut:
+            a, b = RawPeer(await dut.connect()), RawPeer(await dut.connect())
             # both wait to authenticate: neither holds a client's slot yet
             nonce_a = (await a.request("HELLO", {"version": "1.0"}))[2]["nonce"]
             nonce_b = (await b.request("HELLO", {"version": "1.0"}))[2]["nonce"]
@@ -69,10 +87,11 @@ def test_authenticating_beyond_max_clients_is_refused_at_auth() -> None:
     run(main())
 
 
-def test_without_authentication_hello_admits_at_most_max_clients() -> None:
+@impls
+def test_without_authentication_hello_admits_at_most_max_clients(impl: str) -> None:
     async def main() -> None:
-        async with served(max_clients=1, passwords=None) as (_, endpoint, _):
-            a, b = RawPeer(endpoint.connect_in_memory()), RawPeer(endpoint.connect_in_memory())
+        async with serve_impl(impl, max_clients=1, passwords=None) as dut:
+            a, b = RawPeer(await dut.connect()), RawPeer(await dut.connect())
             assert (await a.request("HELLO", {"version": "1.0"}))[2]["role"] == "operator"
             reply = await b.request("HELLO", {"version": "1.0"})
             assert reply[0] == "ERR" and reply[2]["code"] == TooMany.code

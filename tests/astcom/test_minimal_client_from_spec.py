@@ -2,7 +2,8 @@
 
 The client half of this file imports none of astcom_client: raw WebSocket / TCP,
 msgpack, hmac and numpy, following the document section by section. Only the endpoint
-(the thing under test) comes from our code.
+(the thing under test) comes from our code: the Python Endpoint, the C device over TCP
+(its sanitizer build) and the C device through the Relay over a pty pair.
 """
 
 import asyncio
@@ -15,7 +16,8 @@ import struct
 import msgpack
 import numpy as np
 import pytest
-from astcom_helpers import PASSWORDS, run, served
+from astcom_helpers import PASSWORDS, run
+from device_impls import EXAMPLE_GAINS, SOCKET_IMPLS, serve_impl
 from websockets.asyncio.client import connect as ws_connect
 
 # §2.1 dtype codes
@@ -95,11 +97,13 @@ class SpecClient:
         return self.packets.pop(0)
 
 
-@pytest.mark.parametrize("scheme", ["ws", "tcp"])
-def test_a_client_written_from_the_spec_authenticates_lists_reads_and_streams(scheme: str) -> None:
+@pytest.mark.parametrize(("impl", "scheme"), SOCKET_IMPLS)
+def test_a_client_written_from_the_spec_authenticates_lists_reads_and_streams(impl: str,
+                                                                              scheme: str) -> None:
     async def main() -> None:
-        async with served(f"{scheme}://127.0.0.1:0", realtime=True) as (device, _, url):
-            client = SpecClient(scheme, url)
+        async with serve_impl(impl, scheme=scheme, realtime=True) as dut:
+            client = SpecClient(scheme, dut.url)
+            start_t_us = await dut.start_t_us(1000.0)
             await client.open()
             session = await client.login(PASSWORDS["observer"])
             assert session["role"] == "observer" and session["loop_rate_hz"] == 1000.0
@@ -114,7 +118,7 @@ def test_a_client_written_from_the_spec_authenticates_lists_reads_and_streams(sc
             read = await client.call("READ", {"msg": msg})
             counter, gains, label = read["values"]
             assert 0 <= counter <= read["tick"] and label == "example"
-            assert gains.dtype == np.float64 and gains.tolist() == device.gains.tolist()
+            assert gains.dtype == np.float64 and gains.tolist() == EXAMPLE_GAINS
 
             sig = (await client.call("DEFINE", {"names": ["wave.sine", "counter"]}))["msg"]
             layout = await client.call("STREAM_START", {"msg": sig, "rate_hz": 250})
@@ -131,7 +135,7 @@ def test_a_client_written_from_the_spec_authenticates_lists_reads_and_streams(sc
                 np.testing.assert_allclose(arrays[0][:, 0],
                                            np.sin(2 * np.pi * 5.0 * ticks / 1000.0), atol=1e-12)
                 t_us = t0 + np.round(np.arange(n) * period_us)
-                np.testing.assert_array_equal(t_us, device.start_t_us + ticks * 1000)
+                np.testing.assert_array_equal(t_us, start_t_us + ticks * 1000)
             assert second[2] == first[2] + 1 and second[3] == first[3] + first[7] * first[6]
 
             with pytest.raises(RuntimeError, match="^403"):
@@ -141,11 +145,12 @@ def test_a_client_written_from_the_spec_authenticates_lists_reads_and_streams(sc
     run(main())
 
 
-@pytest.mark.parametrize("scheme", ["ws", "tcp"])
-def test_a_client_written_from_the_spec_meets_the_settled_edges(scheme: str) -> None:
+@pytest.mark.parametrize(("impl", "scheme"), SOCKET_IMPLS)
+def test_a_client_written_from_the_spec_meets_the_settled_edges(impl: str, scheme: str) -> None:
     """The answers §3, §5, §6, §7 and §8 now give, checked from the spec client's side."""
     async def main() -> None:
-        async with served(f"{scheme}://127.0.0.1:0") as (_, _, url):
+        async with serve_impl(impl, scheme=scheme) as dut:
+            url = dut.url
             # §5: version syntax; the reply states the endpoint's own version
             for version in ("1", "1.7"):
                 probe = SpecClient(scheme, url)
