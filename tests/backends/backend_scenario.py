@@ -39,8 +39,8 @@ from synthetic_pass import synthetic_pass_tle  # noqa: E402
 BIN = Path(sys.executable).parent
 INDI_PORT = 7624
 INDI_DEVICE = "Telescope Simulator"
-STAR_TRACK_S = 15.0
-PASS_LEAD_S = 80.0  # the pass culminates this long after it is commanded
+STAR_TRACK_S = 12.0
+PASS_LEAD_S = 55.0  # the pass culminates this long after it is commanded
 PASS_AFTER_S = 8.0  # ... and is stopped this long after culmination (mid-pass)
 
 
@@ -283,7 +283,10 @@ async def scenario(kind: str, out_dir: Path) -> dict:
                            "data": json.loads(q_out) if q.returncode == 0 else None,
                            "report_period_s": t.link.stats.period_s()}
 
-        # 2. the Sun: refused before anything moves
+        # 2. vs run of a small plan: one block of the same star, planned and run by the CLI
+        doc["run"] = await run_small_plan(url, site, star.name, out_dir)
+
+        # 3. the Sun: refused before anything moves
         try:
             await t.follow_target(SolarSystemBody("sun"), "Sun", duration_s=10)
             doc["sun_refusal"] = None
@@ -291,7 +294,7 @@ async def scenario(kind: str, out_dir: Path) -> dict:
             doc["sun_refusal"] = {"code": getattr(exc, "code", type(exc).__name__),
                                   "message": str(exc)}
 
-        # 3. a slew whose straight path would cross the Sun zone goes round it
+        # 4. a slew whose straight path would cross the Sun zone goes round it
         # on either side of the Sun in azimuth, 50° from it on the sky, both on the same side
         # of north (the VSS reports azimuths 0..360°): the straight way passes the Sun
         el = 35.0 if sun_azel[1] > 30 else 25.0
@@ -310,7 +313,7 @@ async def scenario(kind: str, out_dir: Path) -> dict:
         doc["route_samples"] = obs.since(k)
         doc["route_ends"] = [a, b]
 
-        # 4. a satellite pass (ISS-like, culminating away from the Sun), stopped mid-pass
+        # 5. a satellite pass (ISS-like, culminating away from the Sun), stopped mid-pass
         culm_s = time.time() + PASS_LEAD_S
         name, l1, l2 = synthetic_pass_tle(site.lat_deg, site.lon_deg, site.height_m, culm_s,
                                           away_from_az_deg=sun_azel[0])
@@ -319,7 +322,16 @@ async def scenario(kind: str, out_dir: Path) -> dict:
         op = await t.track_satellite(Satellite.from_tle(l1, l2, name))
         await op.begun
         k = obs.mark()
-        while time.time() < culm_s + PASS_AFTER_S and not op.done.done():
+        # stopped mid-pass: past culmination (a German mount may follow only the stretch
+        # after the meridian: then 25 s into it)
+        tracking_since = None
+        while not op.done.done() and time.time() < culm_s + 150:
+            if op.phase.label == "tracking" and tracking_since is None:
+                tracking_since = time.time()
+            if tracking_since is not None and time.time() > max(culm_s + PASS_AFTER_S,
+                                                                 tracking_since + 15) \
+                    and time.time() > tracking_since + 10:
+                break
             await asyncio.sleep(0.2)
         doc["pass_op_before_stop"] = op_doc(op)
         stop_at = time.time()
@@ -330,7 +342,7 @@ async def scenario(kind: str, out_dir: Path) -> dict:
         doc["pass_op"] = op_doc(op)
         doc["pass_samples"] = obs.since(k)
 
-        # 5. the driver killed mid-track: a fault, the mount told to stop, nothing resumed
+        # 6. the driver killed mid-track: a fault, the mount told to stop, nothing resumed
         op = await t.follow_target(IcrsStar.from_catalog(star), star.name, duration_s=None)
         await op.begun
         await asyncio.sleep(3.0)
@@ -360,8 +372,6 @@ async def scenario(kind: str, out_dir: Path) -> dict:
             "operation": op_doc(t.op) if t.op else None,
             "calls": [c.role for c in t.link.calls if c.seq > calls_before]}
 
-        # 6. vs run of a small plan: one star block, planned and run by the CLI tools
-        doc["run"] = await run_small_plan(url, site, star.name, out_dir)
         doc["final_backend"] = json.loads(json.dumps((await t.status())["backend"], default=str))
     except Exception:
         doc["errors"].append(traceback.format_exc())
@@ -385,8 +395,8 @@ async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
     program.write_text(
         '[program]\nname = "backend test"\n\n[defaults]\nmin_el_deg = 20\n'
         "sun_max_el_deg = 90\nmoon_min_sep_deg = 0\n\n"
-        f'[[target]]\nstar = "{star}"\nduration_s = 12\n')
-    start = now_us() + 5_000_000
+        f'[[target]]\nstar = "{star}"\nduration_s = 8\n')
+    start = now_us() + 3_000_000
     plan = out_dir / "plan.json"
     run = out_dir / "run.json"
     p = await asyncio.create_subprocess_exec(
@@ -411,7 +421,9 @@ def main() -> None:
     kind, out_dir = sys.argv[1], Path(sys.argv[2])
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = asyncio.run(scenario(kind, out_dir))
-    print(json.dumps(doc, default=str))
+    text = json.dumps(doc, default=str)
+    (out_dir / "scenario.json").write_text(text)
+    print(text)
 
 
 if __name__ == "__main__":

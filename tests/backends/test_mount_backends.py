@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.timeout(900)  # two real-time scenarios, about 3-4 minutes side by side
+
 HERE = Path(__file__).parent
 SCENARIO = HERE / "backend_scenario.py"
 _RUNS: dict[str, subprocess.Popen] = {}
@@ -190,7 +192,8 @@ def test_the_backend_reads_geometry_and_rates_from_the_driver(seen):
         assert caps["geometry"] == "german"
         assert caps["max_rate_deg_s"] == pytest.approx((16384 - 15.041) / 3600, rel=1e-3)
     final = seen["final_backend"]
-    assert final["report_rate_hz"] > 2.0 and final["reported"]["age_s"] < 2.0
+    # measured: Alpaca reads ~20/s, INDI pushes every 250 ms (a still place is not pushed)
+    assert final["report_rate_hz"] > 2.0 and 0 <= final["reported"]["age_s"] < 60.0
     assert final["driver_site"]["lat_deg"] == pytest.approx(seen["site"]["lat_deg"])
 
 
@@ -244,7 +247,12 @@ def test_an_iss_pass_is_followed_on_skyfields_place(seen):
     assert np.median(err) < 60.0, np.round(err, 1)
     assert np.percentile(err, 90) < 300.0, np.round(err, 1)
     assert info["culmination_el_deg"] > 60.0
-    assert any(abs(x - seen["culmination_s"]) < 5 for x in t), "the track covered culmination"
+    if seen["connected"]["capabilities"]["geometry"] == "german":
+        # never flipped mid-track: the whole tracked stretch on one side of the meridian
+        ha = hour_angles_deg(samples, seen)
+        assert np.all(ha > 0) or np.all(ha < 0), np.round(ha, 2)
+    else:
+        assert any(abs(x - seen["culmination_s"]) < 5 for x in t), "the track covered culmination"
 
 
 def test_stop_mid_pass_leaves_the_mount_at_rest(seen):
@@ -294,17 +302,20 @@ def test_the_recorder_records_the_backends_reports_rates_and_errors(seen):
     rec = seen["recorded"]
     assert rec["record_exit"] == 0 and rec["query_exit"] == 0, rec
     data = rec["data"]
-    t = np.asarray(data["t_us"], np.int64) / 1e6
-    ra = np.asarray(data["values"]["report.ra_deg"])
-    dec = np.asarray(data["values"]["report.dec_deg"])
-    err = np.asarray(data["values"]["error.sky_arcsec"])
-    span = t[-1] - t[0]
-    assert span > 5.0
-    # at the rate the driver reports (measured by the backend), give or take a loaded host
-    assert len(t) >= 0.5 * span / rec["report_period_s"], (len(t), span, rec["report_period_s"])
+    t_all = np.asarray(data["t_us"], np.int64) / 1e6
+    assert len(t_all) >= 10 and np.all(np.diff(t_all) > 0)
+    # at the rate reports come (a still star: each read or push), never less than 2 a second
+    assert np.median(np.diff(t_all)) < 0.5, np.diff(t_all)
+    info = seen["star_op"]["info"]
+    inside = (t_all * 1e6 >= info["tracking_from_us"]) & (t_all * 1e6 <= info["tracking_to_us"])
+    assert inside.sum() >= 5, "the recording overlapped the track"
+    t = t_all[inside]
+    ra = np.asarray(data["values"]["report.ra_deg"])[inside]
+    dec = np.asarray(data["values"]["report.dec_deg"])[inside]
+    err = np.asarray(data["values"]["error.sky_arcsec"])[inside]
     # each stored place is where the simulator was: astropy's star at that time, as tracked
     truth = star_apparent(seen["star"], t, seen)
     sky = sky_errors_arcsec(np.column_stack([t, ra / 15.0, dec]), truth)
     assert np.median(sky) < 3.0, sky
-    # the error signal is the VSS's own measure of the same thing
-    assert np.nanmedian(err) < 3.0 and np.all(np.isfinite(err[len(err) // 2:]))
+    # the error signal is the VSS's own measure of the same thing, while it follows
+    assert np.all(np.isfinite(err)) and np.median(err) < 3.0, err

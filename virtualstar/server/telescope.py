@@ -52,6 +52,7 @@ from .exceptions import (
     NotTracking,
     OperationAborted,
     TargetUnreachable,
+    Unsupported,
     VssError,
 )
 from .feeder import FeederConfig
@@ -483,6 +484,10 @@ class Telescope:
         return op
 
     async def park(self) -> Operation:
+        caps = self.link.capabilities
+        if not caps.park:
+            raise Unsupported(f"park: the {caps.backend} mount cannot park (its driver says "
+                              "so); slew to a safe place and stop instead")
         m = self.link.mapping
         return await self.slew_altaz(m.park_az_deg, m.park_el_deg, kind="park", power_off=True)
 

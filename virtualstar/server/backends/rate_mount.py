@@ -439,6 +439,7 @@ class RateMountLink:
                 old.t_us, old.spread_us = mid, 0
                 self._new_report.set()
                 self._new_report = asyncio.Event()
+                self._tell(old, after - before if rep.received_us is None else 0)
         self._update_rest()
 
     def _tell(self, rep: _Report, latency_us: int) -> None:
