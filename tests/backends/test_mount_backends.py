@@ -247,12 +247,15 @@ def test_an_iss_pass_is_followed_on_skyfields_place(seen):
     assert np.median(err) < 60.0, np.round(err, 1)
     assert np.percentile(err, 90) < 300.0, np.round(err, 1)
     assert info["culmination_el_deg"] > 60.0
+    # the satellite moved fast while it was followed (near culmination: about 1°/s)
+    ra, dec = satellite_apparent(seen["tle"], t, seen)
+    ra2, dec2 = satellite_apparent(seen["tle"], t + 1.0, seen)
+    rate = np.hypot(((ra2 - ra + 180) % 360 - 180) * np.cos(np.radians(dec)), dec2 - dec)
+    assert rate.max() > 0.3, rate.max()
     if seen["connected"]["capabilities"]["geometry"] == "german":
         # never flipped mid-track: the whole tracked stretch on one side of the meridian
         ha = hour_angles_deg(samples, seen)
         assert np.all(ha > 0) or np.all(ha < 0), np.round(ha, 2)
-    else:
-        assert any(abs(x - seen["culmination_s"]) < 5 for x in t), "the track covered culmination"
 
 
 def test_stop_mid_pass_leaves_the_mount_at_rest(seen):
@@ -304,18 +307,19 @@ def test_the_recorder_records_the_backends_reports_rates_and_errors(seen):
     data = rec["data"]
     t_all = np.asarray(data["t_us"], np.int64) / 1e6
     assert len(t_all) >= 10 and np.all(np.diff(t_all) > 0)
-    # at the rate reports come (a still star: each read or push), never less than 2 a second
-    assert np.median(np.diff(t_all)) < 0.5, np.diff(t_all)
+    # at the rate reports come (a still star: each read, or each wait for a push), at
+    # least one a second
+    assert np.median(np.diff(t_all)) < 1.0, np.diff(t_all)
     info = seen["star_op"]["info"]
     inside = (t_all * 1e6 >= info["tracking_from_us"]) & (t_all * 1e6 <= info["tracking_to_us"])
     assert inside.sum() >= 5, "the recording overlapped the track"
     t = t_all[inside]
-    ra = np.asarray(data["values"]["report.ra_deg"])[inside]
-    dec = np.asarray(data["values"]["report.dec_deg"])[inside]
-    err = np.asarray(data["values"]["error.sky_arcsec"])[inside]
+    ra = np.asarray(data["values"]["report.ra_deg"], float)[inside]
+    dec = np.asarray(data["values"]["report.dec_deg"], float)[inside]
+    err = np.asarray(data["values"]["error.sky_arcsec"], float)[inside]  # null: not following
     # each stored place is where the simulator was: astropy's star at that time, as tracked
     truth = star_apparent(seen["star"], t, seen)
     sky = sky_errors_arcsec(np.column_stack([t, ra / 15.0, dec]), truth)
     assert np.median(sky) < 3.0, sky
     # the error signal is the VSS's own measure of the same thing, while it follows
-    assert np.all(np.isfinite(err)) and np.median(err) < 3.0, err
+    assert np.isfinite(err).mean() > 0.8 and np.nanmedian(err) < 3.0, err

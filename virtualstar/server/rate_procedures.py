@@ -29,7 +29,8 @@ if TYPE_CHECKING:
 
 __all__ = ["acquire_by_rates", "equatorial_stretch", "follow_now"]
 
-JOIN_MARGIN_S = 3.0  # mount seconds between landing at the join point and the join
+JOIN_MARGIN_S = 5.0  # mount seconds between landing at the join point and the join (the
+# axis-sign probe runs meanwhile: about 2 s)
 GOTO_SETTLE_S = 1.5  # a goto's end is seen a few reports after the driver lands
 MAX_JOIN_PLANS = 6
 POLE_RATE_FRACTION = 0.9  # the right-ascension axis may use this much of its rate limit

@@ -210,6 +210,7 @@ class RateMountLink:
         # commands (`rate_loop.RateFollower`), kept for the connection
         self.axis_signs = (1.0, 1.0)
         self.signs_measured = False
+        self._signs_side: int | None = None  # the pier side the signs were measured on
         # the place the followed path wants at a mount time (native axes, rad), set by the
         # rate loop while it follows: each report's error is taken against it on arrival
         self.demand: Callable[[int], tuple[float, float]] | None = None
@@ -642,11 +643,19 @@ class RateMountLink:
         self._rates_rad_s = (a1, a2)
 
     async def _do_goto_native(self, ra_rad: float, dec_rad: float) -> None:
-        """Goto a place of date and hold it there with the mount's tracking (a join point)."""
+        """Goto a place of date and hold it there with the mount's tracking (a join point).
+
+        A German mount may land on the other side of its pier, where its declination axis
+        turns the other way: the axis signs are then measured again.
+        """
         self._rates_rad_s = (0.0, 0.0)
         await self._send(self.driver.set_rates(0.0, 0.0))
         await self._send(self.driver.set_tracking(True))
         await self._goto_and_wait(ra_rad, dec_rad)
+        side = self._require().flags.side_of_pier
+        if side != self._signs_side or side not in (0, 1):
+            self.signs_measured = False
+        self._signs_side = side
 
     async def _do_goto_place(self, az_deg: float, el_deg: float) -> None:
         """One goto to a fixed observed place (a waypoint round a zone), tracking off."""
