@@ -213,12 +213,19 @@ class IndiDriver:
         return p is not None and abs((p[0] - ra_h + 12) % 24 - 12) < 1e-4 and abs(p[1] - dec_deg) < 1e-3
 
     async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
+        mode = self._vector("TELESCOPE_TRACK_MODE")
+        if not (ra_deg_s or dec_deg_s):
+            # no offset: the mount's own sidereal tracking (libindi refuses a custom rate that
+            # equals sidereal, and keeps the last one: the mount would go on turning)
+            if mode["TRACK_SIDEREAL"] != "On":
+                await self._send("TELESCOPE_TRACK_MODE", {
+                    m: ("On" if m == "TRACK_SIDEREAL" else "Off") for m in mode.members()})
+            return
         # the axis turns at sidereal minus the place's own rate (arcsec/s)
         await self._send("TELESCOPE_TRACK_RATE",
                          {"TRACK_RATE_RA": SIDEREAL_RATE_ARCSEC_S - ra_deg_s * 3600.0,
                           "TRACK_RATE_DE": dec_deg_s * 3600.0})
-        mode = self._vector("TELESCOPE_TRACK_MODE")
-        if (ra_deg_s or dec_deg_s) and mode["TRACK_CUSTOM"] != "On":
+        if mode["TRACK_CUSTOM"] != "On":
             # the driver's own mode, not a remembered one (a goto or abort may reset it)
             await self._send("TELESCOPE_TRACK_MODE",
                              {m: ("On" if m == "TRACK_CUSTOM" else "Off") for m in mode.members()})
