@@ -259,19 +259,22 @@ async def scenario(kind: str, out_dir: Path) -> dict:
         # 1. a star: slew, land, sidereal track (its reports judged against astropy)
         star = pick_star(site, eop, sun_azel)
         doc["star"] = star.name
+        # the recorder records the backend's reports like any signal, all through (started
+        # first: a loaded host takes seconds to start a process)
+        store = out_dir / "store"
+        rec = await asyncio.create_subprocess_exec(
+            str(BIN / "vs"), "record", t.signals.url, "report.ra_deg", "report.dec_deg",
+            "rate.axis1_arcsec_s", "error.sky_arcsec", "--rate", "50", "--duration", "600",
+            "--store", f"parquet:{store}",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+        await asyncio.sleep(2.0)
         op = await t.follow_target(IcrsStar.from_catalog(star), star.name,
                                    duration_s=STAR_TRACK_S)
         await op.begun
         k = obs.mark()
-        # the recorder records the backend's reports like any signal, meanwhile
-        store = out_dir / "store"
-        rec = await asyncio.create_subprocess_exec(
-            str(BIN / "vs"), "record", t.signals.url, "report.ra_deg", "report.dec_deg",
-            "rate.axis1_arcsec_s", "error.sky_arcsec", "--rate", "50", "--duration",
-            str(STAR_TRACK_S - 5), "--store", f"parquet:{store}",
-            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-        _out, rec_err = await rec.communicate()
         await wait_op(op, STAR_TRACK_S + 60)
+        rec.send_signal(signal.SIGINT)  # Ctrl-C: the recorder closes its store and exits
+        _out, rec_err = await asyncio.wait_for(rec.communicate(), 60)
         doc["star_op"] = op_doc(op)
         doc["star_samples"] = obs.since(k)
         q = await asyncio.create_subprocess_exec(
@@ -342,8 +345,15 @@ async def scenario(kind: str, out_dir: Path) -> dict:
         doc["pass_op"] = op_doc(op)
         doc["pass_samples"] = obs.since(k)
 
-        # 6. the driver killed mid-track: a fault, the mount told to stop, nothing resumed
-        op = await t.follow_target(IcrsStar.from_catalog(star), star.name, duration_s=None)
+        # 6. the driver killed mid-track: a fault, the mount told to stop, nothing resumed.
+        # The track follows the place the mount points at (no slew first: the test is short)
+        from virtualstar.astro.equatorial import jnow_to_icrs
+
+        v = await t.link.read(["axis1_position", "axis2_position"])
+        here_icrs = jnow_to_icrs(math.degrees(v["axis1_position"]) % 360.0,
+                                 math.degrees(v["axis2_position"]), now_us())
+        op = await t.follow_target(IcrsStar(*here_icrs), "the place it points at",
+                                   duration_s=None)
         await op.begun
         await asyncio.sleep(3.0)
         calls_before = len(t.link.calls) and t.link.calls[-1].seq

@@ -199,7 +199,7 @@ async def verify_joined(t: Station, ramp, feeder, what: str) -> float:
     tolerance = t.config.arrival_tolerance_arcsec
     if t.link.capabilities.trajectory_buffer:
         return await t.motion.verify_on_path(ramp, tolerance, what)
-    return feeder.verify(tolerance, what)
+    return await feeder.verify(tolerance, what)
 
 
 async def prepare(t: Station, op: Operation) -> None:

@@ -343,8 +343,16 @@ class RateFollower:
 
         await asyncio.sleep(s)
 
-    def verify(self, tolerance_arcsec: float, what: str) -> float:
-        """The last measured error (arcsec); NotArrived beyond tolerance + its time uncertainty."""
+    async def verify(self, tolerance_arcsec: float, what: str) -> float:
+        """The last measured error (arcsec); NotArrived beyond tolerance + its time uncertainty.
+
+        Waits (wall time, at most `max(3 s, STALE_REPORTS` periods)) for the first report
+        after the join: on a loaded host the sign probe may still be running at the join.
+        """
+        deadline = time.monotonic() + max(3.0, STALE_REPORTS * self._period_s())
+        while self.stats.last_error_arcsec is None and time.monotonic() < deadline \
+                and not self.done:
+            await self._sleep(0.05)
         err = self.stats.last_error_arcsec
         if err is None:
             raise NotArrived(f"{what}: no report from the mount since the join", math.inf)
