@@ -109,6 +109,10 @@ class WebSocketTransport:
         addr = ws.remote_address
         self.peer = f"{addr[0]}:{addr[1]}" if addr else "websocket"
 
+    def limit_frames(self, max_bytes: int) -> None:
+        """Read messages of at most `max_bytes` from now on (larger: closed with 1009)."""
+        self._ws.protocol.max_message_size = max_bytes
+
     async def recv(self) -> bytes | None:
         try:
             message = await self._ws.recv()
@@ -140,6 +144,10 @@ class TcpTransport:
         self._ready: list[bytes] = []
         addr = writer.get_extra_info("peername")
         self.peer = f"{addr[0]}:{addr[1]}" if addr else "tcp"
+
+    def limit_frames(self, max_bytes: int) -> None:
+        """Read frames of at most `max_bytes` from now on (larger: MalformedFrame)."""
+        self._frames.max_frame_bytes = max_bytes
 
     async def recv(self) -> bytes | None:
         while not self._ready:

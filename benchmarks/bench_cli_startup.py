@@ -43,7 +43,8 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=15)
     args = ap.parse_args()
     url = f"ws://127.0.0.1:{free_port()}"
-    server = subprocess.Popen([*VS, "server", "--emulator", "--speed", "max", "--listen", url],
+    server = subprocess.Popen([*VS, "server", "--emulator", "--speed", "max", "--listen", url,
+                               "--endpoint-port", "0"],
                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                               cwd=Path(__file__).parents[1],
                               env={**os.environ, "PYTHONUNBUFFERED": "1"})

@@ -18,7 +18,7 @@ from .exceptions import (
     UnknownTermError,
 )
 from .fitting import FitResult, SelectionStep, fit_run, select_terms
-from .model import PointingModel, load_model, model_from_values
+from .model import PointingModel, load_model, model_from_text, model_from_values
 from .run_files import load_run
 from .runs import PointingRun, RunParameters, wrap_deg_180
 from .simulate import simulate_run
@@ -48,6 +48,7 @@ __all__ = [
     "load_model",
     "load_run",
     "load_tpoint",
+    "model_from_text",
     "model_from_values",
     "parse_term_list",
     "pick_spread",

@@ -12,11 +12,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["EmbeddedEmulator", "EmbeddedVss", "embedded_vss", "hidden_geometry_arcsec",
-           "start_emulator"]
+__all__ = ["DEFAULT_ENDPOINT_PORT", "EmbeddedEmulator", "EmbeddedVss", "EndpointUnavailable",
+           "embedded_vss", "hidden_geometry_arcsec", "start_emulator"]
 
+# `vs server --emulator` serves its emulator's ASTCom endpoint on this port unless told
+# otherwise, so that after a restart clients (the panel) find it where it was: beside the
+# VSS's own 8740.
+DEFAULT_ENDPOINT_PORT = 8741
 IN_MEMORY_QUEUE = 256  # frames in flight per direction of an in-process connection
 LOCKSTEP_STREAM_FLUSH_S = 0.2  # mount seconds of samples per stream packet in lockstep
+
+
+class EndpointUnavailable(OSError):
+    """The embedded emulator's ASTCom endpoint cannot listen where it was asked to."""
 
 
 @dataclass
@@ -78,6 +86,7 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
                          url: str = "ws://127.0.0.1:0", az_deg: float = 0.0, el_deg: float = 20.0,
                          params: dict[str, float] | None = None,
                          password: str | None = None,
+                         observer_password: str | None = None,
                          geometry_arcsec: dict[str, float] | None = None,
                          seeing_arcsec: float | None = None,
                          clock: Any = None) -> EmbeddedEmulator:
@@ -105,11 +114,18 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
         start_us = clock.now_us
         # in lockstep nobody waits for a packet in wall time: fewer, longer packets
         extra["stream_flush_s"] = LOCKSTEP_STREAM_FLUSH_S
+    if observer_password and not password:
+        raise ValueError("an observer password needs an operator password too")
+    passwords = {role: pw for role, pw in (("operator", password),
+                                           ("observer", observer_password)) if pw}
     config = EmulatorConfig(speed=speed, start_us=start_us, az_deg=az_deg, el_deg=el_deg,
-                            params=dict(params or {}),
-                            passwords={"operator": password} if password else None, **extra)
+                            params=dict(params or {}), passwords=passwords or None, **extra)
     emulator = MountEmulator(config)
-    bound = await emulator.start(url, run_loop=clock is None)
+    try:
+        bound = await emulator.start(url, run_loop=clock is None)
+    except OSError as exc:
+        raise EndpointUnavailable(exc.errno, f"the emulator's ASTCom endpoint cannot listen on "
+                                  f"{url}: {exc.strerror or exc}") from None
     if clock is not None:
         clock.add_driver(emulator.run_until)
     return EmbeddedEmulator(bound, emulator)
@@ -133,7 +149,8 @@ class EmbeddedVss:
 @contextlib.asynccontextmanager
 async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int | None = None,
                        site: Any = None, listen: str | None = None,
-                       password: str | None = None, emulator_url: str = "ws://127.0.0.1:0",
+                       password: str | None = None, observer_password: str | None = None,
+                       emulator_url: str = "ws://127.0.0.1:0",
                        geometry_arcsec: dict[str, float] | None = None,
                        seeing_arcsec: float | None = None,
                        emulator_params: dict[str, float] | None = None,
@@ -145,11 +162,13 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
     through an in-memory ASTCom connection; otherwise through `emulator_url` at
     `speed`. `listen` (ws://HOST:PORT) also serves the VSS API on a socket. The block
     starts once the VSS is connected and has its first tracking-error samples.
+    `password` (the VSS uses it) and `observer_password` guard the emulator's endpoint.
     """
     from virtualstar.server import build_server
 
     emu = await start_emulator(speed=speed, start_us=start_us, url=emulator_url,
                                params=emulator_params, password=password,
+                               observer_password=observer_password,
                                geometry_arcsec=geometry_arcsec, seeing_arcsec=seeing_arcsec,
                                clock=clock)
     connector = None
@@ -158,6 +177,7 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
             return await emu.connect_in_memory(password=password, name="virtualstar-server")
     server = None
     try:  # from here on the emulator runs: it stops however the block ends, a refused set-up too
+        server_options.setdefault("mount_endpoint", emu.url)  # told to clients (status, hello)
         server = build_server(mount_url=emu.url if clock is None else "in-process emulator",
                               password=password, speed=speed, site=site, clock=clock,
                               connector=connector, **server_options)

@@ -188,6 +188,8 @@ def vs_server_process(*args: str):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         url = f"ws://127.0.0.1:{s.getsockname()[1]}"
+    if "--emulator" in args and "--endpoint-port" not in args:
+        args = (*args, "--endpoint-port", "0")  # its ASTCom endpoint on a free port too
     proc = subprocess.Popen(
         [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
          *args, "--listen", url],

@@ -35,7 +35,7 @@ def log(
         "--source", help="Only these sources (emulator, vss, recorder); comma-separated or "
                          "repeated.")] = None,
     kinds: Annotated[list[str] | None, typer.Option(
-        "--kind", help="Only these kinds (fault, state, param, command, phase, connection, "
+        "--kind", help="Only these kinds (fault, state, param, command, phase, connection, auth, "
                        "clock_sync, gap, session, anomaly ...).")] = None,
     text: Annotated[str, typer.Option(
         "--grep", help="Only events whose message or fields contain this text "

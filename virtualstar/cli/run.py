@@ -57,11 +57,13 @@ def run(
     def fail(message: str, code: int = 2):  # with --json, the error goes to stdout too
         return status_fail(message, code, as_json=as_json)
 
-    try:
-        doc = json.loads(plan.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise fail(f"cannot read plan {plan}: {exc.strerror or exc}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    from virtualstar.files import FileRefused, read_text_file
+
+    try:  # a regular file of at most 64 MiB: a FIFO or /dev/zero would never end
+        doc = json.loads(read_text_file(plan, max_bytes=64 << 20, what="plan"))
+    except FileRefused as exc:
+        raise fail(f"cannot read {exc}") from None
+    except json.JSONDecodeError as exc:
         raise fail(f"{plan}: not JSON ({exc}); write a plan with vs plan PROGRAM --night DATE "
                    "-o PLAN.json") from None
     from virtualstar.planning import PlanningError

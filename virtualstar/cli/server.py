@@ -15,7 +15,10 @@ import typer
 from virtualstar.astro import AstroError, avoidance_from_options
 from virtualstar.astro.site import site_from_options
 from virtualstar.cli.status import fail
+from virtualstar.launcher import DEFAULT_ENDPOINT_PORT, EndpointUnavailable
 from virtualstar.server import DEFAULT_PORT, AccessConfig, VssError, build_server
+from virtualstar.server.access import check_listen
+from virtualstar.server.server import parse_listen_url
 
 __all__ = ["server"]
 
@@ -37,13 +40,21 @@ def server(
     seed: Annotated[int | None, typer.Option(
         "--seed", help="With --emulator: draw hidden pointing errors (>= 100 arcsec RMS) from this "
         "seed, as `mount-emulator --seed N` does.")] = None,
+    endpoint_port: Annotated[int | None, typer.Option(
+        "--endpoint-port", show_default=False,
+        help=f"With --emulator: the loopback port of the emulator's ASTCom endpoint for other "
+        f"clients (the panel, astcom, the recorder), default {DEFAULT_ENDPOINT_PORT}; fixed, so "
+        "a restarted server is found where it was. 0 picks a free port. Clients are told where "
+        "it is (status: mount_endpoint).")] = None,
     mount: Annotated[str | None, typer.Option(
         "--mount", help="The mount, instead of --emulator: an ASTCom URL (ws://mount:8765), an "
         "ASCOM Alpaca telescope alpaca://HOST:PORT/N, or an INDI telescope "
         "indi://HOST:PORT/DEVICE (see docs/mount-backends.md).")] = None,
     password: Annotated[str | None, typer.Option(
         "--password", envvar="ASTCOM_PASSWORD", help="Operator password of the mount's ASTCom "
-        "endpoint (the server's own API passwords: --operator-password, --observer-password).")] = None,
+        "endpoint (the server's own API passwords: --operator-password, --observer-password). "
+        "With --emulator and API passwords, the embedded emulator's endpoint takes the API's "
+        "operator and observer passwords unless this is given.")] = None,
     mapping: Annotated[Path | None, typer.Option(
         "--mapping", help="JSON role mapping for the mount (default: the emulator's).")] = None,
     operator_password: Annotated[str | None, typer.Option(
@@ -96,6 +107,12 @@ def server(
                    "streams its own signals: record them from its endpoint)")
     if not emulator and start is not None:
         raise fail("--start only applies to --emulator (a mount keeps its own clock)")
+    if endpoint_port is not None and not emulator:
+        raise fail("--endpoint-port only applies to --emulator (--mount names the mount's endpoint)")
+    if endpoint_port is None:
+        endpoint_port = DEFAULT_ENDPOINT_PORT
+    if not 0 <= endpoint_port <= 65535:
+        raise fail(f"--endpoint-port {endpoint_port}: expected a TCP port, 0..65535 (0: a free one)")
     geometry_arcsec = None
     if geometry is not None or seed is not None:
         if not emulator:
@@ -121,6 +138,8 @@ def server(
                    "move the telescope)")
     try:
         access = AccessConfig(passwords=passwords or None, allowed_origins=allow_origin or None)
+        # refused before anything starts (the embedded emulator's endpoint listens first)
+        check_listen(parse_listen_url(listen)[0], access)
     except VssError as exc:
         raise fail(str(exc)) from None
     try:
@@ -139,7 +158,8 @@ def server(
                 clock = LockstepClock(start_us if start_us is not None
                                       else time.time_ns() // 1000, pace=pace)
             serve = _serve_embedded(clock, start_us, password, listen, the_site, mapping,
-                                    pointing_model, passive, geometry_arcsec, zones, access)
+                                    pointing_model, passive, geometry_arcsec, zones, access,
+                                    f"ws://127.0.0.1:{endpoint_port}")
             if clock is None:
                 asyncio.run(serve)
             else:
@@ -151,6 +171,9 @@ def server(
                                pointing_model, passive, zones, access, signals))
     except VssError as exc:
         raise fail(str(exc)) from None
+    except EndpointUnavailable as exc:
+        raise fail(f"{exc.strerror}; choose another with --endpoint-port PORT (0: a free one)",
+                   1) from None
     except OSError as exc:
         raise fail(f"cannot listen on {listen}: {exc.strerror or exc}", 1) from None
 
@@ -194,12 +217,27 @@ def _stop_event() -> asyncio.Event:
 
 
 async def _serve_embedded(clock, start_us, password, listen, site, mapping,
-                          pointing_model, passive, geometry_arcsec, zones, access) -> None:
+                          pointing_model, passive, geometry_arcsec, zones, access,
+                          emulator_url) -> None:
     from virtualstar.launcher import embedded_vss
 
+    # The emulator's own ASTCom endpoint inherits the server's protection: with API
+    # passwords it takes the same ones (--password, if given, for the operator instead),
+    # else anyone who can reach its port could stop the operator's track.
+    guard, observer_password = "", None
+    if access.passwords:
+        observer_password = access.passwords.get("observer")
+        if password is None:
+            password = access.passwords["operator"]
+            guard = "the server's operator password" + (
+                " and its observer password" if observer_password else "")
+        else:
+            guard = "--password as its operator password"
     stop = _stop_event()
     async with embedded_vss(clock=clock, speed=1.0, start_us=start_us, site=site,
-                            listen=listen, password=password, geometry_arcsec=geometry_arcsec,
+                            listen=listen, password=password,
+                            observer_password=observer_password, emulator_url=emulator_url,
+                            geometry_arcsec=geometry_arcsec,
                             mapping_path=mapping, active=not passive,
                             pointing_model=pointing_model, zones=zones, access=access) as vss:
         if clock is None:
@@ -210,6 +248,8 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
             mode = f"lockstep simulated time, up to x{clock.pace:g}"
         typer.echo(f"VirtualStar Server on {vss.url} (mount: embedded emulator, {mode}; its "
                    f"ASTCom endpoint for other clients: {vss.emulator.url})")
+        if guard:
+            typer.echo(f"The emulator's ASTCom endpoint takes {guard}.")
         await stop.wait()
     typer.echo("VirtualStar Server stopped")
 

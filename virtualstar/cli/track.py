@@ -47,12 +47,12 @@ def track(
     if duration is not None:
         params["duration_s"] = duration
     if tle is not None:
-        try:
-            params["tle"] = tle.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise fail(f"cannot read TLE file {tle}: {exc.strerror}", as_json=as_json) from None
-        except UnicodeDecodeError:
-            raise fail(f"{tle} is not a text TLE file", as_json=as_json) from None
+        from virtualstar.files import FileRefused, read_text_file
+
+        try:  # the server takes at most 256 KiB of TLE text
+            params["tle"] = read_text_file(tle, max_bytes=256 * 1024, what="TLE file")
+        except FileRefused as exc:
+            raise fail(f"cannot read {exc}", as_json=as_json) from None
         if sat:
             params["sat"] = sat
     elif radec:

@@ -37,7 +37,8 @@ def build_server(*, mount_url: str, password: str | None = None,
     free-running simulated emulator); simulated defaults to speed != 1.
     clock: a `virtualstar.lockstep.LockstepClock` shared with an embedded emulator
     (lockstep simulated time; `speed` is then its pace, 0 for none), with `connector`
-    opening the in-memory connection to it. access: the API's passwords and allowed
+    opening the in-memory connection to it. mount_endpoint (a telescope option): the ASTCom
+    URL clients are told the mount answers at (default `mount_url` when it is one). access: the API's passwords and allowed
     origins (default: none, loopback pages only). signals_url: where an Alpaca or INDI
     mount's reports are served as ASTCom signals for the recorder (`backend_signals`).
     Raises MappingError, BadRequest.
@@ -55,6 +56,8 @@ def build_server(*, mount_url: str, password: str | None = None,
     lockstep = clock is not None and clock.lockstep
     if lockstep:
         speed, simulated = float(getattr(clock, "pace", None) or 0.0), True
+    if "://" in mount_url and not is_rate_mount_url(mount_url):  # an ASTCom endpoint
+        telescope_options.setdefault("mount_endpoint", mount_url)
     config = TelescopeConfig(site=the_site, speed=speed,
                              simulated=(speed != 1.0) if simulated is None else simulated,
                              lockstep=lockstep, active=active, **telescope_options)

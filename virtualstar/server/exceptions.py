@@ -9,6 +9,7 @@
     ├── NotActive (PermissionError)                 passive          the server is passive: it only watches
     ├── Unauthorized (PermissionError)              unauthorized     no (or a wrong) password: authenticate first
     ├── Forbidden (PermissionError)                 forbidden        the connection's role may not do this (observer)
+    ├── Throttled (PermissionError)                 throttled        a password attempt not checked: too many wrong ones (retry later)
     ├── MountUnavailable (ConnectionError)          mount_offline    no connection to the mount right now
     ├── MountRejected (RuntimeError)                mount_rejected   the mount refused a command (its message)
     ├── MountFault (RuntimeError)                   mount_fault      the mount latched a fault during an operation
@@ -20,6 +21,7 @@
     ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
     ├── Unsupported (RuntimeError)                  unsupported      the mount's backend cannot do this (its capabilities)
     ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
+    │   └── StoppedByClient                         aborted          ended by a client's `stop` (`stopped`: true)
     └── InternalError (RuntimeError)                internal         a bug: reported, the server keeps running
 """
 
@@ -39,7 +41,9 @@ __all__ = [
     "NotTracking",
     "OperationAborted",
     "StaleElements",
+    "StoppedByClient",
     "TargetUnreachable",
+    "Throttled",
     "TrackingLost",
     "Unsupported",
     "Unauthorized",
@@ -118,6 +122,16 @@ class OperationAborted(RuntimeError, VssError):
     code = "aborted"
 
 
+class StoppedByClient(OperationAborted):
+    """An operation ended by a client's `stop`: what an operator asked for, not a failure.
+
+    Its code stays `aborted` (clients know it); `stopped` marks it in the operation's
+    `info.error`, so a panel can tell a deliberate stop from a replacement or a shutdown.
+    """
+
+    stopped = True
+
+
 class StaleElements(ValueError, VssError):
     """A satellite's elements are too far from the mount time to be trusted, or SGP4 failed."""
 
@@ -174,3 +188,9 @@ class Unsupported(RuntimeError, VssError):
     """The mount's backend cannot do what was asked (its capabilities say so)."""
 
     code = "unsupported"
+
+
+class Throttled(PermissionError, VssError):
+    """A password attempt refused unchecked: too many wrong ones from the address or overall."""
+
+    code = "throttled"

@@ -93,10 +93,12 @@ class Supervisor:
             self.emit("operation", op.as_dict())
             return op
 
-    async def stop(self, reason: str, *, then: Callable[[], Awaitable[Any]] | None = None) -> None:
+    async def stop(self, reason: str | OperationAborted, *,
+                   then: Callable[[], Awaitable[Any]] | None = None) -> None:
         """End the running operation, wait for it, then run `then` (bring to rest), all under the lock."""
         async with self._lock:
-            await self._end_running(OperationAborted(reason))
+            await self._end_running(reason if isinstance(reason, OperationAborted)
+                                    else OperationAborted(reason))
             if then is not None:
                 await then()
 
@@ -228,5 +230,8 @@ class Supervisor:
         self.emit("operation", op.as_dict())
 
 
-def _error_dict(error: VssError) -> dict[str, str]:
-    return {"code": error.code, "message": str(error)}
+def _error_dict(error: VssError) -> dict[str, Any]:
+    doc: dict[str, Any] = {"code": error.code, "message": str(error)}
+    if getattr(error, "stopped", False):  # a client's stop: asked for, not a failure
+        doc["stopped"] = True
+    return doc

@@ -43,6 +43,7 @@ from virtualstar.astro import (
 
 from . import procedures
 from .clock import MountClock, PacedClock
+from .event_log import KEPT_APART
 from .exceptions import (
     BadRequest,
     MappingError,
@@ -51,6 +52,7 @@ from .exceptions import (
     NotActive,
     NotTracking,
     OperationAborted,
+    StoppedByClient,
     TargetUnreachable,
     Unsupported,
     VssError,
@@ -110,6 +112,7 @@ class TelescopeConfig:
     resume_timeout_s: float = 60.0  # wall seconds an interrupted track waits for the mount
     zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
     hold_lookahead_s: float = HOLD_LOOKAHEAD_S  # a fixed hold must stay out of the zones this long
+    mount_endpoint: str = ""  # where ASTCom clients reach the mount ('' unknown or nowhere)
 
     @property
     def margin_speed(self) -> float:
@@ -171,7 +174,7 @@ class Telescope:
         self._tasks: set[asyncio.Task] = set()
         self.programs = ProgramControl(self, lambda kind, data: self.emit(kind, data))
         self._guide: tuple[int, GuideOffsets] | None = None  # (operation id, its offsets)
-        self.log = EventLog("vss")
+        self.log = EventLog("vss", kept_apart=KEPT_APART)
         self.last_mount_us: int | None = None  # the newest tracking-error sample's time
         self.signals_url: str | None = None  # where a rate-driven mount's reports are served
         self.signals = None
@@ -604,7 +607,7 @@ class Telescope:
             state = await self.motion.state()
             result["mount_state"] = self.link.mapping.state_name(state)
 
-        await self.supervisor.stop("stopped by a client", then=to_rest)
+        await self.supervisor.stop(StoppedByClient("stopped by a client"), then=to_rest)
         return result
 
     async def set_mode(self, mode: str) -> dict[str, Any]:
@@ -620,11 +623,12 @@ class Telescope:
         self.emit("mode", {"mode": mode})
         return {"mode": mode}
 
-    def load_model(self, path: str) -> dict[str, Any]:
-        from pointing_model import PointingModelError, load_model
+    def load_model(self, path: str, text: str | None = None) -> dict[str, Any]:
+        """Use the pointing model in file `path` (its `text` when already read)."""
+        from pointing_model import PointingModelError, load_model, model_from_text
 
         try:
-            self.model = load_model(path)
+            self.model = load_model(path) if text is None else model_from_text(text, str(path))
         except (PointingModelError, OSError, ValueError) as exc:
             raise BadRequest(f"cannot load pointing model {path}: {exc}") from None
         self.model_source = str(path)
@@ -648,6 +652,7 @@ class Telescope:
         """Return encoder and observed positions, RA/Dec, states, mount time, error statistics."""
         cfg = self.config
         out: dict[str, Any] = {"connected": self.link.connected, "url": self.link.config.url,
+                               "mount_endpoint": cfg.mount_endpoint or None,
                                "mode": "active" if self.active else "passive",
                                "simulated": cfg.simulated, "time_mode": cfg.time_mode,
                                "speed": None if cfg.lockstep and cfg.speed <= 0 else cfg.speed,

@@ -58,7 +58,13 @@ try {
   await page.fill('input[name=compute-expr-0]', 'axis.az.error * 3600 * 180 / pi');
   await page.fill('input[name=compute-unit-0]', 'arcsec');
   await page.click('button.apply-computes');
-  await page.waitForTimeout(400);
+  await page.waitForFunction(() => { // the expression has been evaluated on some packets
+    const { series } = window.panelProbe;
+    const c = series.series.get('az_err_arcsec');
+    let n = 0;
+    for (let i = 0; c && i < series.count; i++) if (!Number.isNaN(c[i])) n++;
+    return n >= 200;
+  }, null, { timeout: 10_000 });
   result.computeCheck = await page.evaluate(() => {
     const { series } = window.panelProbe;
     const err = series.series.get('axis.az.error');
@@ -104,6 +110,13 @@ try {
   result.allInOneAxes = await page.evaluate(() => ({ ...window.panelProbe.probe.yAxes }));
   await page.screenshot({ path: join(ARTIFACTS, 'plot-all-in-one.png') });
   await page.check('input[name=stacked]');
+  // an angle shown in another unit: the axis says it, the samples drawn are converted
+  await page.selectOption('select[name="unit:axis.az.error"]', 'arcsec');
+  await redrawn();
+  result.unitChosen = await page.evaluate(() => ({ axes: Object.keys(window.panelProbe.probe.yAxes), drawn: window.panelProbe.probe.drawn }));
+  await page.screenshot({ path: join(ARTIFACTS, 'plot-arcsec.png') });
+  await page.selectOption('select[name="unit:axis.az.error"]', 'rad');
+  await redrawn();
   // Export the visible window as CSV: every sample, with units in the header.
   await page.click('button.pause');
   const [csvFile] = await Promise.all([page.waitForEvent('download'), page.click('button.export-csv')]);
@@ -158,7 +171,9 @@ try {
   await tab(page, 'Signals');
   await shot(page, 'Signals');
   await tab(page, 'Board');
-  await page.waitForTimeout(1100); // one poll of the watch list and STATS
+  // one poll of the watch list and STATS
+  await page.waitForFunction(() => document.querySelector('#tab-Board [data-field=clients]')
+    && document.querySelector('#tab-Board [data-field^="watch:"]')?.textContent.trim() !== '—', null, { timeout: 10_000 });
   await shot(page, 'Board');
   step('screenshots');
 

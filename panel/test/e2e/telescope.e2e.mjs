@@ -21,6 +21,12 @@ const field = (page, name) => page.textContent(`#tab-Telescope [data-field="${na
 const BOARD_FIELDS = ['target', 'kind', 'phase', 'mode', 'mount-state', 'encoder-az', 'encoder-el', 'observed-az',
   'observed-el', 'ra', 'dec', 'mount-time', 'rms-1s', 'on-sky-rms-1s', 'pointing-model', 'clock-offset', 'mount-link'];
 const readBoard = async (page) => Object.fromEntries(await Promise.all(BOARD_FIELDS.map(async (f) => [f, await field(page, f)])));
+/** Wait until the board has drawn a status polled after this moment. */
+async function nextPoll(page) {
+  const now = await page.evaluate(() => Date.now());
+  await page.waitForFunction((t) => window.panelTelescope.updatedMs > t, now, { timeout: 30_000 });
+  await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+}
 const waitField = (page, name, pattern, timeout = 60_000) => page.waitForFunction(
   ([n, p]) => new RegExp(p).test(document.querySelector(`#tab-Telescope [data-field="${n}"]`)?.textContent.trim() ?? ''),
   [name, pattern], { timeout });
@@ -58,7 +64,7 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), join
       return s?.operation?.phase === 'tracking' && s.tracking_error?.['1s']?.n > 500
         && s.mount_time_us > s.operation.info.tracking_from_us + 2e6;
     }, null, { timeout: 60_000 });
-    await page.waitForTimeout(1200); // the next poll is drawn
+    await nextPoll(page);
     result.tracking = await readBoard(page);
     result.trackingOperation = await page.evaluate(() => JSON.parse(JSON.stringify(window.panelTelescope.state.operation)));
     await page.screenshot({ path: join(ARTIFACTS, 'telescope.png') });
@@ -67,7 +73,7 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), join
     await page.click('[data-testid=stop-all]');
     await page.waitForFunction(() => /VSS: stop done/.test(document.querySelector('[data-testid=stop-outcome]')?.textContent ?? ''), null, { timeout: 30_000 });
     result.stopOutcome = await page.textContent('[data-testid=stop-outcome]');
-    await waitField(page, 'phase', '^(aborted|done)$');
+    await waitField(page, 'phase', '^(stopped|aborted|done)$');
     result.afterStop = await readBoard(page);
     result.log = await page.textContent('[data-testid=log]');
     step(result, 'header STOP');
@@ -86,7 +92,7 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), join
     await waitField(page, 'kind', '^park');
     await waitField(page, 'phase', '^done$', 120_000);
     await waitField(page, 'mount-state', '^off$');
-    await page.waitForTimeout(1200);
+    await nextPoll(page);
     result.parked = await readBoard(page);
     await page.screenshot({ path: join(ARTIFACTS, 'telescope-parked.png') });
     step(result, 'parked');
