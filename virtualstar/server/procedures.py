@@ -186,6 +186,14 @@ async def goto_safely(t: Station, op: Operation, az_rad: float, el_rad: float, w
     return pos
 
 
+def _settle_s(t: Station, feeder) -> float:
+    """Mount seconds from the join to the landing check: the configured settle, or what a
+    rate loop needs to take up the path's rate from a few driver reports."""
+    if t.link.capabilities.trajectory_buffer:
+        return t.config.settle_s
+    return feeder.settle_s(t.config.settle_s)
+
+
 def _place_tolerance(t: Station) -> float:
     """How close a slew to a fixed place must land: the arrival tolerance, or the goto
     accuracy a mount without a trajectory buffer declares (its driver lands the goto)."""
@@ -225,7 +233,7 @@ async def follow_sky_target(t: Station, op: Operation, target: Any, *,
     ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun)
 
     async def on_path() -> dict[str, Any]:
-        settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
+        settled_us = ramp.join_us + int(_settle_s(t, feeder) * 1e6)
         await t.motion.wait_until(ramp.join_us)
         t.supervisor.phase(op, Phase.SETTLING)
         await t.motion.wait_until(settled_us)
@@ -468,7 +476,7 @@ async def track_satellite_pass(t: Station, op: Operation, sat: Satellite, *,
     async def on_path() -> int:
         await t.motion.wait_until(ramp.join_us)
         t.supervisor.phase(op, Phase.SETTLING, tracking_from_us=ramp.join_us)
-        await t.motion.wait_until(ramp.join_us + int(cfg.settle_s * 1e6))
+        await t.motion.wait_until(ramp.join_us + int(_settle_s(t, feeder) * 1e6))
         err = await verify_joined(t, ramp, feeder, f"joining the pass of {sat.name}")
         t.supervisor.phase(op, Phase.TRACKING, join_error_arcsec=err)
         return min(await t.motion.wait_until(set_us, op.info), set_us)

@@ -181,16 +181,22 @@ class RateFollower:
             self.link.demand = self._demand
         self.stats.signs = tuple(getattr(self.link, "axis_signs", (1.0, 1.0)))
         last_t = 0
+        last_cycle = time.monotonic()
         while not self.done:
             period = self._period_s()
-            await self.link.wait_report(last_t, max(3.0, STALE_REPORTS * period))
+            stale_s = max(3.0, STALE_REPORTS * period)
+            await self.link.wait_report(last_t, stale_s)
             v = await self.link.read(["axis1_position", "axis2_position", "report_time",
                                       "mount_time", "mount_state"])
             t_rep, now = int(v["report_time"]), int(v["mount_time"])
             age_s = (now - t_rep) / 1e6
             self.stats.max_report_age_s = max(self.stats.max_report_age_s, age_s)
+            stalled = time.monotonic() - last_cycle > stale_s + 1.0
+            last_cycle = time.monotonic()
             if t_rep <= last_t:
-                if age_s > max(3.0, STALE_REPORTS * period):
+                # a report this old while rates are commanded: the driver froze (a host that
+                # stalled this loop is not the driver's fault: the next report decides)
+                if age_s > stale_s and not stalled:
                     await self._stop(f"no report from the driver for {age_s:.1f} s")
                 continue
             last_t = t_rep
@@ -342,6 +348,11 @@ class RateFollower:
         import asyncio
 
         await asyncio.sleep(s)
+
+    def settle_s(self, settle_s: float) -> float:
+        """How long after the join to verify: the loop needs a few reports to take up a rate
+        step (8 report periods, at least `settle_s`)."""
+        return max(settle_s, 8.0 * self._period_s())
 
     async def verify(self, tolerance_arcsec: float, what: str) -> float:
         """The last measured error (arcsec); NotArrived beyond tolerance + its time uncertainty.
