@@ -62,6 +62,7 @@ RATE_STEP_H_S = 0.2  # mount seconds between the two samples that give the path'
 STALE_REPORTS = 12  # reports missed (or 3 s, the larger) before the driver counts as lost
 PROBE_RATE_ARCSEC_S = 60.0  # the sign probe: small, a few arcseconds of motion
 PROBE_S = 0.4  # wall seconds each axis moves in the probe (at least 2.5 driver periods)
+MIN_RATE_CHANGE_ARCSEC_S = 0.05  # a smaller change of rate is not sent
 MERIDIAN_LIMIT_DEG = 0.0  # how far past the meridian a German mount may track (hour angle)
 
 
@@ -158,7 +159,9 @@ class RateFollower:
         self._side: float | None = None  # the sign of the hour angle at the join (German)
         caps = link.capabilities
         self.max_rate = math.radians(caps.max_rate_deg_s or 1.0)
-        step = caps.rate_step_arcsec_s or 0.001
+        # rates closer than this to those in force are not sent: a star is left to the
+        # mount's own tracking (its place of date moves by hundredths of an arcsecond a second)
+        step = max(caps.rate_step_arcsec_s or 0.0, MIN_RATE_CHANGE_ARCSEC_S)
         self.deadband = step / ARCSEC_PER_RAD
 
     # ------------------------------------------------------------------ the loop
