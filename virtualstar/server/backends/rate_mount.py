@@ -435,10 +435,9 @@ class RateMountLink:
         else:
             old.read_us = mid
             old.flags = rep
-            if (self._rates_rad_s == (0.0, 0.0) and (rep.tracking or rep.at_park)) \
-                    or not self.driver.poll_s:
-                # a place that stands still on the sky describes now as well; a driver that
-                # pushes its place on change says by its silence that it is unchanged
+            if self._rates_rad_s == (0.0, 0.0) and (rep.tracking or rep.at_park):
+                # a place that stands still on the sky describes now as well (with tracking
+                # off the place of date moves: a silent driver's report is then just old)
                 old.t_us, old.spread_us = mid, 0
                 self._new_report.set()
                 self._new_report = asyncio.Event()
