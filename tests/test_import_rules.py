@@ -96,7 +96,10 @@ def test_the_emulator_physics_reads_no_clock_and_no_socket(module):
 
 def test_the_vss_reads_no_clock_of_its_own_for_mount_time():
     """The VSS waits on the mount clock (server/clock.py); wall time only for timeouts."""
-    allowed = {"clock.py", "timesync.py", "telescope.py", "server.py"}  # wall: TimeS, stall, heartbeat
+    allowed = {"clock.py", "timesync.py", "telescope.py", "server.py",  # wall: TimeS, stall, heartbeat
+               # a driver without a mount clock: mount time is the host's UTC, each report
+               # stamped when it was read (ARCHITECTURE.md, "Time"); its loop paces in wall time
+               "rate_mount.py", "indi.py", "rate_loop.py"}
     for path in modules("virtualstar/server"):
         if path.name not in allowed:
             assert not imported(path) & {"time", "datetime"}, path.name
@@ -230,3 +233,24 @@ def test_the_facades_reach_the_mount_only_through_a_vss_client(package):
 def test_the_facade_protocols_do_no_io(module):
     names = imported(ROOT / module)
     assert not names & {"asyncio", "socket", "aiohttp", "websockets", "sys"}, names
+
+
+@pytest.mark.parametrize("module", ["procedures.py", "programs.py"])
+def test_the_procedures_see_the_server_only_through_the_station_view(module):
+    """Issue 26's import circle: procedures and programs take a `Station` (station.py), a
+    narrow view of the server, and never import the telescope, even for typing."""
+    names = imported(ROOT / "virtualstar" / "server" / module)
+    assert "virtualstar.server.telescope" not in names, names
+
+
+def test_mount_backends_import_no_supervisor_internals():
+    """A backend implements the mount-link interface and nothing more: it may import the
+    interface, the mapping, the exceptions, astronomy and its protocol's client library."""
+    allowed = {"virtualstar.server.link_interface", "virtualstar.server.mapping",
+               "virtualstar.server.exceptions", "virtualstar.server.operations"}
+    for path in modules("virtualstar/server/backends"):
+        for name in ours(imported(path)):
+            if name.startswith("virtualstar.server.") and not name.startswith(
+                    "virtualstar.server.backends"):
+                assert name in allowed, f"{path.relative_to(ROOT)} imports {name}"
+            assert not name.startswith(("mount_emulator", "virtualstar.launcher")), name

@@ -47,7 +47,9 @@ def server(
         "a restarted server is found where it was. 0 picks a free port. Clients are told where "
         "it is (status: mount_endpoint).")] = None,
     mount: Annotated[str | None, typer.Option(
-        "--mount", help="ASTCom URL of the mount, e.g. ws://mount:8765 (instead of --emulator).")] = None,
+        "--mount", help="The mount, instead of --emulator: an ASTCom URL (ws://mount:8765), an "
+        "ASCOM Alpaca telescope alpaca://HOST:PORT/N, or an INDI telescope "
+        "indi://HOST:PORT/DEVICE (see docs/mount-backends.md).")] = None,
     password: Annotated[str | None, typer.Option(
         "--password", envvar="ASTCOM_PASSWORD", help="Operator password of the mount's ASTCom "
         "endpoint (the server's own API passwords: --operator-password, --observer-password). "
@@ -67,6 +69,9 @@ def server(
         "(repeat for more; default: pages served from loopback only).")] = None,
     listen: Annotated[str, typer.Option(
         "--listen", help="Where clients connect: ws://HOST:PORT.")] = DEFAULT_SERVER_URL,
+    signals: Annotated[str | None, typer.Option(
+        "--signals", help="With an alpaca:// or indi:// mount: serve its reports (place, rates, "
+        "error) as ASTCom signals here, e.g. ws://127.0.0.1:8767, for `vs record`.")] = None,
     site_file: Annotated[Path | None, typer.Option(
         "--site-file", envvar="VIRTUALSTAR_SITE", help="Site TOML file with a \\[site] table (and optionally \\[safety]).")] = None,
     site: Annotated[str | None, typer.Option(
@@ -114,6 +119,10 @@ def server(
     if not emulator and pace is None:
         raise fail("--speed max only applies to --emulator (lockstep needs the emulator in this "
                    "process); give --speed X for a simulated mount running at X times real time")
+    if signals is not None and (emulator or mount is None or "://" not in mount
+                                or mount.split("://")[0] not in ("alpaca", "indi")):
+        raise fail("--signals applies to an alpaca:// or indi:// mount (an ASTCom mount "
+                   "streams its own signals: record them from its endpoint)")
     if not emulator and start is not None:
         raise fail("--start only applies to --emulator (a mount keeps its own clock)")
     if endpoint_port is not None and not emulator:
@@ -182,7 +191,7 @@ def server(
                 run_lockstep(serve, clock)
         else:
             asyncio.run(_serve(pace, mount, password, mapping, listen, the_site,
-                               pointing_model, passive, zones, access, cameras))
+                               pointing_model, passive, zones, access, cameras, signals))
     except VssError as exc:
         raise fail(str(exc)) from None
     except EndpointUnavailable as exc:
@@ -296,17 +305,19 @@ async def _serve_embedded(clock, start_us, password, listen, site, mapping,
 
 
 async def _serve(speed, mount, password, mapping, listen, site, pointing_model, passive,
-                 zones, access, cameras) -> None:
+                 zones, access, cameras, signals=None) -> None:
     from virtualstar.server import build_server
 
     stop = _stop_event()
     vss = build_server(mount_url=mount, password=password, mapping_path=mapping, site=site,
                        speed=speed, active=not passive, pointing_model=pointing_model,
-                       zones=zones, access=access, **cameras)
+                       zones=zones, access=access, signals_url=signals, **cameras)
     try:
         url = await vss.start(listen)
         where = mount + (f", a simulated mount at x{speed:g}" if speed != 1 else "")
         typer.echo(f"VirtualStar Server on {url} (mount: {where})")
+        if vss.telescope.signals is not None:
+            typer.echo(f"the mount's reports as ASTCom signals on {vss.telescope.signals.url}")
         await stop.wait()
     finally:
         await vss.close()

@@ -48,7 +48,7 @@ from .exceptions import VssError
 from .operations import Operation
 
 if TYPE_CHECKING:
-    from .telescope import Telescope
+    from .station import Station
 
 __all__ = ["POLL_S", "ClosedLoop", "running"]
 
@@ -64,7 +64,7 @@ UNREACHABLE_RETRY_S = 1.0
 class ClosedLoop:
     """One loop: a track's corrections, the camera, the filter and what it did."""
 
-    def __init__(self, t: Telescope, op: Operation, corrections: Corrections, kind: str,
+    def __init__(self, t: Station, op: Operation, corrections: Corrections, kind: str,
                  camera: CameraLink, config: FilterConfig) -> None:
         if kind not in ("satellite", "sky"):
             raise ValueError(f"closed loop kind {kind!r}: expected 'satellite' or 'sky'")
@@ -255,7 +255,7 @@ def _tangent(az: float, el: float, az0: float, el0: float) -> tuple[float, float
 
 
 @contextlib.asynccontextmanager
-async def running(t: Telescope, op: Operation, corrections: Corrections, kind: str,
+async def running(t: Station, op: Operation, corrections: Corrections, kind: str,
                   enabled: bool) -> AsyncIterator[ClosedLoop | None]:
     """Run the closed loop (if `enabled`) while the block runs; it ends with the block."""
     if not enabled:

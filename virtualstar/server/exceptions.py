@@ -20,6 +20,7 @@
     ├── NoCamera (LookupError)                      no_camera        a closed loop needs a guide camera (--camera)
     ├── NotArrived (RuntimeError)                   not_arrived      the mount is not where the target is (how far: in the message)
     ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
+    ├── Unsupported (RuntimeError)                  unsupported      the mount's backend cannot do this (its capabilities)
     ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
     │   └── StoppedByClient                         aborted          ended by a client's `stop` (`stopped`: true)
     └── InternalError (RuntimeError)                internal         a bug: reported, the server keeps running
@@ -46,6 +47,7 @@ __all__ = [
     "TargetUnreachable",
     "Throttled",
     "TrackingLost",
+    "Unsupported",
     "Unauthorized",
     "UnknownCommand",
     "VssError",
@@ -188,6 +190,12 @@ class NoCamera(LookupError, VssError):
     """A closed loop was asked for but the server has no guide camera."""
 
     code = "no_camera"
+
+
+class Unsupported(RuntimeError, VssError):
+    """The mount's backend cannot do what was asked (its capabilities say so)."""
+
+    code = "unsupported"
 
 
 class Throttled(PermissionError, VssError):

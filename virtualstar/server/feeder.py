@@ -34,7 +34,7 @@ import numpy as np
 
 from .clock import MountClock
 from .exceptions import MountFault, OperationAborted, TrackingLost
-from .mount_link import MountLink
+from .link_interface import MountBackend
 from .trajectories import Path, Points
 
 __all__ = ["Feeder", "FeederConfig", "FeederStats"]
@@ -79,7 +79,7 @@ class FeederStats:
 class Feeder:
     """Feeds one path to the mount; create one per trajectory."""
 
-    def __init__(self, link: MountLink, clock: MountClock, config: FeederConfig, path: Path,
+    def __init__(self, link: MountBackend, clock: MountClock, config: FeederConfig, path: Path,
                  first_us: int, *, fault_code: int, tracking_code: int,
                  on_points: Callable[[Points], None] | None = None) -> None:
         self.link = link

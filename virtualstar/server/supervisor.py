@@ -34,8 +34,8 @@ from .exceptions import (
     OperationAborted,
     VssError,
 )
+from .link_interface import MountBackend
 from .motion import Motion
-from .mount_link import MountLink
 from .operations import Operation, Phase, Resume, current_operation, resume_decision
 
 __all__ = ["Procedure", "Supervisor", "operations_of_tasks"]
@@ -56,7 +56,7 @@ def operations_of_tasks(task_names) -> set[str]:
 class Supervisor:
     """Run operations one at a time on a mount; emit ``operation`` events as they change."""
 
-    def __init__(self, link: MountLink, motion: Motion, *,
+    def __init__(self, link: MountBackend, motion: Motion, *,
                  emit: Callable[[str, dict[str, Any]], None],
                  resume_timeout_s: float = DEFAULT_RESUME_TIMEOUT_S) -> None:
         self.link = link

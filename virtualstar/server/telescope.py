@@ -54,11 +54,12 @@ from .exceptions import (
     OperationAborted,
     StoppedByClient,
     TargetUnreachable,
+    Unsupported,
     VssError,
 )
 from .feeder import FeederConfig
+from .link_interface import MountBackend
 from .motion import Motion
-from .mount_link import MountLink
 from .offset_path import sky_rate_arcsec_s
 from .on_target import OnTarget
 from .operations import Operation
@@ -118,9 +119,9 @@ class TelescopeConfig:
 
 
 class Telescope:
-    """Drive one mount through a `MountLink`; emit events through `emit(kind, data)`."""
+    """Drive one mount through its mount link (`link_interface.MountBackend`); emit events through `emit(kind, data)`."""
 
-    def __init__(self, link: MountLink, config: TelescopeConfig, clock: MountClock | None = None,
+    def __init__(self, link: MountBackend, config: TelescopeConfig, clock: MountClock | None = None,
                  emit: Callable[[str, dict[str, Any]], None] | None = None) -> None:
         self.link = link
         self.config = config
@@ -151,6 +152,8 @@ class Telescope:
         self.steering = Steering(self)  # offsets and guide pulses of the running track
         self.log = EventLog("vss", kept_apart=KEPT_APART)
         self.last_mount_us: int | None = None  # the newest tracking-error sample's time
+        self.signals_url: str | None = None  # where a rate-driven mount's reports are served
+        self.signals = None
 
     def log_event(self, level: str, kind: str, message: str, **fields: Any) -> None:
         """Log an event at the mount time last seen; before any sample, the lockstep
@@ -180,9 +183,21 @@ class Telescope:
         tracking_errors.warm_up()  # compiled kernels ready before any client or sample comes
         on_target.warm_up()
         self.link.on_event = self._on_link_event
+        if self.signals_url is not None:
+            await self._serve_signals(self.signals_url)
         self.link.start()
         self._spawn(self._watch(), "vss-watch")
         self._spawn(self.timesync.run(), "vss-timesync")
+
+    async def _serve_signals(self, url: str) -> None:
+        """Serve a rate-driven mount's reports as ASTCom signals (backend_signals.py)."""
+        if not hasattr(self.link, "report_listeners"):
+            raise BadRequest("--signals: this mount streams its own signals over ASTCom; "
+                             "record them from its endpoint")
+        from .backend_signals import ReportSignals
+
+        self.signals = ReportSignals(self.link)
+        await self.signals.serve(url)
 
     async def close(self) -> None:
         """Stop everything: a running operation is ended (the mount brought to rest), tasks too."""
@@ -196,6 +211,8 @@ class Telescope:
             await asyncio.wait(tasks)
         await self.steering.close()
         await self.link.stop()
+        if self.signals is not None:
+            await self.signals.close()
 
     async def first_samples(self, timeout_s: float) -> None:
         """Wait until the error stream has delivered samples (the VSS is fully up)."""
@@ -220,13 +237,23 @@ class Telescope:
             self._spawn(self._after_connecting(), "vss-after-connecting")
         elif kind == "mount_disconnected":
             self._mount_state = None
-            self.supervisor.interrupt(MountUnavailable("lost the connection to the mount"))
+            if self.link.capabilities.trajectory_buffer:
+                self.supervisor.interrupt(MountUnavailable("lost the connection to the mount"))
+            else:
+                # a mount told rates keeps turning at them: an operation on it cannot wait
+                # for the link to come back, it ends with a fault (the link told it to stop)
+                self.last_fault = f"lost the driver: {data.get('reason', 'connection lost')}"
+                self.supervisor.interrupt(MountFault(
+                    f"lost the {self.link.capabilities.backend} driver in the middle of the "
+                    f"operation ({data.get('reason', 'connection lost')}); the mount was told "
+                    "to stop"))
 
     async def _after_connecting(self) -> None:
         for attempt in range(5):  # a loaded host may time a first request out: try again
             try:
                 await self._read_limits()
-                await self._start_error_stream()
+                if self.link.capabilities.error_stream:
+                    await self._start_error_stream()
                 return
             except VssError as exc:
                 log.warning("after connecting (attempt %d): %s", attempt + 1, exc)
@@ -381,7 +408,7 @@ class Telescope:
                             min_lead_s=min(0.5, self.margins.start_lead_s / 2))
 
     # ------------------------------------------------------------------ commands
-    def _check_can_move(self) -> None:
+    def check_can_move(self) -> None:
         """Refuse a moving command on a passive server or without a mount (again under the lock)."""
         if not self.active:
             raise NotActive("the server is passive (it only watches the mount): run "
@@ -395,7 +422,7 @@ class Telescope:
                             closed_loop: bool = False) -> Operation:
         """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped);
         `closed_loop`: guided by the guide camera's centroids (closed_loop.py)."""
-        self._check_can_move()
+        self.check_can_move()
         if closed_loop:
             self.steering.need_camera(kind)
 
@@ -417,7 +444,7 @@ class Telescope:
     async def _start(self, kind: str, name: str, procedure, *, resumable: bool = False,
                      allow_sun: bool = False, check=None) -> Operation:
         async def checks() -> None:
-            self._check_can_move()  # it may have gone passive while this waited for the lock
+            self.check_can_move()  # it may have gone passive while this waited for the lock
             if check is not None:
                 await check()
 
@@ -443,7 +470,7 @@ class Telescope:
         A hold must stay out of the Sun/Moon zones for the next hour (the Sun drifts
         15°/h); the park position is exempt (the stow is the safe place).
         """
-        self._check_can_move()
+        self.check_can_move()
         lim = self.limits
         lowest = lim.el_min_deg - self.config.horizon_deg if kind == "park" else lim.el_min_deg
         if not lowest <= el_deg <= lim.el_max_deg:
@@ -467,6 +494,10 @@ class Telescope:
         return op
 
     async def park(self) -> Operation:
+        caps = self.link.capabilities
+        if not caps.park:
+            raise Unsupported(f"park: the {caps.backend} mount cannot park (its driver says "
+                              "so); slew to a safe place and stop instead")
         m = self.link.mapping
         return await self.slew_altaz(m.park_az_deg, m.park_el_deg, kind="park", power_off=True)
 
@@ -485,7 +516,7 @@ class Telescope:
                                "star_el_deg) -> [dx_arcsec, dy_arcsec] function)")
         if not settle_s >= 0:
             raise BadRequest(f"settle_s={settle_s}: expected >= 0 mount seconds")
-        self._check_can_move()
+        self.check_can_move()
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.measure_pointing(self, op, target, name, settle_s=settle_s,
@@ -506,7 +537,7 @@ class Telescope:
                                  f"±{top:g}°/s")
         if az_rate_deg_s == 0.0 and el_rate_deg_s == 0.0:
             raise BadRequest("move: both rates are 0; send stop to end a move")
-        self._check_can_move()
+        self.check_can_move()
         name = f"move az {az_rate_deg_s:+g}°/s el {el_rate_deg_s:+g}°/s"
 
         async def procedure(op: Operation) -> dict[str, Any]:
@@ -528,7 +559,7 @@ class Telescope:
                               allow_sun: bool = False, closed_loop: bool = False) -> Operation:
         """Track the pass of `sat` in progress, or the next one above the horizon limit;
         `closed_loop`: the along/across offsets follow the guide camera (closed_loop.py)."""
-        self._check_can_move()
+        self.check_can_move()
         if closed_loop:
             self.steering.need_camera("track")
 
@@ -612,6 +643,8 @@ class Telescope:
                                "safety": self._safety_doc(),
                                "limits": dataclasses.asdict(self.limits),
                                "corrections": self.steering.status(self.last_mount_us),
+                               "backend": {**self.link.describe(), "signals_url":
+                                           self.signals.url if self.signals else None},
                                "tracking_error": {f"{w}s": self.errors.window(w).as_dict()
                                                   for w in (1, 10, 60)}}
         if not self.link.connected:

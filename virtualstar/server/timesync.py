@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 from .clock import MountClock
 from .exceptions import VssError
-from .mount_link import MountLink
+from .link_interface import MountBackend
 
 __all__ = ["ARM_WINDOW_US", "TimeSync", "TimeSyncStatus"]
 
@@ -57,7 +57,7 @@ class TimeSyncStatus:
 class TimeSync:
     """Periodically sync the mount clock to UTC and measure its offset."""
 
-    def __init__(self, link: MountLink, clock: MountClock, *, simulated: bool,
+    def __init__(self, link: MountBackend, clock: MountClock, *, simulated: bool,
                  period_s: float = 10.0,
                  on_offset: Callable[[int, int], None] | None = None) -> None:
         self.link = link
@@ -74,7 +74,10 @@ class TimeSync:
         The measurement before the sync is the drift accumulated since the last one (the
         worst offset of the period), the one after it what the sync left.
         """
-        if not self.active:
+        if not self.active or not self.link.capabilities.time_sync:
+            # a driver without a PPS clock keeps its own time (host UTC): only measured
+            if not self.link.capabilities.time_sync:
+                self.status.mode = "verify only (the driver keeps its own time)"
             await self.verify()
             return
         second = await self._second_in_window()
