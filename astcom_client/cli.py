@@ -296,7 +296,12 @@ def relay_command(
                                      "'*' for any.")] = None,
         queue_packets: Annotated[int, typer.Option(
             "--queue-packets", min=1, help="Stream packets queued per slow client before the "
-                                           "oldest is dropped.")] = 256) -> None:
+                                           "oldest is dropped.")] = 256,
+        link_timeout: Annotated[float, typer.Option(
+            "--link-timeout", min=0.5, help="Seconds without a frame from the device (it "
+                                            "answers a PING every second) before the link "
+                                            "counts as lost and its clients get ERR 503.")] = 3.0
+        ) -> None:
     """Carry one device link (serial/SPI or TCP, framed as in the protocol's §11) to many clients.
 
     Every client gets its own session on the device (handshake, password, streams); the
@@ -310,7 +315,7 @@ def relay_command(
     try:
         config = RelayConfig(serial=serial, tcp=tcp, listen=tuple(listen or ["ws://127.0.0.1:8765"]),
                              allowed_origins=tuple(allowed_origin) if allowed_origin else None,
-                             queue_packets=queue_packets)
+                             queue_packets=queue_packets, link_timeout_s=link_timeout)
         for url in config.listen:
             parse_url(url)
     except ValueError as exc:

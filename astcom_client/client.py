@@ -283,8 +283,19 @@ class Client:
             client._reader = asyncio.get_running_loop().create_task(client._read_loop())
         conn.start()
         try:
+            # An endpoint that refuses (429, 503) says why and closes at once: its reason may
+            # already be here, before our HELLO (then sending it fails). Its reason, not the
+            # closed socket.
+            if client._ready.done() and client._ready.exception() is not None:
+                raise client._ready.exception()
             await client._flush()
             ready = await asyncio.wait_for(asyncio.shield(client._ready), timeout_s)
+        except ConnectionClosed as exc:
+            await client._abort()
+            refusal = client._ready.exception() if client._ready.done() else None
+            if isinstance(refusal, AstcomError) and refusal is not exc:
+                raise refusal from None
+            raise
         except BaseException:
             await client._abort()
             raise
@@ -422,8 +433,9 @@ class Client:
             while (frame := self._conn.next_frame()) is not None:
                 await self._transport.send(frame)
         except (ConnectionError, AstcomError) as exc:
-            self._fail_all(ConnectionClosed(f"connection lost while sending: {exc}"))
-            raise ConnectionClosed(f"connection lost while sending: {exc}") from None
+            error = ConnectionClosed(f"connection lost while sending: {exc}")
+            self._fail_all(error)
+            raise error from None
 
     # -- reader ----------------------------------------------------------------------------------
     async def _read_loop(self) -> None:

@@ -13,6 +13,7 @@ import contextvars
 import itertools
 import logging
 import ssl
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -21,9 +22,17 @@ import numpy as np
 
 from .auth import Authenticator, Role
 from .codec import Codec, CodecLimits
-from .exceptions import AstcomError, AuthTimeout, ConnectionClosed, DeviceError, TooMany
+from .exceptions import (
+    AstcomError,
+    AuthenticationFailed,
+    AuthTimeout,
+    ConnectionClosed,
+    DeviceError,
+    TooMany,
+)
 from .origins import check_allowed_origins
 from .protocol import (
+    AuthRequested,
     RequestReceived,
     ServerConnection,
     ServerOptions,
@@ -31,6 +40,7 @@ from .protocol import (
 )
 from .registry import Collection
 from .service import EndpointService, PendingInvoke, ServiceLimits
+from .throttle import AuthThrottle, Failure, ThrottlePolicy
 from .transports import (
     MemoryTransport,
     ServerHandle,
@@ -58,6 +68,12 @@ class EndpointConfig:
     (http(s)://127.0.0.1, localhost, [::1], any port); otherwise a list of origins
     `http(s)://host[:port]`, "loopback" for the default set, or "*" for any page.
     Other pages get HTTP 403 with the reason.
+
+    Before a connection has authenticated it may send `max_pending_frames` frames of
+    `max_pending_frame_bytes` at most (more, or larger, close it), and its password attempts are throttled per address
+    and overall by `throttle` (astcom_client/throttle.py): held a moment, or refused
+    unchecked with ERR 429. A peer that does not read its replies is not read either:
+    each request is answered before the next is read.
     """
 
     loop_rate_hz: float = 1000.0
@@ -73,6 +89,9 @@ class EndpointConfig:
     max_names_per_message: int = 1024
     max_streams_per_client: int = 64
     auth_timeout_s: float = 10.0
+    max_pending_frame_bytes: int = 4096  # before authentication
+    max_pending_frames: int = 16  # frames a connection may send before it has authenticated
+    throttle: ThrottlePolicy = ThrottlePolicy()
     queue_packets: int = 256  # per client; the oldest stream packet is dropped beyond it
     flush_interval_s: float = 0.02  # a stream packet holds about this much time of samples
     certfile: str | None = None
@@ -90,7 +109,9 @@ class EndpointConfig:
                 "max_names_per_message": self.max_names_per_message,
                 "max_streams_per_client": self.max_streams_per_client,
                 "auth_timeout_s": self.auth_timeout_s, "queue_packets": self.queue_packets,
-                "max_clients": self.max_clients, "max_pending": self.max_pending}
+                "max_clients": self.max_clients, "max_pending": self.max_pending,
+                "max_pending_frame_bytes": self.max_pending_frame_bytes,
+                "max_pending_frames": self.max_pending_frames}
 
 
 # Who sent the request a device function or setter is running for: (client name, role
@@ -105,6 +126,8 @@ class Endpoint:
 
     `on_client(what, name, role, client_id)`, if set, is called with "connected" once a
     client is authenticated (its role known) and "disconnected" when it leaves.
+    `on_auth_failure(peer, failure)`, if set, is called for every wrong password (a
+    device logs it) with the `throttle.Failure` it cost the peer's address.
     """
 
     def __init__(self, collection: Collection, config: EndpointConfig | None = None) -> None:
@@ -119,15 +142,18 @@ class Endpoint:
             limits=ServiceLimits(cfg.max_messages, cfg.max_names_per_message,
                                  cfg.max_streams_per_client, cfg.max_array_len,
                                  cfg.flush_interval_s))
-        self._options = ServerOptions(Authenticator(cfg.passwords), self.codec, cfg.name,
+        authenticator = Authenticator(cfg.passwords)
+        self._options = ServerOptions(authenticator, self.codec, cfg.name,
                                       cfg.loop_rate_hz, cfg.queue_packets, cfg.limits(),
-                                      admit=self._admit)
+                                      admit=self._admit, gate_auth=authenticator.required)
+        self.throttle = AuthThrottle(cfg.throttle)
         self._ids = itertools.count(1)
         self._wakers: dict[int, asyncio.Event] = {}
         self._servers: list[ServerHandle] = []
         self._sessions: set[asyncio.Task[None]] = set()
         self.urls: list[str] = []
         self.on_client: Callable[[str, str, str, int], None] | None = None
+        self.on_auth_failure: Callable[[str, Failure], None] | None = None
 
     def _announce(self, what: str, conn: ServerConnection) -> None:
         if self.on_client is not None:
@@ -267,7 +293,10 @@ class Endpoint:
         writer = asyncio.create_task(self._writer(conn, transport, wake, control_lock))
         loop = asyncio.get_running_loop()
         timer = loop.call_later(self.config.auth_timeout_s, self._auth_expired, conn, wake)
+        if self._options.gate_auth:
+            _limit_frames(transport, self.config.max_pending_frame_bytes)
         announced = False
+        frames_before_auth = 0
         try:
             while conn.state is not ServerState.CLOSED and not writer.done():
                 try:
@@ -278,13 +307,23 @@ class Endpoint:
                     break
                 if data is None:
                     break
+                if not conn.role:
+                    frames_before_auth += 1
+                    if frames_before_auth > self.config.max_pending_frames:
+                        conn.close(TooMany.code, f"more than {self.config.max_pending_frames} "
+                                   "frames before authenticating")
+                        await self._send_pending(conn, transport)
+                        break
                 for event in conn.receive_frame(data):
                     if isinstance(event, RequestReceived):
                         await self._execute(conn, event)
+                    elif isinstance(event, AuthRequested):
+                        await self._gate_auth(conn, event, transport.peer)
                 if conn.role:
                     timer.cancel()
                     if not announced:
                         announced = True
+                        _limit_frames(transport, self.config.max_frame_bytes)
                         self._announce("connected", conn)
                 # Replies go out from here, without a hop through the writer task (latency).
                 try:
@@ -318,6 +357,35 @@ class Endpoint:
         finally:
             current_client.reset(token)
         conn.send_result(event.seq, result)
+
+    async def _gate_auth(self, conn: ServerConnection, event: AuthRequested, peer: str) -> None:
+        """Hold or refuse an AUTH as the throttle says, check it, report the outcome."""
+        address = peer.rpartition(":")[0] or peer
+        verdict = self.throttle.reserve(address, time.monotonic())
+        if verdict.refused:  # counted by the throttle, not logged one by one (a flood)
+            conn.finish_auth(event.seq, event.auth, verdict.message(address))
+            return
+        try:
+            if verdict.wait_s > 0:
+                await asyncio.sleep(verdict.wait_s)  # the guesses of one address queue up
+        except asyncio.CancelledError:
+            self.throttle.cancelled(address, time.monotonic())
+            raise
+        conn.finish_auth(event.seq, event.auth)
+        now = time.monotonic()
+        if conn.role:
+            self.throttle.succeeded(address, now)
+        elif conn.close_code == AuthenticationFailed.code:
+            failure = self.throttle.failed(address, now)
+            log.warning("wrong password from %s (%d in a row%s)", peer, failure.failures,
+                        f"; locked out for {failure.locked_s:g} s" if failure.locked_s else "")
+            if self.on_auth_failure is not None:
+                try:
+                    self.on_auth_failure(peer, failure)
+                except Exception:  # a device's logging must never cut a connection
+                    log.exception("on_auth_failure failed")
+        else:  # malformed, timed out, or refused for want of a client slot: not a guess
+            self.throttle.cancelled(address, now)
 
     @staticmethod
     async def _finish_invoke(pending: PendingInvoke) -> dict[str, Any]:
@@ -371,3 +439,10 @@ class Endpoint:
         with contextlib.suppress(Exception):
             while (frame := conn.next_frame()) is not None:
                 await asyncio.wait_for(transport.send(frame), 2.0)
+
+
+def _limit_frames(transport: Transport, max_bytes: int) -> None:
+    """Set the largest frame `transport` reads, if it can tell (the pre-auth budget)."""
+    limit = getattr(transport, "limit_frames", None)
+    if limit is not None:
+        limit(max_bytes)

@@ -13,12 +13,21 @@ phase, gap, session, anomaly...), `fields` a flat map of JSON values. `EventLog`
 the newest `capacity` events in order with a sequence number, so a reader that asks
 for everything after the last `seq` it saw never misses one unless it fell `capacity`
 behind (the gap is then visible in `seq`). No I/O and no clock: the caller gives times.
+
+Kinds that anyone can cause in bulk (connections, failed logins) can be kept apart
+(`kept_apart={"connection": 2000, "auth": 2000}`): each such kind has a ring of its
+own, so a flood of them pushes out only older events of the same kind, never the
+operations, faults, commands and safety events of the main ring. `dropped` counts the
+events that fell out of the log, by kind.
 """
 
 from __future__ import annotations
 
+import bisect
+import heapq
 import json
-from collections import deque
+from collections import Counter, deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
@@ -70,29 +79,55 @@ class Event:
 
 
 class EventLog:
-    """The newest `capacity` events of one source, numbered from 1."""
+    """The newest `capacity` events of one source, numbered from 1.
 
-    def __init__(self, source: str, *, capacity: int = DEFAULT_CAPACITY) -> None:
+    `kept_apart` maps a kind to the capacity of a ring of its own (see the module
+    docstring); every other kind shares the main ring of `capacity` events.
+    """
+
+    def __init__(self, source: str, *, capacity: int = DEFAULT_CAPACITY,
+                 kept_apart: Mapping[str, int] | None = None) -> None:
         self.source = source
         self._events: deque[Event] = deque(maxlen=capacity)
+        self._apart: dict[str, deque[Event]] = {
+            kind: deque(maxlen=int(size)) for kind, size in (kept_apart or {}).items()}
         self.last_seq = 0
+        self.dropped: Counter[str] = Counter()
 
     def add(self, t_us: int, level: str, kind: str, message: str, **fields: Any) -> Event:
         """Append an event at mount time `t_us`; return it (with its `seq`)."""
         level_rank(level)
         self.last_seq += 1
         event = Event(int(t_us), self.source, level, kind, message, fields, self.last_seq)
-        self._events.append(event)
+        ring = self._apart.get(kind, self._events)
+        if ring.maxlen is not None and len(ring) == ring.maxlen:
+            self.dropped[ring[0].kind] += 1
+        ring.append(event)
         return event
+
+    def __len__(self) -> int:
+        return len(self._events) + sum(len(ring) for ring in self._apart.values())
 
     def since(self, seq: int) -> list[Event]:
         """Return the events numbered after `seq`, oldest first."""
-        if not self._events or seq >= self.last_seq:
+        if seq >= self.last_seq:
             return []
-        first = self._events[0].seq
-        start = max(0, seq + 1 - first)
-        return list(self._events)[start:]
+        rings = [self._events, *self._apart.values()]
+        parts = [_after(ring, seq) for ring in rings if ring]
+        if len(parts) == 1:
+            return parts[0]
+        return list(heapq.merge(*parts, key=lambda e: e.seq))
 
     def since_json(self, seq: int) -> str:
         """`since` as a JSON list of dicts (the ASTCom function `log.since` returns this)."""
         return json.dumps([e.as_dict() for e in self.since(int(seq))])
+
+
+def _after(ring: deque[Event], seq: int) -> list[Event]:
+    """The events of one ring (in seq order) numbered after `seq`."""
+    if not ring or ring[-1].seq <= seq:
+        return []
+    if ring[0].seq > seq:
+        return list(ring)
+    events = list(ring)
+    return events[bisect.bisect_right(events, seq, key=lambda e: e.seq):]

@@ -26,7 +26,7 @@ class LinkKind(IntEnum):
     DATA = 1   # an ASTCom frame of the channel, either way
     OPEN = 2   # relay -> device: a client arrived on the channel (body: its address, text)
     CLOSE = 3  # either way: the channel is over; from the device: u16 LE code + reason
-    HELLO = 4  # channel 0: u8 version, u16 LE channels, u32 LE max_frame_bytes
+    HELLO = 4  # channel 0: u8 version, u16 LE channels, u32 LE max_frame_bytes, u32 LE token
     PING = 5   # channel 0, relay -> device: a token (4 bytes)
     PONG = 6   # channel 0, device -> relay: the same token
 
@@ -44,15 +44,20 @@ def encode_link_frame(chan: int, kind: int, body: bytes = b"") -> bytes:
     return cobs.encode(plain + struct.pack("<I", zlib.crc32(plain))) + b"\0"
 
 
-def link_hello_body(channels: int, max_frame_bytes: int) -> bytes:
-    return struct.pack("<BHI", LINK_VERSION, channels, max_frame_bytes)
+def link_hello_body(channels: int, max_frame_bytes: int, token: int = 0) -> bytes:
+    """A HELLO body; `token` is the relay's (1..2^32-1) or, from the device, the token of
+    the HELLO it answers (0 when it announces itself at boot)."""
+    return struct.pack("<BHII", LINK_VERSION, channels, max_frame_bytes, token)
 
 
-def parse_link_hello(body: bytes) -> tuple[int, int, int]:
-    """Return (version, channels, max_frame_bytes) of a HELLO body; ValueError if short."""
+def parse_link_hello(body: bytes) -> tuple[int, int, int, int | None]:
+    """Return (version, channels, max_frame_bytes, token) of a HELLO body (token None from
+    a device that sends none); ValueError if short."""
     if len(body) < 7:
-        raise ValueError(f"link HELLO of {len(body)} bytes; expected 7")
-    return struct.unpack_from("<BHI", body)
+        raise ValueError(f"link HELLO of {len(body)} bytes; expected 11")
+    version, channels, max_frame = struct.unpack_from("<BHI", body)
+    token = struct.unpack_from("<I", body, 7)[0] if len(body) >= 11 else None
+    return version, channels, max_frame, token
 
 
 class LinkReader:

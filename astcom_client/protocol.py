@@ -52,6 +52,7 @@ from .exceptions import (
 )
 
 __all__ = [
+    "AuthRequested",
     "ClientConnection",
     "ClientState",
     "ConnectionTerminated",
@@ -72,6 +73,15 @@ class RequestReceived:
 
     seq: int
     command: Command
+
+
+@dataclass(frozen=True)
+class AuthRequested:
+    """An AUTH the endpoint may hold (throttling) before `ServerConnection.finish_auth`
+    checks it; only with `ServerOptions.gate_auth` (server side)."""
+
+    seq: int
+    auth: Auth
 
 
 @dataclass(frozen=True)
@@ -150,6 +160,9 @@ class ServerOptions:
     # Called just before a connection becomes authenticated; returns why it is refused
     # (ERR 429, then closed) or None. The endpoint counts its authenticated clients here.
     admit: Callable[[], str | None] | None = None
+    # True: an AUTH is handed out as `AuthRequested` and checked by `finish_auth`, so the
+    # endpoint can hold or refuse it first (password attempts throttled).
+    gate_auth: bool = False
 
 
 class ServerConnection:
@@ -212,6 +225,8 @@ class ServerConnection:
             self._hello(seq, command)
             return []
         if isinstance(command, Auth):
+            if self.options.gate_auth:
+                return [AuthRequested(seq, command)]
             return self._auth(seq, command)
         if isinstance(command, Bye):
             self.send_result(seq, {})
@@ -261,6 +276,20 @@ class ServerConnection:
         self.state = ServerState.READY
         self.send_result(seq, {"role": role.label, "proof": proof})
         return []
+
+    def finish_auth(self, seq: int, auth: Auth, refusal: str | None = None
+                    ) -> list[ConnectionTerminated]:
+        """Check a held AUTH (`AuthRequested`), or refuse it unchecked with `refusal`
+        (ERR 429, then closed). A wrong password closes the connection (ERR 401)."""
+        if self.state is not ServerState.AWAIT_AUTH:  # closed meanwhile (auth timeout)
+            return []
+        try:
+            if refusal is not None:
+                self.state = ServerState.CLOSED
+                raise TooMany(refusal)
+            return self._auth(seq, auth)
+        except AstcomError as exc:  # still unauthenticated: every error ends the connection
+            return self._fail(seq, exc, close=True)
 
     def _admit(self) -> None:
         refusal = self.options.admit() if self.options.admit is not None else None

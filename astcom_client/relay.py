@@ -41,7 +41,7 @@ from .link import (
     link_hello_body,
     parse_link_hello,
 )
-from .transports import ServerHandle, Transport, start_server
+from .transports import ServerHandle, TcpTransport, Transport, start_server
 from .url import parse_url
 
 __all__ = ["Relay", "RelayConfig"]
@@ -74,18 +74,26 @@ class _Client:
         self.close_code: int | None = None
         self.close_reason = ""
         self.dropped_packets = 0
+        self.queued_packets = 0  # stream packets in `queue`
 
     def push(self, frame: bytes) -> None:
         if frame.startswith(_DATA_PREFIX):
-            streams = sum(1 for f in self.queue if f.startswith(_DATA_PREFIX))
-            if streams >= self.queue_packets:
-                for i, f in enumerate(self.queue):
+            if self.queued_packets >= self.queue_packets:
+                for i, f in enumerate(self.queue):  # the oldest packet (replies stay)
                     if f.startswith(_DATA_PREFIX):
                         del self.queue[i]
                         self.dropped_packets += 1
+                        self.queued_packets -= 1
                         break
+            self.queued_packets += 1
         self.queue.append(frame)
         self.wake.set()
+
+    def pop(self) -> bytes:
+        frame = self.queue.popleft()
+        if frame.startswith(_DATA_PREFIX):
+            self.queued_packets -= 1
+        return frame
 
     def end(self, code: int, reason: str) -> None:
         if self.close_code is None:
@@ -120,6 +128,7 @@ class Relay:
         self._tcp_writer: asyncio.StreamWriter | None = None
         self._last_rx = 0.0
         self._tokens = itertools.count(1)
+        self._hello_token = 0             # the token of our last HELLO
         self._next_chan = 0
         self.frames_to_device = 0
         self.frames_from_device = 0
@@ -173,7 +182,7 @@ class Relay:
                 await asyncio.sleep(1.0)
                 continue
             self._last_rx = loop.time()
-            self._send_link(0, LinkKind.HELLO, link_hello_body(0, 0))
+            self._say_hello()
             pinger = asyncio.create_task(self._ping())
             try:
                 if reader is not None:
@@ -222,9 +231,14 @@ class Relay:
             await asyncio.sleep(self.config.ping_interval_s)
             if loop.time() - self._last_rx > self.config.link_timeout_s:
                 self._link_lost(f"the device has not answered for {self.config.link_timeout_s:g} s")
-                self._send_link(0, LinkKind.HELLO, link_hello_body(0, 0))
+                self._say_hello()
             else:
                 self._send_link(0, LinkKind.PING, struct.pack("<I", next(self._tokens) & 0xFFFFFFFF))
+
+    def _say_hello(self) -> None:
+        """Ask the device to announce itself (and forget every channel)."""
+        self._hello_token = next(self._tokens) & 0xFFFFFFFF or 1
+        self._send_link(0, LinkKind.HELLO, link_hello_body(0, 0, self._hello_token))
 
     def _on_bytes(self, data: bytes) -> None:
         self._last_rx = asyncio.get_running_loop().time()
@@ -235,10 +249,14 @@ class Relay:
     def _on_frame(self, frame: LinkFrame) -> None:
         if frame.kind == LinkKind.HELLO:
             try:
-                _, channels, max_frame = parse_link_hello(frame.body)
+                _, channels, max_frame, token = parse_link_hello(frame.body)
             except ValueError:
                 return
-            if self.link_up.is_set():
+            if token not in (None, 0, self._hello_token):
+                return  # the answer to an earlier HELLO of ours, overtaken by a newer one
+            # the answer to our HELLO is expected; a HELLO of token 0 is the device booting
+            # (a stale one may also wait in the line when the relay starts: link not up yet)
+            if self.link_up.is_set() and token != self._hello_token:
                 self._link_lost("the device restarted")
             self.channels, self.max_frame_bytes = channels, max_frame
             self.closing.clear()
@@ -290,21 +308,34 @@ class Relay:
         self._send_link(chan, LinkKind.OPEN, transport.peer.encode()[:64])
         writer = asyncio.create_task(self._write_client(client))
         try:
-            while client.close_code is None:
+            # After the end (the device closed the channel, or the frame was refused) the
+            # client's frames already on their way are read and dropped until its close
+            # arrives: a reader that stops would leave the WebSocket's closing handshake
+            # stuck behind them (up to 1 MiB of them: beyond, a flood is not read on).
+            dropped = 0
+            while True:
                 try:
                     frame = await transport.recv()
                 except AstcomError as exc:  # a text frame, an oversized TCP frame
-                    client.push(_error_frame(exc.code, exc.message))
-                    client.end(exc.code, exc.message)
-                    break
+                    if client.close_code is None:
+                        client.push(_error_frame(exc.code, exc.message))
+                        client.end(exc.code, exc.message)
+                    if isinstance(transport, TcpTransport):
+                        break  # the TCP byte stream cannot be resynchronised
+                    continue
                 if frame is None:
                     break
+                if client.close_code is not None:
+                    dropped += len(frame)
+                    if dropped > 1 << 20:  # a flood, not frames in flight: read no more
+                        break
+                    continue
                 if len(frame) > self.max_frame_bytes:
                     message = (f"frame of {len(frame)} bytes exceeds the limit of "
                                f"{self.max_frame_bytes} bytes")
                     client.push(_error_frame(413, message))
                     client.end(413, message)
-                    break
+                    continue
                 self._send_link(chan, LinkKind.DATA, frame)
                 self.frames_to_device += 1
         finally:
@@ -322,7 +353,7 @@ class Relay:
                 await client.wake.wait()
                 client.wake.clear()
                 while client.queue:
-                    await client.transport.send(client.queue.popleft())
+                    await client.transport.send(client.pop())
                 if client.close_code is not None:
                     break
         except Exception:  # the client went away; its reader ends the session

@@ -42,6 +42,11 @@ log = logging.getLogger("astcom.transports")
 
 _READ_CHUNK = 1 << 16
 _WS_CLOSE_CODES = {1000: 1000, 413: 1009, 429: 1013, 503: 1001}
+# How long, and how much, a closing connection reads (and drops) of what its peer still
+# sends, so that the peer receives our last frames (the ERR that says why it is cut off);
+# a flood beyond that is not read on.
+_LINGER_S = 2.0
+_LINGER_BYTES = 1 << 20
 
 
 class Transport(Protocol):
@@ -109,6 +114,10 @@ class WebSocketTransport:
         addr = ws.remote_address
         self.peer = f"{addr[0]}:{addr[1]}" if addr else "websocket"
 
+    def limit_frames(self, max_bytes: int) -> None:
+        """Read messages of at most `max_bytes` from now on (larger: closed with 1009)."""
+        self._ws.protocol.max_message_size = max_bytes
+
     async def recv(self) -> bytes | None:
         try:
             message = await self._ws.recv()
@@ -127,7 +136,22 @@ class WebSocketTransport:
     async def close(self, code: int = 1000, reason: str = "") -> None:
         ws_code = _WS_CLOSE_CODES.get(code, 1008 if code else 1000)
         text = f"{code} {reason}" if reason else ""
-        await self._ws.close(ws_code, text.encode()[:120].decode(errors="ignore"))
+        # The peer's close frame may sit behind messages it sent before it saw ours; they
+        # are read and dropped, else the closing handshake waits for close_timeout.
+        drain = asyncio.ensure_future(self._drop_incoming())
+        try:
+            await self._ws.close(ws_code, text.encode()[:120].decode(errors="ignore"))
+        finally:
+            drain.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await drain
+
+    async def _drop_incoming(self) -> None:
+        # a reader of our own may be in recv() already (ConcurrencyError): then it drains
+        dropped = 0
+        with contextlib.suppress(Exception):
+            while dropped < _LINGER_BYTES:
+                dropped += len(await self._ws.recv())
 
 
 class TcpTransport:
@@ -140,6 +164,10 @@ class TcpTransport:
         self._ready: list[bytes] = []
         addr = writer.get_extra_info("peername")
         self.peer = f"{addr[0]}:{addr[1]}" if addr else "tcp"
+
+    def limit_frames(self, max_bytes: int) -> None:
+        """Read frames of at most `max_bytes` from now on (larger: MalformedFrame)."""
+        self._frames.max_frame_bytes = max_bytes
 
     async def recv(self) -> bytes | None:
         while not self._ready:
@@ -164,6 +192,16 @@ class TcpTransport:
 
     async def close(self, code: int = 1000, reason: str = "") -> None:
         if not self._writer.is_closing():
+            # Closing with unread bytes makes the kernel reset the connection, and a reset
+            # destroys what the peer has not read yet (our last replies): say we are done
+            # (FIN) and drop what still comes until the peer closes too, for a while.
+            with contextlib.suppress(Exception):
+                if self._writer.can_write_eof():
+                    self._writer.write_eof()
+                    dropped = 0
+                    async with asyncio.timeout(_LINGER_S):
+                        while dropped < _LINGER_BYTES and (data := await self._reader.read(_READ_CHUNK)):
+                            dropped += len(data)
             self._writer.close()
         with contextlib.suppress(Exception):
             await asyncio.wait_for(self._writer.wait_closed(), 2.0)

@@ -7,6 +7,7 @@
 
 from catalogs.exceptions import (
     CatalogError,
+    ElementFileError,
     OmmFormatError,
     StarCsvError,
     TleChecksumError,
@@ -29,6 +30,7 @@ from catalogs.tle import (
     epoch_age_days,
     load_tle_file,
     parse_tle_text,
+    read_element_text,
     select_satellite,
     tle_checksum,
 )
@@ -46,6 +48,7 @@ __all__ = [
     "TEMPLATE_LINE1",
     "TEMPLATE_LINE2",
     "CatalogError",
+    "ElementFileError",
     "OmmFormatError",
     "Star",
     "StarCatalog",
@@ -63,6 +66,7 @@ __all__ = [
     "epoch_age_days",
     "load_star_csv",
     "load_tle_file",
+    "read_element_text",
     "parse_dec_deg",
     "parse_omm_json",
     "parse_ra_deg",

@@ -7,6 +7,8 @@
     ├── TleFormatError(ValueError)      a TLE line breaks the column layout
     │   └── TleChecksumError            ... or its modulo-10 checksum
     ├── OmmFormatError(ValueError)      an OMM JSON record lacks or mangles a field
+    ├── ElementFileError(ValueError)    an element file that is no file to read (a device,
+    │                                   a directory, too big, not text)
     └── StarCsvError(ValueError)        a user star catalog CSV row is wrong
 
     TleEpochWarning(UserWarning)        elements used far from their epoch
@@ -94,6 +96,10 @@ class OmmFormatError(ValueError, CatalogError):
         self.index = index
         self.problem = problem
         super().__init__(f"{source}, OMM record {index}: {problem}")
+
+
+class ElementFileError(ValueError, CatalogError):
+    """A TLE/OMM file cannot be read as one: missing, not a regular file, too big, not text."""
 
 
 class StarCsvError(ValueError, CatalogError):

@@ -8,6 +8,8 @@ The column layout follows the NORAD/Space-Track "Two-Line Element Set Format"
 from __future__ import annotations
 
 import math
+import os
+import stat
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -17,6 +19,7 @@ from pathlib import Path
 from sgp4.api import Satrec
 
 from catalogs.exceptions import (
+    ElementFileError,
     TleChecksumError,
     TleEpochWarning,
     TleFormatError,
@@ -275,13 +278,61 @@ def parse_tle_text(text: str, source: str = "<string>") -> list[TleRecord]:
     return records
 
 
+#: The largest element file read (CelesTrak's whole active catalogue is ~3 MB as TLE).
+MAX_ELEMENT_FILE_BYTES = 64 * 1024 * 1024
+
+
+def read_element_text(path: str | Path) -> str:
+    """Return the text of a TLE/OMM file: a regular file of at most MAX_ELEMENT_FILE_BYTES,
+    UTF-8. Raises ElementFileError saying what the path is instead (no such file, a device
+    such as /dev/zero, a FIFO, a directory, too big, not text); never blocks on a FIFO."""
+    path = Path(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise ElementFileError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise ElementFileError(f"{path}: cannot open: {exc.strerror or exc}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise ElementFileError(f"{path} is {_file_kind(st.st_mode)}, not a regular file; "
+                                   "expected a TLE (2/3-line) or OMM JSON text file")
+        if st.st_size > MAX_ELEMENT_FILE_BYTES:
+            raise ElementFileError(f"{path} holds {st.st_size} bytes, more than the "
+                                   f"{MAX_ELEMENT_FILE_BYTES} an element file may; "
+                                   "expected a TLE (2/3-line) or OMM JSON text file")
+        with os.fdopen(os.dup(fd), "rb") as f:
+            data = f.read(MAX_ELEMENT_FILE_BYTES + 1)
+    finally:
+        os.close(fd)
+    if len(data) > MAX_ELEMENT_FILE_BYTES:
+        raise ElementFileError(f"{path} grew beyond {MAX_ELEMENT_FILE_BYTES} bytes while read")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ElementFileError(f"{path} is not text (byte {exc.start} is "
+                               f"0x{data[exc.start]:02X}); expected a TLE (2/3-line) or OMM "
+                               "JSON text file") from None
+
+
+def _file_kind(mode: int) -> str:
+    for test, name in ((stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISFIFO, "a FIFO"), (stat.S_ISDIR, "a directory"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
 def load_tle_file(path: str | Path) -> list[TleRecord]:
     """Read a TLE (2- or 3-line) or OMM JSON file; the format is told from the content.
 
-    Raises TleFormatError / OmmFormatError naming the file and the line or record.
+    Raises ElementFileError when the path is no element file to read (read_element_text),
+    TleFormatError / OmmFormatError naming the file and the line or record.
     """
     path = Path(path)
-    text = path.read_text(encoding="utf-8")
+    text = read_element_text(path)
     if text.lstrip().startswith(("[", "{")):
         from catalogs.omm import parse_omm_json
 

@@ -69,7 +69,8 @@ class MountEmulator:
         self.speed = float(config.speed)
         self.last_guide = (0.0, 0.0)
         self.health = LoopHealth()
-        self.log = EventLog("emulator")
+        # connections and failed logins keep rings of their own: churn cannot flush the rest
+        self.log = EventLog("emulator", kept_apart={"connection": 2000, "auth": 2000})
         self._last_states = self._states()
         self.collection, col_to_state = build_collection(self)
         self._col_to_state = np.zeros(self.collection.trace_width, dtype=np.int64)
@@ -79,6 +80,7 @@ class MountEmulator:
             loop_rate_hz=LOOP_RATE_HZ, passwords=config.passwords, name="mount-emulator",
             flush_interval_s=config.stream_flush_s))
         self.endpoint.on_client = self._client_event
+        self.endpoint.on_auth_failure = self._auth_failure
         self._wanted_key: bytes | None = None
         self._src = np.zeros(0, dtype=np.int64)
         self._dst = np.zeros(0, dtype=np.int64)
@@ -122,6 +124,17 @@ class MountEmulator:
         self.log.add(self.model.mount_time_us, "info", "connection",
                      f"client {name or client_id} ({role}) {what}", client=name, role=role,
                      client_id=client_id, what=what)
+
+    def _auth_failure(self, peer: str, failure) -> None:
+        notes = [f"{failure.failures} in a row"]
+        if failure.locked_s:
+            notes.append(f"locked out for {failure.locked_s:g} s")
+        if failure.refused:
+            notes.append(f"{failure.refused} attempts refused unchecked since the last")
+        self.log.add(self.model.mount_time_us, "warning", "auth",
+                     f"wrong password from {peer} ({'; '.join(notes)})", client=peer,
+                     failures=failure.failures, locked_s=failure.locked_s,
+                     refused=failure.refused)
 
     def param_written(self, name: str, old: float, new: float) -> None:
         """Log a parameter write (old → new); a fault injection is a warning."""

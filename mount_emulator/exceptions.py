@@ -6,6 +6,7 @@
     ├── CommandRejected (RuntimeError)     the state machine forbids the command now
     ├── TargetOutOfRange (ValueError)      a slew or move beyond the axis limits
     ├── TrajectoryError (ValueError)       malformed trajectory batch (lengths, types)
+    │   └── ReplaceRefused                 traj.replace_from too late or with bad points
     ├── ConfigError (ValueError)           bad config or geometry file, unknown parameter
     └── InsecureListen (PermissionError)   a non-loopback address without a password
 
@@ -20,6 +21,7 @@ __all__ = [
     "ConfigError",
     "InsecureListen",
     "MountEmulatorError",
+    "ReplaceRefused",
     "TargetOutOfRange",
     "TrajectoryError",
 ]
@@ -56,6 +58,10 @@ class TargetOutOfRange(ValueError, MountEmulatorError):
 
 class TrajectoryError(ValueError, MountEmulatorError):
     """A trajectory batch is malformed (different lengths, wrong dimensions)."""
+
+
+class ReplaceRefused(TrajectoryError):
+    """traj.replace_from was refused: its time is too close or past, or its points are bad."""
 
 
 class ConfigError(ValueError, MountEmulatorError):

@@ -96,6 +96,10 @@ G_SEG_T0_US = 30
 G_SEG_SPAN_US = 31
 G_SEG_COEF = 32  # 8 slots: per axis c0..c3 of p(s) = c0 + c1·s + c2·s² + c3·s³, s in [0, 1)
 G_DRIFT_INJ_PPM = 40  # clock drift added by the injected drift growth, ppm
+G_TRAJ_REPLACES = 41  # traj.replace_from calls applied since traj.init
+G_TRAJ_REPLACE_REFUSED = 42  # traj.replace_from calls refused (too late) since traj.init
+G_TRAJ_DROPPED = 43  # buffered points dropped by traj.replace_from since traj.init
+G_TRAJ_REPLACE_LEAD_US = 44  # lead (from - mount time) of the last applied replace_from, µs
 STATE_AXIS0 = 64
 
 # ----------------------------------------------------------- per-axis state
@@ -149,6 +153,7 @@ Q_OVERVOLTAGE_V = 8
 Q_AMBIENT_C = 9
 Q_LATE_MARGIN_US = 10
 Q_INJ_DRIFT_GROWTH = 11  # ppm per hour
+Q_REPLACE_MIN_LEAD_US = 12  # traj.replace_from refuses a time closer to the clock than this
 PARAM_AXIS0 = 16
 
 # ------------------------------------------------------ per-axis parameters
@@ -293,6 +298,10 @@ _GLOBAL_STATE = [
     (G_REGEN_J, "power.regen_energy", "J", "Regenerated energy dissipated in the chopper since start", "signal"),
     (G_TRAJ_REF_AZ, "traj.ref_az", "rad", "Trajectory sample at the current tick, azimuth", "signal"),
     (G_TRAJ_REF_EL, "traj.ref_el", "rad", "Trajectory sample at the current tick, elevation", "signal"),
+    (G_TRAJ_REPLACES, "traj.replaces", "", "traj.replace_from calls applied since traj.init", "status"),
+    (G_TRAJ_REPLACE_REFUSED, "traj.replace_refused", "", "traj.replace_from calls refused since traj.init (time past or closer than traj.replace_min_lead_us)", "status"),
+    (G_TRAJ_DROPPED, "traj.dropped", "", "Buffered points dropped by traj.replace_from since traj.init", "status"),
+    (G_TRAJ_REPLACE_LEAD_US, "traj.replace_lead_us", "us", "Lead of the last applied traj.replace_from: its from_us minus the mount time it arrived at", "status"),
     (G_DRIFT_INJ_PPM, "time.injected_drift_ppm", "ppm", "Clock drift added so far by time.inject_drift_growth (fault injection)", "signal"),
 ]
 
@@ -343,6 +352,7 @@ _GLOBAL_PARAMS = [
     (Q_OVERVOLTAGE_V, "safety.overvoltage", "V", "Watchdog trips above this bus voltage", 65.0),
     (Q_AMBIENT_C, "power.ambient_temperature", "degC", "Ambient temperature for the motor thermal model", 15.0),
     (Q_LATE_MARGIN_US, "traj.late_margin_us", "us", "A pushed point must be at least this far in the future", 0.0),
+    (Q_REPLACE_MIN_LEAD_US, "traj.replace_min_lead_us", "us", "traj.replace_from refuses a from_us closer to the mount clock than this (the controller's documented minimum lead)", 20000.0),
     (Q_INJ_DRIFT_GROWTH, "time.inject_drift_growth", "ppm/h", "Fault injection: the clock's drift changes by this much per hour (a crystal warming or ageing); time.injected_drift_ppm holds what it added", 0.0),
 ]
 
@@ -455,7 +465,8 @@ _FIXED_RANGES: dict[str, tuple[float, float]] = {
     "position_min": (-2 * math.pi, 2 * math.pi), "position_max": (-2 * math.pi, 2 * math.pi),
     "encoder_bits": (8.0, 40.0), "inject_encoder_fault": (0.0, 1.0),
     "safety.inject_heartbeat_miss": (0.0, 1.0), "time.drift_ppm": (-1000.0, 1000.0),
-    "traj.late_margin_us": (0.0, 1e6), "temperature_max": (0.0, 200.0),
+    "traj.late_margin_us": (0.0, 1e6), "traj.replace_min_lead_us": (0.0, 1e6),
+    "temperature_max": (0.0, 200.0),
     "power.ambient_temperature": (-60.0, 60.0), "gravity_imbalance": (-1000.0, 1000.0),
     "settle_window": (1e-3, 3600.0), "integral_zone": (0.0, 1.0),
     "friction_smoothing": (1e-9, 1.0), "cogging_periods": (0.0, 1000.0),
@@ -473,8 +484,29 @@ _SCALED_RANGES: dict[str, tuple[float, float]] = {  # (lowest, highest × defaul
 }
 
 
+# Parameters that must stay strictly positive (the step divides by them), and those that
+# may be zero but never negative.
+POSITIVE_PARAMS = frozenset({
+    "inertia_motor", "inertia_load", "torque_constant", "current_tau", "thermal_resistance",
+    "thermal_tau", "friction_smoothing", "velocity_filter_tau", "rate_limit", "accel_limit",
+    "ctrl_rate_limit", "ctrl_accel_limit", "following_error_limit", "current_limit",
+    "supply_resistance", "bus_capacitance", "chopper_resistance", "heartbeat_timeout",
+})
+NONNEGATIVE_PARAMS = frozenset({"stiffness", "damping", "winding_resistance",
+                                "viscous_friction", "coulomb_friction", "cogging",
+                                "brake_torque", "friction_ff", "integral_zone"})
+
+
 def param_range(slot: Slot) -> tuple[float, float]:
-    """Return the (min, max) a parameter may be written to, in its unit."""
+    """Return the (min, max) a parameter may be written to, in its unit; a parameter the
+    step divides by (POSITIVE_PARAMS) never reaches 0: at least 1e-6 × its default."""
+    lo, hi = _declared_range(slot)
+    if slot.name.rsplit(".", 1)[-1] in POSITIVE_PARAMS and lo <= 0:
+        lo = 1e-6 * slot.default
+    return lo, hi
+
+
+def _declared_range(slot: Slot) -> tuple[float, float]:
     short = slot.name.rsplit(".", 1)[-1]
     for key in (slot.name, short):
         if key in _FIXED_RANGES:

@@ -15,7 +15,12 @@ import math
 import numpy as np
 
 from mount_emulator import layout as L
-from mount_emulator.exceptions import CommandRejected, TargetOutOfRange, TrajectoryError
+from mount_emulator.exceptions import (
+    CommandRejected,
+    ReplaceRefused,
+    TargetOutOfRange,
+    TrajectoryError,
+)
 from mount_emulator.physics import initial_state, step
 from mount_emulator.states import (
     STATUS_SYNC_ARMED,
@@ -205,7 +210,9 @@ class MountModel:
         if AxisState.TRACKING in (self.axis_state(0), self.axis_state(1)):
             raise CommandRejected("traj.init", "TRACKING", ["traj.reset", "stop"])
         self._clear_buffer()
-        for i in (L.G_TRAJ_LATE, L.G_TRAJ_ACCEPTED, L.G_TRAJ_UNDERRUNS, L.G_TRAJ_OUT_OF_RANGE):
+        for i in (L.G_TRAJ_LATE, L.G_TRAJ_ACCEPTED, L.G_TRAJ_UNDERRUNS, L.G_TRAJ_OUT_OF_RANGE,
+                  L.G_TRAJ_REPLACES, L.G_TRAJ_REPLACE_REFUSED, L.G_TRAJ_DROPPED,
+                  L.G_TRAJ_REPLACE_LEAD_US):
             self.state[i] = 0
         self.state[L.G_STATUS] = int(self.state[L.G_STATUS]) & ~(STATUS_UNDERRUN | STATUS_TRAJ_STARTED)
 
@@ -238,32 +245,72 @@ class MountModel:
         ``traj.out_of_range``. Points beyond the free space are neither stored
         nor counted: push them again later.
         """
+        t, az, el, vaz, vel = _points(t_us, az_rad, el_rad, az_rate_rad_s, el_rate_rad_s)
+        earliest = self.state[L.G_MOUNT_US] + self.params[L.Q_LATE_MARGIN_US]
+        return self._append(t, az, el, vaz, vel, earliest)
+
+    def traj_replace_from(self, from_us, t_us, az_rad, el_rad, az_rate_rad_s=None,
+                          el_rate_rad_s=None) -> int:
+        """Drop every buffered point at or after mount time `from_us`, append new ones.
+
+        Both happen between two ticks, so the axes never see a buffer half replaced.
+        Refused (ReplaceRefused, counted in ``traj.replace_refused``, the buffer
+        untouched) when `from_us` is less than ``traj.replace_min_lead_us`` ahead of
+        the mount clock, or when the new points are not all at or after `from_us`,
+        strictly increasing, finite and inside the axis limits. Returns how many new
+        points were stored (those beyond the free space are not: push them later).
+        ``traj.replaces`` counts the calls applied, ``traj.dropped`` the points dropped.
+        """
         try:
-            t = np.asarray(t_us, dtype=np.int64).ravel()
-            az = np.asarray(az_rad, dtype=np.float64).ravel()
-            el = np.asarray(el_rad, dtype=np.float64).ravel()
-        except (TypeError, ValueError) as exc:
-            raise TrajectoryError(f"trajectory arrays must be numeric (t_us integer µs): {exc}") from None
-        rates = az_rate_rad_s is not None or el_rate_rad_s is not None
-        if rates and (az_rate_rad_s is None or el_rate_rad_s is None):
-            raise TrajectoryError("give both az_rate_rad_s and el_rate_rad_s, or neither")
-        if rates:
-            vaz = np.asarray(az_rate_rad_s, dtype=np.float64).ravel()
-            vel = np.asarray(el_rate_rad_s, dtype=np.float64).ravel()
-        else:
-            vaz = vel = np.full(len(t), np.nan)
-        if not (len(t) == len(az) == len(el) == len(vaz) == len(vel)):
-            raise TrajectoryError(
-                f"trajectory arrays differ in length: t_us {len(t)}, az {len(az)}, el {len(el)}"
-                + (f", az_rate {len(vaz)}, el_rate {len(vel)}" if rates else "")
-            )
+            from_us = int(from_us)
+        except (TypeError, ValueError, OverflowError):
+            raise TrajectoryError(f"from_us must be an integer mount time in µs, got {from_us!r}") from None
+        t, az, el, vaz, vel = _points(t_us, az_rad, el_rad, az_rate_rad_s, el_rate_rad_s)
+        now = int(self.state[L.G_MOUNT_US])
+        lead_min = int(self.params[L.Q_REPLACE_MIN_LEAD_US])
+        problem = ""
+        if from_us < now + lead_min:
+            problem = (f"from_us {from_us} is {(from_us - now) / 1000:.1f} ms ahead of the mount "
+                       f"clock ({now}); at least traj.replace_min_lead_us = {lead_min / 1000:g} ms "
+                       "is needed")
+        elif len(t) and (t[0] < from_us or np.any(np.diff(t) <= 0)):
+            problem = "the new points must be at or after from_us and strictly increasing in time"
+        elif len(t) and not self._inside_limits(az, el, vaz, vel):
+            problem = "some new points are outside the axis limits or not finite"
+        if problem:
+            self.state[L.G_TRAJ_REPLACE_REFUSED] += 1
+            raise ReplaceRefused(problem)
+        cap = self.traj_capacity
+        head = int(self.state[L.G_TRAJ_HEAD])
+        tail = int(self.state[L.G_TRAJ_TAIL])
+        dropped = 0
+        while tail > head and self.traj_t[(tail - 1) % cap] >= from_us:
+            tail -= 1
+            dropped += 1
+        self.state[L.G_TRAJ_TAIL] = tail
+        self.state[L.G_TRAJ_LAST_US] = int(self.traj_t[(tail - 1) % cap]) if tail > head else 0
+        self.state[L.G_SEG_HEAD] = -1  # the cached segment may end on a dropped point
+        self.state[L.G_TRAJ_DROPPED] += dropped
+        self.state[L.G_TRAJ_REPLACES] += 1
+        self.state[L.G_TRAJ_REPLACE_LEAD_US] = from_us - now
+        return self._append(t, az, el, vaz, vel, from_us - 1)
+
+    def _inside_limits(self, az, el, vaz, vel) -> bool:
+        lims = [(self.params[L.param_index(a, L.P_POS_MIN)], self.params[L.param_index(a, L.P_POS_MAX)])
+                for a in range(2)]
+        return bool(np.all((az >= lims[0][0]) & (az <= lims[0][1]) & (el >= lims[1][0])
+                           & (el <= lims[1][1])) and not np.any(np.isinf(vaz) | np.isinf(vel)))
+
+    def _append(self, t, az, el, vaz, vel, earliest) -> int:
+        """Store points after `earliest` (µs) and the newest buffered point; return the count."""
         cap = self.traj_capacity
         tail = int(self.state[L.G_TRAJ_TAIL])
         head = int(self.state[L.G_TRAJ_HEAD])
         last = int(self.state[L.G_TRAJ_LAST_US]) if tail > head else -(2**62)
-        earliest = self.state[L.G_MOUNT_US] + self.params[L.Q_LATE_MARGIN_US]
         lims = [(self.params[L.param_index(a, L.P_POS_MIN)], self.params[L.param_index(a, L.P_POS_MAX)])
                 for a in range(2)]
+        if len(t) > 1 and bool(np.all(np.diff(t) > 0)):
+            return self._append_increasing(t, az, el, vaz, vel, max(earliest, last), lims)
         accepted = late = out = 0
         for k in range(len(t)):
             if tail - head >= cap - 1:
@@ -291,6 +338,38 @@ class MountModel:
         self.state[L.G_TRAJ_ACCEPTED] += accepted
         return accepted
 
+    def _append_increasing(self, t, az, el, vaz, vel, after, lims) -> int:
+        """`_append` for a batch already increasing in time: the same rules, as arrays."""
+        cap = self.traj_capacity
+        tail = int(self.state[L.G_TRAJ_TAIL])
+        head = int(self.state[L.G_TRAJ_HEAD])
+        late = t <= after
+        inside = ((az >= lims[0][0]) & (az <= lims[0][1]) & (el >= lims[1][0])
+                  & (el <= lims[1][1]) & ~np.isinf(vaz) & ~np.isinf(vel))
+        take = np.flatnonzero(~late & inside)
+        room = cap - 1 - (tail - head)
+        stored = take[:max(room, 0)]
+        # once full, the points after are neither stored nor counted (push them later)
+        full = len(stored) >= room
+        considered = (int(stored[-1]) + 1 if len(stored) else 0) if full else len(t)
+        idx = (tail + np.arange(len(stored))) % cap
+        self.traj_t[idx] = t[stored]
+        self.traj_p[idx, 0] = az[stored]
+        self.traj_p[idx, 1] = el[stored]
+        self.traj_v[idx, 0] = vaz[stored]
+        self.traj_v[idx, 1] = vel[stored]
+        tail += len(stored)
+        self.state[L.G_TRAJ_TAIL] = tail
+        if len(stored):
+            self.state[L.G_TRAJ_LAST_US] = int(t[stored[-1]])
+        elif tail <= head:
+            self.state[L.G_TRAJ_LAST_US] = 0
+        self.state[L.G_TRAJ_LATE] += int(np.count_nonzero(late[:considered]))
+        self.state[L.G_TRAJ_OUT_OF_RANGE] += int(np.count_nonzero(~late[:considered]
+                                                                  & ~inside[:considered]))
+        self.state[L.G_TRAJ_ACCEPTED] += len(stored)
+        return len(stored)
+
     # --------------------------------------------------------------------- time
     def set_clock(self, start_us: int) -> None:
         """Put the true and the mount clock on `start_us` (µs since 1970 UTC; whole ticks).
@@ -308,3 +387,29 @@ class MountModel:
         """Arm a UTC second (since 1970): the mount clock takes it at the next PPS edge."""
         self.state[L.G_PENDING_UTC_S] = int(utc_second)
         self.state[L.G_STATUS] = int(self.state[L.G_STATUS]) | STATUS_SYNC_ARMED
+
+
+def _points(t_us, az_rad, el_rad, az_rate_rad_s, el_rate_rad_s) -> tuple[np.ndarray, ...]:
+    """Check and flatten a batch of trajectory points (rates NaN when not given)."""
+    try:
+        t = np.asarray(t_us, dtype=np.int64).ravel()
+        az = np.asarray(az_rad, dtype=np.float64).ravel()
+        el = np.asarray(el_rad, dtype=np.float64).ravel()
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise TrajectoryError(f"trajectory arrays must be numeric (t_us integer µs): {exc}") from None
+    rates = az_rate_rad_s is not None or el_rate_rad_s is not None
+    if rates and (az_rate_rad_s is None or el_rate_rad_s is None):
+        raise TrajectoryError("give both az_rate_rad_s and el_rate_rad_s, or neither")
+    if rates:
+        try:
+            vaz = np.asarray(az_rate_rad_s, dtype=np.float64).ravel()
+            vel = np.asarray(el_rate_rad_s, dtype=np.float64).ravel()
+        except (TypeError, ValueError) as exc:
+            raise TrajectoryError(f"trajectory rates must be numeric: {exc}") from None
+    else:
+        vaz = vel = np.full(len(t), np.nan)
+    if not (len(t) == len(az) == len(el) == len(vaz) == len(vel)):
+        raise TrajectoryError(
+            f"trajectory arrays differ in length: t_us {len(t)}, az {len(az)}, el {len(el)}"
+            + (f", az_rate {len(vaz)}, el_rate {len(vel)}" if rates else ""))
+    return t, az, el, vaz, vel

@@ -24,15 +24,8 @@ if TYPE_CHECKING:
 
 __all__ = ["POSITIVE_PARAMS", "build_collection"]
 
-# Parameters that must stay strictly positive (the step divides by them).
-POSITIVE_PARAMS = {
-    "inertia_motor", "inertia_load", "torque_constant", "current_tau", "thermal_resistance",
-    "thermal_tau", "friction_smoothing", "velocity_filter_tau", "rate_limit", "accel_limit",
-    "ctrl_rate_limit", "ctrl_accel_limit", "following_error_limit", "current_limit",
-    "supply_resistance", "bus_capacitance", "chopper_resistance", "heartbeat_timeout",
-}
-NONNEGATIVE_PARAMS = {"stiffness", "damping", "winding_resistance", "viscous_friction",
-                      "coulomb_friction", "cogging", "brake_torque", "friction_ff", "integral_zone"}
+POSITIVE_PARAMS = L.POSITIVE_PARAMS  # the layout knows them: param_range keeps them > 0
+NONNEGATIVE_PARAMS = L.NONNEGATIVE_PARAMS
 
 
 def _param_setter(params: np.ndarray, slot: L.Slot,
@@ -75,8 +68,6 @@ def build_collection(emu: MountEmulator) -> tuple[Collection, dict[int, int]]:
         column_to_state[var.trace_column] = slot.index
     for slot in L.PARAM_SLOTS:
         lo, hi = L.param_range(slot)
-        if slot.name.rsplit(".", 1)[-1] in POSITIVE_PARAMS and lo <= 0:
-            lo = 1e-6 * slot.default  # the step divides by it: never 0
         coll.add_variable(slot.name, "f64", kind="parameter", access="rw", unit=slot.unit,
                           doc=f"{slot.doc} (default {slot.default:g})",
                           get=lambda i=slot.index: float(params[i]),
@@ -165,6 +156,12 @@ def _add_text_signals(coll: Collection, emu: MountEmulator) -> None:
     coll.add_variable("guide.dy_arcsec", "f64", unit="arcsec",
                       doc="Last guide measurement: star minus optical axis, elevation",
                       get=lambda: emu.last_guide[1])
+    coll.add_variable("truth.geometry_arcsec", "f64[7]", unit="arcsec",
+                      doc="The hidden true geometry, TPOINT terms IA, IE, AN, AW, NPAE, CA, TF "
+                          "(observed - encoder = delta): for truth devices beside the emulator "
+                          "(the guide camera simulator), never for the VSS",
+                      get=lambda: np.array([getattr(emu.camera.geometry, k) for k in
+                                            ("ia", "ie", "an", "aw", "npae", "ca", "tf")]))
     coll.add_variable("sim.speed", "f64", unit="x",
                       doc="Simulated-time speed factor (0 = as fast as possible)",
                       get=lambda: emu.speed)
@@ -198,6 +195,15 @@ def _add_functions(coll: Collection, emu: MountEmulator) -> None:
                       args=[("t_us", "i64[]"), ("az_rad", "f64[]"), ("el_rad", "f64[]"),
                             ("az_rate_rad_s", "f64[]"), ("el_rate_rad_s", "f64[]")],
                       returns="u32", doc="Append points with their rates; returns the accepted count")
+    coll.add_function("traj.replace_from", m.traj_replace_from,
+                      args=[("from_us", "i64"), ("t_us", "i64[]"), ("az_rad", "f64[]"),
+                            ("el_rad", "f64[]"), ("az_rate_rad_s", "f64[]"),
+                            ("el_rate_rad_s", "f64[]")],
+                      returns="u32",
+                      doc="Atomically drop every buffered point at or after from_us (mount µs) "
+                          "and append these points (at or after from_us, with rates); refused "
+                          "when from_us is less than traj.replace_min_lead_us ahead of the "
+                          "clock; returns the accepted count")
     coll.add_function("time.set_utc", m.set_utc, args=[("utc_second", "i64")],
                       doc="Arm a UTC second (since 1970): the mount clock takes it at the next PPS edge")
     coll.add_function("time.now_us", lambda: m.mount_time_us, returns="i64",

@@ -9,20 +9,19 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
-import numpy as np
 import typer
 
 from .constants import GEOMETRIC_TERMS
 from .exceptions import PointingModelError
-from .fitting import FitResult, fit_run, select_terms
-from .model import PointingModel, load_model, model_from_values
-from .run_files import load_run
-from .simulate import simulate_run
-from .terms import parse_term_list
-from .tpoint_format import write_tpoint
-from .tpoint_model_file import save_tpoint_model
+
+if TYPE_CHECKING:
+    from .fitting import FitResult
+    from .model import PointingModel
+
+# The fit (numpy, scipy) and the astronomy are imported when a command runs: --help stays
+# fast (tests/test_import_rules.py).
 
 app = typer.Typer(
     name="pointing-model",
@@ -84,31 +83,61 @@ def fit(
     site_file: Annotated[str | None, typer.Option(
         "--site-file", help="Site TOML (default $VIRTUALSTAR_SITE or the packaged site); "
         "only for CSV rows given as RA/Dec.")] = None,
+    substitute: Annotated[list[str] | None, typer.Option(
+        "--substitute", help="OLD=NEW: fit TPOINT term OLD (named in --terms) as our term NEW "
+        "(e.g. TX10=TX, see docs/pointing-model.md); a .mod output names it OLD again. "
+        "Repeatable.")] = None,
 ) -> None:
     """Fit pointing terms to a pointing run and report values, σ, RMS, PSD and diagnostics."""
+    import dataclasses
+
+    from .fitting import fit_run, select_terms
+    from .run_files import load_run
+    from .terms import parse_term_list
+    from .tpoint_model_file import save_tpoint_model
+
     if auto and terms:
         raise _fail("give either --terms or --auto, not both", EXIT_USAGE)
+    mapping = _parse_substitutions(substitute or [])
+    if mapping and auto:
+        raise _fail("--substitute renames terms of --terms; --auto chooses among our own",
+                    EXIT_USAGE)
+    asked = (terms or ",".join(GEOMETRIC_TERMS)).replace(" ", ",").split(",")
     try:
-        names = None if auto else parse_term_list(terms or ",".join(GEOMETRIC_TERMS))
+        names = None if auto else parse_term_list(
+            [mapping.get(t.strip().upper(), t) for t in asked])
     except ValueError as exc:  # includes UnknownTermError
         raise _fail(f"--terms: {exc}", EXIT_USAGE) from None
+    unused = sorted(set(mapping) - {t.strip().upper() for t in asked})
+    if unused:
+        raise _fail(f"--substitute {', '.join(unused)}: not among --terms", EXIT_USAGE)
+    substituted = {parse_term_list([new])[0]: old for old, new in mapping.items()}
     with _errors_to_exit():
         converter = _lazy_radec_converter(site, site_file)
         run = load_run(data, radec_to_altaz=converter)
         result = (select_terms(run, reject_sigma=reject_sigma) if names is None
                   else fit_run(run, names, reject_sigma=reject_sigma))
+        model = result.model
+        if substituted:  # the model file says which TPOINT term each stands for
+            model = dataclasses.replace(model, fit_info={**model.fit_info,
+                                                         "substituted": substituted})
         if output is not None and output.suffix.lower() == ".mod":
-            save_tpoint_model(result.model, output, caption=run.caption)
+            save_tpoint_model(model, output, caption=run.caption)
         elif output is not None:
-            result.model.save(output)
+            model.save(output)
         if plot is not None:
             from .plotting import plot_residuals
 
             plot_residuals(run, result, plot)
     if as_json:
-        typer.echo(json.dumps(result.to_json_dict(), indent=2))
+        doc = result.to_json_dict()
+        if substituted:
+            doc["substituted"] = substituted
+        typer.echo(json.dumps(doc, indent=2))
     else:
         typer.echo(_format_fit(result))
+        for ours, theirs in substituted.items():
+            typer.echo(f"{theirs} fitted as {ours} (--substitute {theirs}={ours})")
 
 
 def _format_fit(result: FitResult) -> str:
@@ -137,10 +166,8 @@ def _format_fit(result: FitResult) -> str:
     return "\n".join(lines)
 
 
-def _lazy_radec_converter(site: str | None, site_file: str | None
-                          ) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
-    def convert(utcs: Any, ra_deg: np.ndarray, dec_deg: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
+def _lazy_radec_converter(site: str | None, site_file: str | None) -> Callable[..., Any]:
+    def convert(utcs: Any, ra_deg: Any, dec_deg: Any) -> Any:
         from .cli_sky import make_site, radec_to_observed_altaz
 
         return radec_to_observed_altaz(list(utcs), ra_deg, dec_deg, make_site(site, site_file))
@@ -212,11 +239,24 @@ def simulate(
     seed: Annotated[int | None, typer.Option("--seed", help="Random seed (repeatable runs).")] = None,
     min_el_deg: Annotated[float, typer.Option("--min-el", help="Lowest elevation, deg.")] = 20.0,
     max_el_deg: Annotated[float, typer.Option("--max-el", help="Highest elevation, deg.")] = 85.0,
-    latitude_deg: Annotated[float, typer.Option(
-        "--latitude-deg", help="Site latitude written to the run-parameters line.")] = -30.2446,
+    latitude_deg: Annotated[float | None, typer.Option(
+        "--latitude-deg", help="Site latitude written to the run-parameters line; default: "
+        "the site file's ($VIRTUALSTAR_SITE or the packaged site).")] = None,
+    site_file: Annotated[str | None, typer.Option(
+        "--site-file", help="Site TOML giving the latitude (default $VIRTUALSTAR_SITE or the "
+        "packaged site).")] = None,
 ) -> None:
     """Write a synthetic pointing run (TPOINT format) drawn from a model plus noise."""
+    import numpy as np
+
+    from .simulate import simulate_run
+    from .tpoint_format import write_tpoint
+
     with _errors_to_exit():
+        if latitude_deg is None:
+            from .cli_sky import make_site
+
+            latitude_deg = make_site(None, site_file).lat_deg
         pm = _model_argument(model)
         rng = np.random.default_rng(seed)
         run = simulate_run(pm, stars, noise, rng=rng, min_el_deg=min_el_deg,
@@ -231,6 +271,8 @@ def simulate(
 
 
 def _model_argument(text: str) -> PointingModel:
+    from .model import load_model, model_from_values
+
     if "=" in text and not Path(text).exists():
         values = []
         for item in text.replace(" ", ",").split(","):
@@ -263,6 +305,8 @@ def apply(
         "see docs/pointing-model.md); repeatable.")] = None,
 ) -> None:
     """Print the encoder demand for an observed position (or the reverse with --inverse)."""
+    from .model import load_model
+
     az, el = _parse_altaz(altaz)
     mapping = _parse_substitutions(substitute or [])
     with _errors_to_exit():

@@ -177,6 +177,12 @@ def load_model(path: str | Path, *, substitute: Mapping[str, str] | None = None
         text = Path(path).read_text(encoding="utf-8", errors="replace")
     except OSError as exc:
         raise ModelFileError(source, f"cannot read: {exc.strerror or exc}") from exc
+    return model_from_text(text, source, substitute=substitute)
+
+
+def model_from_text(text: str, source: str, *, substitute: Mapping[str, str] | None = None
+                    ) -> PointingModel:
+    """Read a model from the `text` of a file named `source` (as `load_model` does)."""
     from .tpoint_model_file import looks_like_tpoint_model, read_tpoint_model
 
     if looks_like_tpoint_model(text):

@@ -32,7 +32,7 @@ if [ ! -f node_modules/.package-lock.json ] || [ package-lock.json -nt node_modu
 fi
 
 BUNDLE=../virtualstar/panel/static/index.html
-if [ ! -f "$BUNDLE" ] || [ -n "$(find src index.html vite.config.js package-lock.json -newer "$BUNDLE" -print -quit)" ]; then
+if [ ! -f "$BUNDLE" ] || [ -n "$(find src public index.html vite.config.js package-lock.json -newer "$BUNDLE" -print -quit)" ]; then
   echo "panel: npm run build"
   npm run build --silent >/dev/null
 fi

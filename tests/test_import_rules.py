@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-OURS = ("astcom_client", "mount_emulator", "virtualstar", "pointing_model", "catalogs")
+OURS = ("astcom_client", "mount_emulator", "virtualstar", "pointing_model", "catalogs",
+        "guide_camera")
 
 
 def imported(path: Path) -> set[str]:
@@ -50,9 +51,13 @@ def offending(paths: list[Path], forbidden: tuple[str, ...]) -> list[str]:
 
 
 @pytest.mark.parametrize(("package", "forbidden"), [
-    ("astcom_client", ("mount_emulator", "virtualstar", "pointing_model", "catalogs")),
-    ("catalogs", ("astcom_client", "mount_emulator", "virtualstar", "pointing_model")),
-    ("mount_emulator", ("virtualstar", "pointing_model", "catalogs")),
+    ("astcom_client", ("mount_emulator", "virtualstar", "pointing_model", "catalogs",
+                       "guide_camera")),
+    ("catalogs", ("astcom_client", "mount_emulator", "virtualstar", "pointing_model",
+                  "guide_camera")),
+    ("mount_emulator", ("virtualstar", "pointing_model", "catalogs", "guide_camera")),
+    # the camera simulator: ASTCom and independent truth libraries (skyfield, sgp4, ERFA)
+    ("guide_camera", ("mount_emulator", "virtualstar", "pointing_model", "catalogs")),
 ])
 def test_a_package_imports_only_what_the_architecture_allows(package, forbidden):
     assert offending(modules(package), forbidden) == []
@@ -65,9 +70,15 @@ def test_the_pointing_model_core_imports_nothing_of_ours_and_its_cli_no_emulator
     assert offending(cli, ("mount_emulator", "astcom_client")) == []
 
 
-def test_only_the_launcher_of_virtualstar_imports_the_emulator():
+def test_only_the_launcher_of_virtualstar_imports_the_emulator_and_the_camera_simulator():
     others = [p for p in modules("virtualstar") if p != ROOT / "virtualstar" / "launcher.py"]
-    assert offending(others, ("mount_emulator",)) == []
+    assert offending(others, ("mount_emulator", "guide_camera")) == []
+
+
+@pytest.mark.parametrize("module", ["frames.py", "boresight.py"])
+def test_the_camera_frames_are_pure_functions(module):
+    names = imported(ROOT / "guide_camera" / module)
+    assert not names & {"time", "datetime", "asyncio", "socket", "astcom_client"}, names
 
 
 @pytest.mark.parametrize("module", ["protocol.py", "codec.py", "commands.py", "service.py",
@@ -85,7 +96,10 @@ def test_the_emulator_physics_reads_no_clock_and_no_socket(module):
 
 def test_the_vss_reads_no_clock_of_its_own_for_mount_time():
     """The VSS waits on the mount clock (server/clock.py); wall time only for timeouts."""
-    allowed = {"clock.py", "timesync.py", "telescope.py", "server.py"}  # wall: TimeS, stall, heartbeat
+    allowed = {"clock.py", "timesync.py", "telescope.py", "server.py",  # wall: TimeS, stall, heartbeat
+               # a driver without a mount clock: mount time is the host's UTC, each report
+               # stamped when it was read (ARCHITECTURE.md, "Time"); its loop paces in wall time
+               "rate_mount.py", "indi.py", "rate_loop.py"}
     for path in modules("virtualstar/server"):
         if path.name not in allowed:
             assert not imported(path) & {"time", "datetime"}, path.name
@@ -103,6 +117,86 @@ def test_the_vs_root_lists_each_command_with_the_first_paragraph_of_its_own_help
         target = getattr(importlib.import_module(module), attribute)
         doc = target.info.help if isinstance(target, typer.Typer) else target.__doc__
         assert " ".join(doc.strip().split("\n\n")[0].split()) == summary, name
+
+
+_EVERY_HELP = r"""
+import importlib, json, os, sys
+import typer
+HEAVY = {"numpy", "pandas", "pyarrow", "matplotlib", "scipy", "numba", "astropy", "erfa",
+         "skyfield", "sgp4", "aiohttp", "websockets"}
+
+def in_child(work):
+    # fork from this light parent: each command sees only what it imports itself
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(r)
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        try:
+            out = work()
+        except BaseException as exc:  # noqa: BLE001 - reported to the parent
+            out = repr(exc)
+        os.write(w, json.dumps(out).encode())
+        os._exit(0)
+    os.close(w)
+    data = b""
+    while chunk := os.read(r, 1 << 16):
+        data += chunk
+    os.waitpid(pid, 0)
+    return json.loads(data)
+
+def subcommands():
+    from virtualstar.cli.main import COMMANDS
+    argvs = [("virtualstar.cli.main", ["--help"])]
+    for name, (module, attribute, _) in COMMANDS.items():
+        argvs.append(("virtualstar.cli.main", [name, "--help"]))
+        target = getattr(importlib.import_module(module), attribute)
+        if isinstance(target, typer.Typer):
+            for sub in typer.main.get_group(target).commands:
+                argvs.append(("virtualstar.cli.main", [name, sub, "--help"]))
+    import pointing_model.cli as pm
+    argvs.append(("pointing_model.cli", ["--help"]))
+    for sub in typer.main.get_group(pm.app).commands:
+        argvs.append(("pointing_model.cli", [sub, "--help"]))
+    return argvs
+
+def run_help(module, argv):
+    # what --help does up to drawing the text: import the command and build its parameters
+    # (the drawing itself, in rich, imports nothing of ours and costs most of the time)
+    def work():
+        app = importlib.import_module(module).app
+        command = typer.main.get_group(app)
+        with command.make_context("prog", ["--help"], resilient_parsing=True) as ctx:
+            for name in argv[:-1]:
+                command = command.get_command(ctx, name)
+                ctx = command.make_context(name, ["--help"], parent=ctx, resilient_parsing=True)
+            command.get_params(ctx)
+        return sorted({m.split(".")[0] for m in sys.modules} & HEAVY)
+    return in_child(work)
+
+results = {f"{module} {' '.join(argv)}": run_help(module, argv)
+           for module, argv in in_child(subcommands)}
+print(json.dumps(results))
+"""
+
+
+def test_every_help_imports_none_of_the_heavy_libraries():
+    """Every `vs ... --help` and `pointing-model ... --help` stays under 0.3 s: none imports
+    numpy, pyarrow, scipy, the astronomy, aiohttp or websockets (benchmarks/bench_cli_startup.py
+    times them). Each command is built as its --help builds it, in a process forked from a
+    parent that imported only typer."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _EVERY_HELP], capture_output=True, text=True,
+                         cwd=ROOT, timeout=300)
+    results = json.loads(out.stdout.strip().splitlines()[-1])
+    assert len(results) > 30, results  # every command and subcommand was reached
+    heavy = {argv: mods for argv, mods in results.items() if mods}
+    assert heavy == {}, heavy
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["status", "--server", "ws://127.0.0.1:9"],
@@ -139,3 +233,24 @@ def test_the_facades_reach_the_mount_only_through_a_vss_client(package):
 def test_the_facade_protocols_do_no_io(module):
     names = imported(ROOT / module)
     assert not names & {"asyncio", "socket", "aiohttp", "websockets", "sys"}, names
+
+
+@pytest.mark.parametrize("module", ["procedures.py", "programs.py"])
+def test_the_procedures_see_the_server_only_through_the_station_view(module):
+    """Issue 26's import circle: procedures and programs take a `Station` (station.py), a
+    narrow view of the server, and never import the telescope, even for typing."""
+    names = imported(ROOT / "virtualstar" / "server" / module)
+    assert "virtualstar.server.telescope" not in names, names
+
+
+def test_mount_backends_import_no_supervisor_internals():
+    """A backend implements the mount-link interface and nothing more: it may import the
+    interface, the mapping, the exceptions, astronomy and its protocol's client library."""
+    allowed = {"virtualstar.server.link_interface", "virtualstar.server.mapping",
+               "virtualstar.server.exceptions", "virtualstar.server.operations"}
+    for path in modules("virtualstar/server/backends"):
+        for name in ours(imported(path)):
+            if name.startswith("virtualstar.server.") and not name.startswith(
+                    "virtualstar.server.backends"):
+                assert name in allowed, f"{path.relative_to(ROOT)} imports {name}"
+            assert not name.startswith(("mount_emulator", "virtualstar.launcher")), name

@@ -4,8 +4,9 @@
 the site (found with the pass predictor from the bundled TLE), starts the
 VirtualStar Server on it, and as an API client (in the same process, no socket):
 slews to a bright star, tracks it sidereally, then tracks the ISS through the
-whole pass. It returns the per-phase figures (slew time, tracking error RMS and
-peak, on the encoders and on the sky) and writes a PNG of the tracking error.
+whole pass. It returns the per-phase figures (slew time; RMS and peak of the error on
+target — the boresight against the target's true place —, of the encoders' following
+error and on the sky; the planned deviation apart) and writes a PNG of the errors.
 
 The emulator and the server share one `LockstepClock`: mount time advances only
 when the server has done the work due, so the figures are the same on every run
@@ -58,7 +59,12 @@ class DemoConfig:
 
 @dataclass
 class DemoPhase:
-    """One phase: tracking error (arcsec) over [from_us, to_us]; slew time if it is a slew."""
+    """One phase over [from_us, to_us] (arcsec); slew time if it is a slew.
+
+    `rms_arcsec`/`peak_arcsec`: the encoders' following error (vs the demand sent);
+    `on_target_*`: the boresight against the target's true place (what the sky saw);
+    `planned_deviation_peak_arcsec`: the demand against that place (a keyhole), apart.
+    """
 
     name: str
     target: str
@@ -67,16 +73,24 @@ class DemoPhase:
     from_us: int
     to_us: int
     slew_time_s: float | None = None
-    on_sky_rms_arcsec: float | None = None  # encoder error with clock offset × target rate
+    on_sky_rms_arcsec: float | None = None  # on target with clock offset × target rate
     on_sky_peak_arcsec: float | None = None
     clock_offset_us: int | None = None  # the largest mount clock offset during the phase
+    on_target_rms_arcsec: float | None = None
+    on_target_peak_arcsec: float | None = None
+    off_target_s: float | None = None
+    planned_deviation_peak_arcsec: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {"name": self.name, "target": self.target, "rms_arcsec": self.rms_arcsec,
                 "peak_arcsec": self.peak_arcsec, "duration_s": (self.to_us - self.from_us) / 1e6,
                 "slew_time_s": self.slew_time_s, "on_sky_rms_arcsec": self.on_sky_rms_arcsec,
                 "on_sky_peak_arcsec": self.on_sky_peak_arcsec,
-                "clock_offset_us": self.clock_offset_us}
+                "clock_offset_us": self.clock_offset_us,
+                "on_target_rms_arcsec": self.on_target_rms_arcsec,
+                "on_target_peak_arcsec": self.on_target_peak_arcsec,
+                "off_target_s": self.off_target_s,
+                "planned_deviation_peak_arcsec": self.planned_deviation_peak_arcsec}
 
 
 @dataclass
@@ -206,7 +220,9 @@ def _phase(name: str, target: str, stats: dict[str, Any], *,
            slew_time_s: float | None = None) -> DemoPhase:
     return DemoPhase(name, target, stats["rms_arcsec"], stats["peak_arcsec"], stats["from_us"],
                      stats["to_us"], slew_time_s, stats["on_sky_rms_arcsec"],
-                     stats["on_sky_peak_arcsec"], stats["clock_offset_us"])
+                     stats["on_sky_peak_arcsec"], stats["clock_offset_us"],
+                     stats.get("on_target_rms_arcsec"), stats.get("on_target_peak_arcsec"),
+                     stats.get("off_target_s"), stats.get("planned_deviation_peak_arcsec"))
 
 
 async def _encoder_quantum_arcsec(vss) -> float:
@@ -249,10 +265,20 @@ def _plot(result: DemoResult, out_dir: Path) -> Path:
                 transform=ax.get_xaxis_transform())
         row = (row + 1) % 4
     floor = 1e-4
+
+    def values(key: str) -> np.ndarray:  # None (no target followed) → a gap in the line
+        return np.maximum(np.array([np.nan if v is None else v for v in series[key]], float),
+                          floor)
+
+    # on target (the truth) on top; it equals the following error wherever nothing is planned
+    ax.semilogy(x, values("on_target_rms_arcsec"), lw=2.4, color="tab:green", alpha=0.55,
+                zorder=5, label="on target RMS per 0.1 s (boresight vs the target's true place)")
+    ax.semilogy(x, values("planned_deviation_arcsec"), lw=0.6, color="tab:pink", zorder=4,
+                label="planned deviation, peak per 0.1 s (demand vs true place)")
     ax.semilogy(x, np.maximum(series["peak_arcsec"], floor), lw=0.6, color="tab:red",
-                label="peak per 0.1 s (on the sky)")
+                label="following error peak per 0.1 s (encoders vs demand)")
     ax.semilogy(x, np.maximum(series["rms_arcsec"], floor), lw=0.9, color="black",
-                label="RMS per 0.1 s (on the sky)")
+                label="following error RMS per 0.1 s")
     ax.semilogy(x, np.maximum(series["az_rms_arcsec"], floor), lw=0.6, color="tab:cyan",
                 label="azimuth RMS (× cos el)")
     ax.semilogy(x, np.maximum(series["el_rms_arcsec"], floor), lw=0.6, color="tab:olive",
@@ -264,8 +290,8 @@ def _plot(result: DemoResult, out_dir: Path) -> Path:
                 "resolution, not tracking", transform=ax.get_yaxis_transform(), fontsize=7,
                 color="tab:brown", va="bottom")
     ax.set_xlabel(f"mount time since {iso_utc(t0)} UTC [s]")
-    ax.set_ylabel("following error [arcsec]")
-    ax.set_title("VirtualStar demo: tracking error through slews, sidereal tracking and an "
+    ax.set_ylabel("error on the sky [arcsec]")
+    ax.set_title("VirtualStar demo: errors through slews, sidereal tracking and an "
                  "ISS pass (lockstep simulated time)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)

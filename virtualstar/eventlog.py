@@ -14,11 +14,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from astcom_client.events import Event, level_rank, utc_text
+from virtualstar.display import safe_text
 
 __all__ = ["FOLLOW_POLL_S", "EventFilter", "VssEventSource", "follow_vss", "format_event",
            "store_events"]
 
 FOLLOW_POLL_S = 0.5
+#: Events asked of the VSS's `log` at a time (its default; docs/vss-api.md).
+LOG_PAGE_EVENTS = 1000
 
 
 @dataclass(frozen=True)
@@ -54,7 +57,8 @@ class EventFilter:
 
 def format_event(e: Event) -> str:
     """Return one table row: UTC, level, source, kind, message."""
-    return f"{utc_text(e.t_us)}  {e.level:<7} {e.source:<8} {e.kind:<11} {e.message}"
+    return (f"{utc_text(e.t_us)}  {safe_text(e.level):<7} {safe_text(e.source):<8} "
+            f"{safe_text(e.kind):<11} {safe_text(e.message)}")
 
 
 def store_events(reader) -> list[Event]:
@@ -64,12 +68,13 @@ def store_events(reader) -> list[Event]:
 
 
 async def follow_vss(url: str, flt: EventFilter, on_event: Callable[[Event], None], *,
-                     password: str | None = None, history: bool = True,
+                     password: str | None = None, history: bool = True, follow: bool = True,
                      duration_s: float | None = None) -> int:
-    """Print a VSS's events as they come (polling `log`); return how many passed.
+    """Hand on a VSS's events that pass `flt` (polling `log`); return how many passed.
 
-    `history` also hands on what the log already holds. Ends after `duration_s` wall
-    seconds (None: until cancelled).
+    `history` also hands on what the log already holds. Without `follow`, reads the log
+    once, to its newest event, and returns. With it, keeps polling until `duration_s`
+    wall seconds have passed (None: until cancelled).
     """
     from virtualstar.vss_client import VssClient
 
@@ -79,17 +84,20 @@ async def follow_vss(url: str, flt: EventFilter, on_event: Callable[[Event], Non
         since = 0
         if not history:
             since = int((await client.request("log", {"since": 0, "limit": 1}))["last_seq"])
-        while deadline is None or time.monotonic() < deadline:
-            doc = await client.request("log", {"since": since})
+        while True:
+            doc = await client.request("log", {"since": since, "limit": LOG_PAGE_EVENTS})
             for d in doc["events"]:
                 e = Event.from_dict(d)
                 since = max(since, e.seq)
                 if flt.matches(e):
                     passed += 1
                     on_event(e)
-            if len(doc["events"]) < 1000:
-                await asyncio.sleep(FOLLOW_POLL_S)
-    return passed
+            if doc["events"] and since < int(doc.get("last_seq", since)):
+                continue  # more are waiting: read on at once
+            if not follow or (deadline is not None and time.monotonic() >= deadline):
+                return passed
+            await asyncio.sleep(FOLLOW_POLL_S if deadline is None
+                                else max(0.0, min(FOLLOW_POLL_S, deadline - time.monotonic())))
 
 
 
@@ -125,6 +133,6 @@ class VssEventSource:
             doc = await self.client.request("log", {"since": seq})
             events = [Event.from_dict(d) for d in doc["events"]]
             out += events
-            if len(events) < 1000:
+            if len(events) < LOG_PAGE_EVENTS:
                 return out
             seq = events[-1].seq

@@ -1,7 +1,8 @@
 """Start the bundled mount emulator inside this process (`vs server --emulator`, `vs demo`).
 
-This is the only module of `virtualstar` that imports `mount_emulator`
-(docs/architecture.md): everything else talks to a mount through ASTCom only.
+This is the only module of `virtualstar` that imports `mount_emulator` and the guide
+camera simulator `guide_camera` (docs/architecture.md): everything else talks to a
+mount or a camera through ASTCom only.
 """
 
 from __future__ import annotations
@@ -12,11 +13,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["EmbeddedEmulator", "EmbeddedVss", "embedded_vss", "hidden_geometry_arcsec",
-           "start_emulator"]
+__all__ = ["DEFAULT_ENDPOINT_PORT", "CameraSim", "EmbeddedCamera", "EmbeddedEmulator",
+           "EmbeddedVss", "EndpointUnavailable", "camera_from_file", "embedded_vss",
+           "hidden_geometry_arcsec", "satellite_camera", "star_camera", "start_emulator",
+           "start_guide_camera"]
 
+# `vs server --emulator` serves its emulator's ASTCom endpoint on this port unless told
+# otherwise, so that after a restart clients (the panel) find it where it was: beside the
+# VSS's own 8740.
+DEFAULT_ENDPOINT_PORT = 8741
 IN_MEMORY_QUEUE = 256  # frames in flight per direction of an in-process connection
 LOCKSTEP_STREAM_FLUSH_S = 0.2  # mount seconds of samples per stream packet in lockstep
+
+
+class EndpointUnavailable(OSError):
+    """The embedded emulator's ASTCom endpoint cannot listen where it was asked to."""
 
 
 @dataclass
@@ -78,6 +89,7 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
                          url: str = "ws://127.0.0.1:0", az_deg: float = 0.0, el_deg: float = 20.0,
                          params: dict[str, float] | None = None,
                          password: str | None = None,
+                         observer_password: str | None = None,
                          geometry_arcsec: dict[str, float] | None = None,
                          seeing_arcsec: float | None = None,
                          clock: Any = None) -> EmbeddedEmulator:
@@ -105,14 +117,130 @@ async def start_emulator(*, speed: float = 1.0, start_us: int | None = None,
         start_us = clock.now_us
         # in lockstep nobody waits for a packet in wall time: fewer, longer packets
         extra["stream_flush_s"] = LOCKSTEP_STREAM_FLUSH_S
+    if observer_password and not password:
+        raise ValueError("an observer password needs an operator password too")
+    passwords = {role: pw for role, pw in (("operator", password),
+                                           ("observer", observer_password)) if pw}
     config = EmulatorConfig(speed=speed, start_us=start_us, az_deg=az_deg, el_deg=el_deg,
-                            params=dict(params or {}),
-                            passwords={"operator": password} if password else None, **extra)
+                            params=dict(params or {}), passwords=passwords or None, **extra)
     emulator = MountEmulator(config)
-    bound = await emulator.start(url, run_loop=clock is None)
+    try:
+        bound = await emulator.start(url, run_loop=clock is None)
+    except OSError as exc:
+        raise EndpointUnavailable(exc.errno, f"the emulator's ASTCom endpoint cannot listen on "
+                                  f"{url}: {exc.strerror or exc}") from None
     if clock is not None:
         clock.add_driver(emulator.run_until)
     return EmbeddedEmulator(bound, emulator)
+
+
+@dataclass(frozen=True)
+class CameraSim:
+    """A simulated guide camera to run beside the embedded emulator: its truth and settings.
+
+    `truth` is a `guide_camera` truth (`SatelliteTruth`, `StarTruth`); `config` a
+    `guide_camera.CameraConfig` (None: its defaults). Build one with `satellite_camera`
+    or `star_camera`.
+    """
+
+    truth: Any
+    config: Any = None
+
+
+def satellite_camera(line1: str, line2: str, site: Any, *, along_s: float = 0.0,
+                     across_arcsec: float = 0.0, at_us: int | None = None,
+                     config: Any = None) -> CameraSim:
+    """A camera that sees a satellite whose true elements are the given ones moved
+    `along_s` along its track and `across_arcsec` across it at `at_us` (guide_camera's
+    `shifted_tle`); the VSS is given the unmoved ones."""
+    from guide_camera import CameraSite, SatelliteTruth, shifted_elements
+
+    where = CameraSite.from_object(site)
+    if not (along_s or across_arcsec):
+        return CameraSim(SatelliteTruth(line1, line2, where), config)
+    if at_us is None:
+        raise ValueError("a moved satellite needs the time its offsets are seen at (at_us)")
+    elements = shifted_elements(line1, line2, along_s=along_s, across_arcsec=across_arcsec,
+                                at_us=at_us, site=where)
+    return CameraSim(SatelliteTruth.from_satrec(elements, where), config)
+
+
+def star_camera(ra_deg: float, dec_deg: float, site: Any, *, config: Any = None,
+                **motion: float) -> CameraSim:
+    """A camera that sees a star at its catalogue place (pm_ra_cosdec_mas_yr, pm_dec_mas_yr,
+    parallax_mas, rv_km_s, epoch_jyear as keywords)."""
+    from guide_camera import CameraSite, StarTruth
+
+    return CameraSim(StarTruth(ra_deg, dec_deg, CameraSite.from_object(site), **motion), config)
+
+
+def camera_from_file(path: str | Path, site: Any) -> CameraSim:
+    """A simulated camera from a TOML file (guide_camera's `load_camera_file` layout); the
+    [truth] table may also name a bundled star: star = "Vega"."""
+    from catalogs import UnknownStar, bright_stars
+    from guide_camera import CameraConfigError, CameraSite
+    from guide_camera.config_file import camera_config, read_camera_file, truth_from_table
+
+    where = CameraSite.from_object(site)
+    try:
+        doc = read_camera_file(path)
+        truth = dict(doc["truth"])
+        if "star" in truth:
+            try:
+                star = bright_stars().lookup(str(truth.pop("star")))
+            except UnknownStar as exc:
+                raise ValueError(f"{path}: {exc}") from None
+            truth.update(ra_deg=star.ra_deg, dec_deg=star.dec_deg,
+                         pm_ra_cosdec_mas_yr=star.pm_ra_cosdec_mas_yr,
+                         pm_dec_mas_yr=star.pm_dec_mas_yr, parallax_mas=star.parallax_mas,
+                         rv_km_s=star.rv_km_s or 0.0, epoch_jyear=star.epoch_jyear)
+        return CameraSim(truth_from_table(truth, where, Path(path)),
+                         camera_config(doc.get("camera", {}), path))
+    except CameraConfigError as exc:
+        raise ValueError(str(exc)) from None
+
+
+@dataclass
+class EmbeddedCamera:
+    """A running simulated guide camera: its device and where clients reach it."""
+
+    url: str
+    device: Any
+
+    async def connect_in_memory(self, *, name: str = "in-process", password: str | None = None,
+                                timeout_s: float = 5.0):
+        from astcom_client import Client
+
+        end = self.device.endpoint.connect_in_memory(IN_MEMORY_QUEUE)
+        return await Client.open(end, password=password, name=name, timeout_s=timeout_s)
+
+    async def stop(self) -> None:
+        await self.device.stop()
+
+
+async def start_guide_camera(emulator: EmbeddedEmulator, sim: CameraSim, *, site: Any = None,
+                             clock: Any = None, url: str | None = "ws://127.0.0.1:0",
+                             password: str | None = None,
+                             observer_password: str | None = None) -> EmbeddedCamera:
+    """Start the guide camera simulator beside an embedded emulator (same event loop).
+
+    It reads the emulator through an in-memory ASTCom connection and waits on `clock`
+    (the lockstep clock: deterministic frames), or follows the emulator's own clock.
+    `url` also serves the camera on a socket (the panel, the recorder; None: nowhere);
+    `password` (the emulator's operator password) and `observer_password` guard it too.
+    """
+    from guide_camera import CameraConfig, CameraSite, GuideCameraDevice
+
+    async def connect():
+        return await emulator.connect_in_memory(password=password, name="guide-camera")
+
+    passwords = {role: pw for role, pw in (("operator", password),
+                                           ("observer", observer_password)) if pw} or None
+    device = GuideCameraDevice(connect, sim.truth, config=sim.config or CameraConfig(),
+                               site=None if site is None else CameraSite.from_object(site),
+                               clock=clock, passwords=passwords)
+    bound = await device.start(url)
+    return EmbeddedCamera(bound, device)
 
 
 @dataclass
@@ -122,6 +250,7 @@ class EmbeddedVss:
     emulator: EmbeddedEmulator
     server: Any  # virtualstar.server.VssServer
     url: str  # the VSS's WebSocket URL ('' when it listens nowhere)
+    camera: EmbeddedCamera | None = None
 
     def client(self):
         """Return an in-process API client (`LocalVssClient`) of the VSS."""
@@ -133,11 +262,14 @@ class EmbeddedVss:
 @contextlib.asynccontextmanager
 async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int | None = None,
                        site: Any = None, listen: str | None = None,
-                       password: str | None = None, emulator_url: str = "ws://127.0.0.1:0",
+                       password: str | None = None, observer_password: str | None = None,
+                       emulator_url: str = "ws://127.0.0.1:0",
                        geometry_arcsec: dict[str, float] | None = None,
                        seeing_arcsec: float | None = None,
                        emulator_params: dict[str, float] | None = None,
                        connect_timeout_s: float = 30.0,
+                       camera: CameraSim | None = None,
+                       camera_url: str | None = None,
                        **server_options: Any) -> AsyncIterator[EmbeddedVss]:
     """Run the emulator and a VSS driving it on this event loop, until the block ends.
 
@@ -145,11 +277,16 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
     through an in-memory ASTCom connection; otherwise through `emulator_url` at
     `speed`. `listen` (ws://HOST:PORT) also serves the VSS API on a socket. The block
     starts once the VSS is connected and has its first tracking-error samples.
+    `password` (the VSS uses it) and `observer_password` guard the emulator's endpoint.
+    `camera` runs a simulated guide camera beside the emulator (served on `camera_url`
+    too, if given) and gives it to the VSS for closed loops.
     """
     from virtualstar.server import build_server
+    from virtualstar.server.camera_link import CameraLinkConfig
 
     emu = await start_emulator(speed=speed, start_us=start_us, url=emulator_url,
                                params=emulator_params, password=password,
+                               observer_password=observer_password,
                                geometry_arcsec=geometry_arcsec, seeing_arcsec=seeing_arcsec,
                                clock=clock)
     connector = None
@@ -157,15 +294,32 @@ async def embedded_vss(*, clock: Any = None, speed: float = 1.0, start_us: int |
         async def connector():
             return await emu.connect_in_memory(password=password, name="virtualstar-server")
     server = None
+    cam = None
     try:  # from here on the emulator runs: it stops however the block ends, a refused set-up too
+        server_options.setdefault("mount_endpoint", emu.url)  # told to clients (status, hello)
+        link = None
+        if camera is not None:
+            from virtualstar.astro import load_site
+
+            cam = await start_guide_camera(emu, camera, site=site or load_site(), clock=clock,
+                                           url=camera_url, password=password,
+                                           observer_password=observer_password)
+
+            async def camera_connector():
+                return await cam.connect_in_memory(name="virtualstar-server", password=password)
+
+            link = CameraLinkConfig(cam.url or "in-process guide camera",
+                                    connector=camera_connector)
         server = build_server(mount_url=emu.url if clock is None else "in-process emulator",
                               password=password, speed=speed, site=site, clock=clock,
-                              connector=connector, **server_options)
+                              connector=connector, camera=link, **server_options)
         url = await server.start(listen)
         await server.telescope.link.wait_connected(connect_timeout_s)
         await server.telescope.first_samples(connect_timeout_s)
-        yield EmbeddedVss(emu, server, url)
+        yield EmbeddedVss(emu, server, url, cam)
     finally:
         if server is not None:
             await server.close()
+        if cam is not None:
+            await cam.stop()
         await emu.stop()

@@ -23,7 +23,12 @@ sockets are served as they come.
     result = run_lockstep(main(clock), clock)    # or LockstepEventLoop(clock) by hand
 
 `pace` optionally caps the clock at that many mount seconds per wall second
-(lockstep, but never faster than ×pace). A test can also `freeze()` the clock,
+(lockstep, but never faster than ×pace). `idle_pace` is the pace while nobody waits
+for mount time to pass: a server that clients drive by hand (`vs server --emulator
+--speed max`) runs as fast as the CPU allows only while some request waits for an
+operation to land or end (`with clock.awaited(): ...`), and at real time otherwise, so
+the sky a user is about to ask for is still there when the command is typed. A test can
+also `freeze()` the clock,
 so that time passes only inside `advance(s)`, and wait for `settled()`: the
 moment nothing on the loop can run.
 """
@@ -31,13 +36,14 @@ moment nothing on the loop can run.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import heapq
 import itertools
 import logging
 import math
 import selectors
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Iterator
 from typing import Any, TypeVar
 
 __all__ = ["LockstepClock", "LockstepEventLoop", "run_lockstep"]
@@ -60,13 +66,19 @@ class LockstepClock:
     """
 
     lockstep = True
-    speed = 1.0
+    speed = 1.0  # the VSS's margins: those of real time
 
     def __init__(self, start_us: int, *, max_step_us: int = DEFAULT_MAX_STEP_US,
-                 pace: float | None = None, tick_us: int = TICK_US) -> None:
-        if pace is not None and not pace > 0:
-            raise ValueError(f"pace={pace}: expected mount seconds per wall second > 0, or None")
+                 pace: float | None = None, tick_us: int = TICK_US,
+                 idle_pace: float | None = None) -> None:
+        for name, value in (("pace", pace), ("idle_pace", idle_pace)):
+            if value is not None and not value > 0:
+                raise ValueError(f"{name}={value}: expected mount seconds per wall second > 0, "
+                                 "or None")
         self.tick_us = int(tick_us)
+        self.busy_pace = pace  # the pace while a request waits (all the time without idle_pace)
+        self.idle_pace = idle_pace
+        self._awaited = 0
         self.now_us = int(start_us) // self.tick_us * self.tick_us
         self.max_step_us = max(self.tick_us, int(max_step_us))
         self.pace = pace
@@ -79,6 +91,8 @@ class LockstepClock:
         self.error: BaseException | None = None
         self.frozen = False
         self._settled: list[asyncio.Future[None]] = []
+        if idle_pace is not None:
+            self.pace = idle_pace
 
     # ------------------------------------------------------------------ for tasks
     def add_driver(self, driver: Callable[[int], Any]) -> None:
@@ -112,6 +126,25 @@ class LockstepClock:
 
     def thaw(self) -> None:
         self.frozen = False
+
+    @contextlib.contextmanager
+    def awaited(self) -> Iterator[None]:
+        """Within the block a client waits for mount time to pass: with an `idle_pace`, the
+        clock runs at its busy pace (`pace`) until no such block is open."""
+        self._awaited += 1
+        self._pace_for_waiters()
+        try:
+            yield
+        finally:
+            self._awaited -= 1
+            self._pace_for_waiters()
+
+    def _pace_for_waiters(self) -> None:
+        if self.idle_pace is None:
+            return
+        pace = self.busy_pace if self._awaited else self.idle_pace
+        if pace != self.pace:
+            self.set_pace(pace)
 
     def set_pace(self, pace: float | None) -> None:
         """Change the cap (mount seconds per wall second; None: as fast as the CPU allows)."""

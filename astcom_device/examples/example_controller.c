@@ -89,11 +89,11 @@ void ex_init(double rate_hz, int64_t start_t_us, ex_clock_fn wall_us)
     W.amplitude = 1.0;
     W.frequency_hz = 5.0;
     W.gains[0] = 1.0; W.gains[1] = 0.1; W.gains[2] = 0.01;
-    snprintf(W.label, sizeof W.label, "example");
+    ad_snprintf(W.label, sizeof W.label, "example");
     W.site.lat_deg = 45.0;
     W.site.lon_deg = 6.0;
     W.voltage_v = 24.0;
-    snprintf(W.mode, sizeof W.mode, "idle");
+    ad_snprintf(W.mode, sizeof W.mode, "idle");
     W.current_a = 2.5;
     W.enabled = 1;
     F.rate_hz = rate_hz;
@@ -106,7 +106,7 @@ void ex_init(double rate_hz, int64_t start_t_us, ex_clock_fn wall_us)
         a->rate_limit = 5.0 * DEG;
         a->accel_limit = 2.0 * DEG;
         a->ctrl_rate_limit = 1.0 * DEG;
-        snprintf(a->fault_text, sizeof a->fault_text, "none");
+        ad_snprintf(a->fault_text, sizeof a->fault_text, "none");
     }
     F.ax[0].pos_min = -270.0 * DEG; F.ax[0].pos_max = 270.0 * DEG;
     F.ax[1].pos_min = 0.0 * DEG; F.ax[1].pos_max = 90.0 * DEG;
@@ -124,7 +124,7 @@ static int64_t mount_time(uint64_t tick)
 static void fault(axis *a, int64_t bit, const char *text)
 {
     a->faults |= bit;
-    snprintf(a->fault_text, sizeof a->fault_text, "%s", text);
+    ad_snprintf(a->fault_text, sizeof a->fault_text, "%s", text);
     a->velocity = 0.0;
     set_state(a, EX_FAULT);
 }
@@ -340,7 +340,7 @@ static int fn_slew(ad_call *c, void *u)
         if (a->state == EX_OFF) return ad_fail(c, "the axes are off: power them on first");
         if (a->state == EX_TRACKING) return ad_fail(c, "the mount is tracking: reset the trajectory first");
         if (!(goal[i] >= a->pos_min && goal[i] <= a->pos_max)) {
-            snprintf(why, sizeof why, "%s %.4f deg is outside %.1f..%.1f deg", i ? "el" : "az",
+            ad_snprintf(why, sizeof why, "%s %.4f deg is outside %.1f..%.1f deg", i ? "el" : "az",
                      goal[i] / DEG, a->pos_min / DEG, a->pos_max / DEG);
             return ad_fail(c, why);
         }
@@ -429,7 +429,7 @@ static int fn_safety_reset(ad_call *c, void *u)
     for (int i = 0; i < 2; i++) {
         axis *a = &F.ax[i];
         a->faults = 0;
-        snprintf(a->fault_text, sizeof a->fault_text, "none");
+        ad_snprintf(a->fault_text, sizeof a->fault_text, "none");
         if (a->state == EX_FAULT) set_state(a, EX_OFF);
     }
     update_mount_state();

@@ -2,6 +2,7 @@
  *
  *   astcom-example [--tcp HOST:PORT] [--serial PATH] [--rate HZ] [--password P]
  *                  [--observer-password P] [--extra N] [--duration S] [--stats FILE]
+ *                  [--warmup S] [--rt-priority N]
  *                  [--LIMIT VALUE ...]
  *
  * Limits: --max-clients --max-pending --auth-timeout --max-frame-bytes --max-depth
@@ -18,14 +19,20 @@
 static void usage(void)
 {
     fputs("usage: astcom-example [--tcp HOST:PORT] [--serial PATH] [--rate HZ] [--password P]\n"
-          "       [--observer-password P] [--extra N] [--duration S] [--stats FILE]\n"
+          "       [--observer-password P] [--extra N] [--duration S] [--stats FILE] [--warmup S]\n"
+          "       [--rt-priority N]\n"
           "       [--max-clients N] [--max-pending N] [--auth-timeout S] [--max-frame-bytes N]\n"
+          "       [--max-pending-frame-bytes N] [--max-pending-frames N]\n"
           "       [--max-depth N] [--max-array-len N] [--max-str-bytes N] [--max-messages N]\n"
           "       [--max-names N] [--max-streams N] [--ring-ticks N] [--max-reply-bytes N]\n"
           "       [--link-channels N]\n"
           "Serves the example controller (the Python example device's names plus a two-axis\n"
           "trajectory follower) over ASTCom: TCP, and/or the framed link on a tty/pty for\n"
-          "`astcom relay`. Without a password authentication is off (loopback tests only).\n",
+          "`astcom relay`. Without a password authentication is off (loopback tests only).\n"
+          "--stats FILE writes the tick loop's lateness (p50/p99/p99.9/max, the first\n"
+          "--warmup S seconds left out), dropped and skipped counts as JSON at exit.\n"
+          "--rt-priority N runs the tick thread SCHED_FIFO at priority N (1..99), as a\n"
+          "controller's loop should run on Linux (needs CAP_SYS_NICE or an rtprio limit).\n",
           stderr);
 }
 
@@ -60,8 +67,12 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--extra")) extra = (unsigned)number(a, v);
         else if (!strcmp(a, "--duration")) o.duration_s = atof(v);
         else if (!strcmp(a, "--stats")) o.stats_path = v;
+        else if (!strcmp(a, "--warmup")) o.warmup_s = atof(v);
+        else if (!strcmp(a, "--rt-priority")) o.rt_priority = (int)number(a, v);
         else if (!strcmp(a, "--max-clients")) cfg.max_clients = (uint32_t)number(a, v);
         else if (!strcmp(a, "--max-pending")) cfg.max_pending = (uint32_t)number(a, v);
+        else if (!strcmp(a, "--max-pending-frame-bytes")) cfg.max_pending_frame_bytes = (uint32_t)number(a, v);
+        else if (!strcmp(a, "--max-pending-frames")) cfg.max_pending_frames = (uint32_t)number(a, v);
         else if (!strcmp(a, "--auth-timeout")) cfg.auth_timeout_s = atof(v);
         else if (!strcmp(a, "--max-frame-bytes")) cfg.max_frame_bytes = (uint32_t)number(a, v);
         else if (!strcmp(a, "--max-depth")) cfg.max_depth = (uint32_t)number(a, v);

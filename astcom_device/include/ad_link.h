@@ -23,7 +23,8 @@ enum ad_link_kind {
     AD_LINK_DATA = 1,   /* an ASTCom frame of channel `chan` (either way) */
     AD_LINK_OPEN = 2,   /* relay -> device: a client arrived on `chan` (body: its address) */
     AD_LINK_CLOSE = 3,  /* either way: `chan` is over; from the device: u16 LE code + reason */
-    AD_LINK_HELLO = 4,  /* chan 0: u8 version, u16 LE channels, u32 LE max_frame_bytes */
+    AD_LINK_HELLO = 4,  /* chan 0: u8 version, u16 LE channels, u32 LE max_frame_bytes,
+                           u32 LE token (the relay's; the device echoes it, 0 at boot) */
     AD_LINK_PING = 5,   /* chan 0, relay -> device: u32 token */
     AD_LINK_PONG = 6    /* chan 0, device -> relay: the same token */
 };
@@ -34,15 +35,20 @@ typedef struct ad_link ad_link;
 typedef void (*ad_link_drain_fn)(void *io);
 
 /* Bytes the link needs for a device whose frames are at most `max_frame_bytes` in and
- * `max_reply_bytes` out, with `channels` channels (<= AD_LINK_MAX_CHANNELS). */
+ * `max_reply_bytes` out, with `channels` channels (<= AD_LINK_MAX_CHANNELS): its receive
+ * buffer, its send ring, the park and the channel tables. */
 size_t ad_link_bytes(uint32_t max_frame_bytes, uint32_t max_reply_bytes, uint32_t channels);
 ad_link *ad_link_init(void *mem, size_t mem_bytes, ad_device *dev, uint32_t max_frame_bytes,
                       uint32_t max_reply_bytes, uint32_t channels, ad_link_drain_fn drain,
                       void *io);
-/* Announce the device (a HELLO on channel 0): at boot, and whenever the relay asks. */
+/* Announce the device at boot (a HELLO on channel 0 with token 0); a relay's HELLO is
+ * answered by the link itself, with the relay's token. */
 void ad_link_hello(ad_link *link);
-/* Returns the bytes consumed: fewer than `n` when a frame must wait for its channel
- * (a deferred call runs there); feed the rest after ad_link_service(). */
+/* Returns the bytes consumed. A frame for a channel that cannot take it yet (a deferred
+ * call runs there) is parked, so the other channels go on, and handed on by
+ * ad_link_service(); a channel that overflows the park (AD_LINK_PARK_FRAMES frames) is
+ * closed with ERR 429. Built without a park (0, a small MCU), fewer than `n` are consumed
+ * instead: feed the rest after ad_link_service(). */
 size_t ad_link_feed(ad_link *link, const uint8_t *bytes, size_t n, int64_t now_us);
 /* Close the channels the device wants closed (after BYE, errors); call after ad_poll. */
 void ad_link_service(ad_link *link);

@@ -105,6 +105,9 @@ typedef struct ad_config {
     uint32_t max_frame_bytes, max_depth, max_array_len, max_str_bytes;
     uint32_t max_messages, max_names_per_message, max_streams_per_client;
     uint32_t max_clients, max_pending;
+    /* before AUTH succeeds (with authentication on): frames of at most this size, and at
+     * most this many of them (the next is ERR 429 and a close) */
+    uint32_t max_pending_frame_bytes, max_pending_frames;
     double auth_timeout_s;
     uint32_t queue_packets;        /* announced; the sink's room decides what is dropped */
     /* device-side sizes */
@@ -153,6 +156,16 @@ typedef struct ad_sink {
     size_t (*room)(void *ctx);
     int (*send)(void *ctx, const uint8_t *frame, size_t len, int droppable);
     void *ctx;
+    /* Optional (NULL: not offered): a reply of `len` bytes in parts, for replies larger
+     * than max_reply_bytes (a whole LIST on a device with a small scratch). begin() returns
+     * 0 when it takes the frame (it then must take every part: buffer or wait), else the
+     * reply is refused with ERR 413; part() gets the bytes in order; end() closes it. */
+    int (*begin)(void *ctx, size_t len);
+    void (*part)(void *ctx, const uint8_t *bytes, size_t n);
+    void (*end)(void *ctx);
+    /* Optional: the stream packets this connection's transport holds, not yet sent (STATS
+     * queue_depths); NULL: reported as 0. */
+    size_t (*queued)(void *ctx);
 } ad_sink;
 
 typedef struct ad_session ad_session;
@@ -166,8 +179,14 @@ void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len,
 /* A frame the transport had to refuse before it was whole (its length prefix was over
  * max_frame_bytes): ERR 413 and close. */
 void ad_refuse_oversize(ad_device *dev, ad_session *s, uint64_t announced);
-/* Streams, auth timeouts and deferred calls. Call often (every ms or so). */
+/* Streams, auth timeouts and deferred calls. Call often (every ms or so), or when
+ * ad_poll_delay_us() says. */
 void ad_poll(ad_device *dev, int64_t now_us);
+/* How long (µs) the communication loop may sleep before ad_poll() has work: until the
+ * next stream packet is due, the next auth timeout, at most `max_us`; 1 ms while a
+ * deferred call runs. A loop that sleeps this long (waking early for I/O) does what one
+ * that polls every millisecond does, with far fewer wake-ups. */
+int64_t ad_poll_delay_us(const ad_device *dev, int64_t now_us, int64_t max_us);
 /* True when the library wants the transport closed (after BYE or an error that
  * closes); `code`/`reason` say why (reason may be ""). The frames before are sent. */
 int ad_wants_close(const ad_session *s, int *code, const char **reason);
@@ -175,6 +194,9 @@ int ad_wants_close(const ad_session *s, int *code, const char **reason);
 void ad_close(ad_device *dev, ad_session *s);
 /* Stop reading from a peer whose sink cannot take a reply now (back-pressure). */
 int ad_can_receive(const ad_device *dev, const ad_session *s);
+/* The largest frame the peer may send now (smaller before it has authenticated): a
+ * transport that reads a length first refuses a larger one with ad_refuse_oversize(). */
+uint32_t ad_frame_limit(const ad_device *dev, const ad_session *s);
 
 /* ---- function calls ------------------------------------------------------------------- */
 
@@ -200,13 +222,28 @@ void ad_return_f64_array(ad_call *call, const double *v, uint32_t n);
 int ad_fail(ad_call *call, const char *message);
 /* Wait without blocking: `resume(call, user, now_us)` is called from ad_poll() until it
  * returns AD_OK (after ad_return_*) or fails. `state` keeps up to AD_CALL_STATE_BYTES
- * bytes for it. */
+ * bytes for it. The arguments (ad_arg_*) are valid in the first call only: copy what
+ * resume needs into the state. The connection's later requests wait for the answer (over
+ * the framed link, only that channel's). */
 #define AD_CALL_STATE_BYTES 32
 typedef int (*ad_resume_fn)(ad_call *call, void *user, int64_t now_us);
 int ad_defer(ad_call *call, ad_resume_fn resume);
 void *ad_call_state(ad_call *call);
 /* Who asked: the session's client name and role ("observer"/"operator"). */
 const char *ad_call_client(const ad_call *call);
+
+/* ---- texts ------------------------------------------------------------------------------- */
+
+/* snprintf for the library's and an application's texts, without the C library's float
+ * printf (9 KiB of flash on a Cortex-M4): %s %.*s %c %d %u %x %02x, the l, ll and z
+ * lengths, %g %.Ng (up to 17 digits) %.Nf (up to 9 decimals) and %%. Returns the length
+ * the whole text needs, as snprintf does; `buf` always ends with a NUL when cap > 0. */
+#if defined(__GNUC__) && !defined(AD_NO_FORMAT_CHECK)
+/* checked against printf's rules by the host builds; on a Cortex-M4, whose uint32_t is an
+ * unsigned long of the same size, the firmware build defines AD_NO_FORMAT_CHECK */
+__attribute__((format(printf, 3, 4)))
+#endif
+int ad_snprintf(char *buf, size_t cap, const char *fmt, ...);
 
 /* ---- figures ---------------------------------------------------------------------------- */
 

@@ -9,6 +9,7 @@
  * writer picks the wrong format for some negative integers (-129 comes out as +127).
  */
 #include "ad_codec.h"
+#include "astcom_device.h"
 
 #include <stdio.h>
 #include <string.h>
@@ -74,7 +75,7 @@ int ad_parse_ndarray(const uint8_t *p, uint32_t n, ad_ndarray *out)
 }
 
 /* ---- the validating walk --------------------------------------------------------------- */
-#define ERR(code, ...) do { snprintf(why, why_len, __VA_ARGS__); return (code); } while (0)
+#define ERR(code, ...) do { ad_snprintf(why, why_len, __VA_ARGS__); return (code); } while (0)
 
 int ad_validate(const uint8_t *frame, size_t len, const ad_limits *lim, char *why,
                 size_t why_len)
@@ -252,6 +253,14 @@ int ad_rd_skip(ad_rd *rd)
 static int wr_cb(void *data, const char *buf, size_t len)
 {
     ad_wr *w = (ad_wr *)data;
+    if (w->spill && len > w->left) {
+        ad_wr_flush(w);
+        if (len > w->left) { /* larger than the whole window: straight through */
+            w->spill(w->spill_ctx, (const uint8_t *)buf, len);
+            w->used += len;
+            return 0;
+        }
+    }
     if (!w->overflow && len <= w->left) {
         memcpy(w->p, buf, len);
         w->p += len;
@@ -267,10 +276,24 @@ static int wr_cb(void *data, const char *buf, size_t len)
 
 void ad_wr_init(ad_wr *w, uint8_t *buf, size_t cap)
 {
-    w->p = (char *)buf;
-    w->left = cap;
+    ad_wr_init_spill(w, buf, cap, NULL, NULL);
+}
+
+void ad_wr_init_spill(ad_wr *w, uint8_t *buf, size_t cap, ad_spill_fn spill, void *ctx)
+{
+    w->p = w->base = (char *)buf;
+    w->left = w->cap = cap;
     w->used = 0;
     w->overflow = 0;
+    w->spill = spill;
+    w->spill_ctx = ctx;
+}
+
+void ad_wr_flush(ad_wr *w)
+{
+    if (w->spill && w->p > w->base) w->spill(w->spill_ctx, (const uint8_t *)w->base, (size_t)(w->p - w->base));
+    w->p = w->base;
+    w->left = w->cap;
 }
 
 void ad_wr_array(ad_wr *w, uint32_t n) { PK(w); msgpack_pack_array(&pk, n); }

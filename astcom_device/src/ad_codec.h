@@ -73,15 +73,25 @@ extern const uint8_t AD_DTYPE_SIZE[11];
 
 /* ---- writing ------------------------------------------------------------------------------ */
 
+/* A frame being written into a buffer. With a spill function the buffer is a window: when
+ * it is full its bytes go to spill() and writing goes on (a frame larger than the buffer,
+ * sent in parts); without, bytes past its end are only counted (overflow). */
+typedef void (*ad_spill_fn)(void *ctx, const uint8_t *bytes, size_t n);
 typedef struct ad_wr {
     char *p;
     size_t left;
     size_t used;       /* bytes the frame takes, counted even past the end of the buffer */
     int overflow;
-    mpack_tokbuf_t tb;
+    char *base;
+    size_t cap;
+    ad_spill_fn spill;
+    void *spill_ctx;
 } ad_wr;
 
 void ad_wr_init(ad_wr *w, uint8_t *buf, size_t cap);
+void ad_wr_init_spill(ad_wr *w, uint8_t *buf, size_t cap, ad_spill_fn spill, void *ctx);
+/* Hand the bytes still in the window to spill() (the frame's last part). */
+void ad_wr_flush(ad_wr *w);
 void ad_wr_array(ad_wr *w, uint32_t n);
 void ad_wr_map(ad_wr *w, uint32_t n);
 void ad_wr_str(ad_wr *w, const char *s);

@@ -26,6 +26,8 @@ void ad_config_defaults(ad_config *c)
     c->max_streams_per_client = 64;
     c->max_clients = 32;
     c->max_pending = 8;
+    c->max_pending_frame_bytes = 4096;
+    c->max_pending_frames = 16;
     c->auth_timeout_s = 10.0;
     c->queue_packets = 256;
     c->ring_ticks = 2048;
@@ -37,7 +39,7 @@ void ad_config_defaults(ad_config *c)
 
 /* ---- arena ------------------------------------------------------------------------------ */
 typedef struct layout {
-    size_t vrt, frt, traced, ring, sessions, msg_pool, samplers, scratch, stage, argbuf, total;
+    size_t vrt, traced, ring, sessions, msg_pool, samplers, scratch, stage, argbuf, total;
     uint32_t row_bytes, n_traced, stage_bytes, msg_pool_bytes, argbuf_bytes, n_sessions;
 } layout;
 
@@ -67,7 +69,7 @@ static void plan(const ad_config *c, const ad_var *vars, size_t nv, size_t nf, l
                                     : c->max_frame_bytes < 65536 ? c->max_frame_bytes * 2u
                                     : c->max_frame_bytes);
     L->vrt = off; off += up8(nv * sizeof(ad_var_rt));
-    L->frt = off; off += up8(nf * sizeof(ad_fn_rt));
+    (void)nf; /* signatures are parsed when a function is called: no table in RAM */
     L->traced = off; off += up8(nt * sizeof(uint16_t));
     L->ring = off; off += (size_t)L->row_bytes * c->ring_ticks;
     L->sessions = off; off += up8(L->n_sessions * sizeof(ad_session));
@@ -105,12 +107,45 @@ static int valid_name(const char *n)
     return !start;
 }
 
-static int parse_signature(const char *sig, ad_fn_rt *rt)
+/* A function's signature text, read one argument at a time when it is called (no table of
+ * parsed signatures in RAM): "(name:type,name:type)->type"; types may hold commas inside
+ * [] or {}. */
+typedef struct sig_it {
+    const char *p, *close;
+} sig_it;
+
+/* Check the whole signature; count its arguments and parse its return type. 0 or -1. */
+static int sig_begin(const char *sig, sig_it *it, ad_type *ret, uint8_t *n_args);
+
+/* The next argument into `a`: 1, or 0 after the last, or -1 when malformed. */
+static int sig_next(sig_it *it, ad_arg *a)
 {
-    /* (name:type,name:type)->type; types may hold commas inside [] or {} */
+    if (it->p >= it->close) return 0;
+    const char *colon = memchr(it->p, ':', (size_t)(it->close - it->p));
+    if (!colon) return -1;
+    const char *q = colon + 1;
+    int depth = 0;
+    while (q < it->close && !(depth == 0 && *q == ',')) {
+        if (*q == '[' || *q == '{') depth++;
+        else if (*q == ']' || *q == '}') depth--;
+        q++;
+    }
+    a->name = it->p;
+    a->name_len = (uint32_t)(colon - it->p);
+    a->type_text = colon + 1;
+    a->type_len = (uint32_t)(q - colon - 1);
+    if (ad_parse_type(a->type_text, a->type_len, &a->type) || a->type.base == AD_T_NONE
+            || a->type.base == AD_T_STRUCT || a->type.base == AD_T_BYTES)
+        return -1;
+    if (a->type.base == AD_T_STR) a->type.c_size = 0;
+    it->p = q < it->close ? q + 1 : q;
+    return 1;
+}
+
+static int sig_begin(const char *sig, sig_it *it, ad_type *ret, uint8_t *n_args)
+{
     const char *p = sig, *close;
     int depth = 0;
-    memset(rt, 0, sizeof *rt);
     if (*p != '(') return -1;
     p++;
     for (close = p; *close; close++) {
@@ -119,31 +154,19 @@ static int parse_signature(const char *sig, ad_fn_rt *rt)
         else if (*close == ')' && depth == 0) break;
     }
     if (*close != ')' || strncmp(close, ")->", 3)) return -1;
-    while (p < close) {
-        const char *colon = memchr(p, ':', (size_t)(close - p));
-        if (!colon || rt->n_args == AD_MAX_ARGS) return -1;
-        const char *q = colon + 1;
-        depth = 0;
-        while (q < close && !(depth == 0 && *q == ',')) {
-            if (*q == '[' || *q == '{') depth++;
-            else if (*q == ']' || *q == '}') depth--;
-            q++;
-        }
-        ad_arg *a = &rt->args[rt->n_args++];
-        a->name = p;
-        a->name_len = (uint32_t)(colon - p);
-        a->type_text = colon + 1;
-        a->type_len = (uint32_t)(q - colon - 1);
-        if (ad_parse_type(a->type_text, a->type_len, &a->type) || a->type.base == AD_T_NONE
-                || a->type.base == AD_T_STRUCT || a->type.base == AD_T_BYTES)
-            return -1;
-        if (a->type.base == AD_T_STR) a->type.c_size = 0;
-        p = q < close ? q + 1 : q;
-    }
-    const char *ret = close + 3;
-    if (ad_parse_type(ret, strlen(ret), &rt->ret)) return -1;
-    if (rt->ret.ndim == AD_VARLEN || rt->ret.base == AD_T_STRUCT || rt->ret.base == AD_T_BYTES)
+    const char *rtext = close + 3;
+    if (ad_parse_type(rtext, strlen(rtext), ret) || ret->ndim == AD_VARLEN
+            || ret->base == AD_T_STRUCT || ret->base == AD_T_BYTES)
         return -1;
+    sig_it count = {p, close};
+    ad_arg a;
+    int rc;
+    *n_args = 0;
+    while ((rc = sig_next(&count, &a)) == 1)
+        if (++*n_args > AD_MAX_ARGS) return -1;
+    if (rc < 0) return -1;
+    it->p = p;
+    it->close = close;
     return 0;
 }
 
@@ -153,17 +176,17 @@ ad_device *ad_init(void *arena, size_t arena_bytes, const ad_config *cfg, const 
     layout L;
     uint8_t *base = (uint8_t *)arena;
     uint16_t probe = 1;
-    if (*(uint8_t *)&probe != 1) { snprintf(why, why_len, "a big-endian host is not supported"); return NULL; }
-    if (!arena || ((uintptr_t)arena & 7u)) { snprintf(why, why_len, "the arena must be 8-byte aligned"); return NULL; }
+    if (*(uint8_t *)&probe != 1) { ad_snprintf(why, why_len, "a big-endian host is not supported"); return NULL; }
+    if (!arena || ((uintptr_t)arena & 7u)) { ad_snprintf(why, why_len, "the arena must be 8-byte aligned"); return NULL; }
     if (cfg->loop_rate_hz <= 0 || cfg->ring_ticks < 2 || cfg->max_reply_bytes < 256
             || cfg->max_depth < 2 || cfg->max_frame_bytes < 64) {
-        snprintf(why, why_len, "configuration out of range (loop_rate_hz > 0, ring_ticks >= 2, "
+        ad_snprintf(why, why_len, "configuration out of range (loop_rate_hz > 0, ring_ticks >= 2, "
                  "max_reply_bytes >= 256, max_depth >= 2, max_frame_bytes >= 64)");
         return NULL;
     }
     plan(cfg, vars, n_vars, n_fns, &L);
     if (arena_bytes < L.total) {
-        snprintf(why, why_len, "the arena holds %zu bytes; this configuration needs %zu",
+        ad_snprintf(why, why_len, "the arena holds %zu bytes; this configuration needs %zu",
                  arena_bytes, L.total);
         return NULL;
     }
@@ -175,7 +198,6 @@ ad_device *ad_init(void *arena, size_t arena_bytes, const ad_config *cfg, const 
     dev->fns = fns;
     dev->n_fns = (uint32_t)n_fns;
     dev->vrt = (ad_var_rt *)(base + L.vrt);
-    dev->frt = (ad_fn_rt *)(base + L.frt);
     dev->traced = (uint16_t *)(base + L.traced);
     dev->ring = base + L.ring;
     dev->row_bytes = L.row_bytes;
@@ -196,35 +218,43 @@ ad_device *ad_init(void *arena, size_t arena_bytes, const ad_config *cfg, const 
     for (size_t i = 0; i < n_vars; i++) {
         const ad_var *v = &vars[i];
         ad_var_rt *rt = &dev->vrt[i];
-        if (!v->name || !valid_name(v->name)) { snprintf(why, why_len, "invalid name '%s': expected dotted identifiers such as axis.az.position", v->name ? v->name : "(null)"); return NULL; }
-        if (!v->type || ad_parse_type(v->type, strlen(v->type), &rt->type) || (rt->type.base >= AD_T_BYTES && rt->type.base != AD_T_STRUCT)) { snprintf(why, why_len, "%s: unknown or unsupported type '%s'", v->name, v->type ? v->type : "(null)"); return NULL; }
-        if (rt->type.ndim == AD_VARLEN) { snprintf(why, why_len, "%s: a variable cannot be of variable length (%s)", v->name, v->type); return NULL; }
-        if (rt->type.base == AD_T_STR) {
-            if (v->capacity < 1) { snprintf(why, why_len, "%s: a str variable needs its buffer capacity", v->name); return NULL; }
-            rt->type.c_size = v->capacity;
+        ad_type t;
+        if (!v->name || !valid_name(v->name)) { ad_snprintf(why, why_len, "invalid name '%s': expected dotted identifiers such as axis.az.position", v->name ? v->name : "(null)"); return NULL; }
+        if (!v->type || ad_parse_type(v->type, strlen(v->type), &t) || (t.base >= AD_T_BYTES && t.base != AD_T_STRUCT)) { ad_snprintf(why, why_len, "%s: unknown or unsupported type '%s'", v->name, v->type ? v->type : "(null)"); return NULL; }
+        if (t.ndim == AD_VARLEN) { ad_snprintf(why, why_len, "%s: a variable cannot be of variable length (%s)", v->name, v->type); return NULL; }
+        if (t.base == AD_T_STR) {
+            if (v->capacity < 1) { ad_snprintf(why, why_len, "%s: a str variable needs its buffer capacity", v->name); return NULL; }
+            t.c_size = v->capacity;
         }
-        if (!v->ptr) { snprintf(why, why_len, "%s: no storage (ptr)", v->name); return NULL; }
-        if ((v->has_min || v->has_max) && (rt->type.base == 0 || rt->type.base > 10)) { snprintf(why, why_len, "%s: only numeric variables take min/max, not %s", v->name, v->type); return NULL; }
-        if (v->has_min && v->has_max && v->min > v->max) { snprintf(why, why_len, "%s: min %g is above max %g", v->name, v->min, v->max); return NULL; }
+        if (!v->ptr) { ad_snprintf(why, why_len, "%s: no storage (ptr)", v->name); return NULL; }
+        if ((v->has_min || v->has_max) && (t.base == 0 || t.base > 10)) { ad_snprintf(why, why_len, "%s: only numeric variables take min/max, not %s", v->name, v->type); return NULL; }
+        if (v->has_min && v->has_max && v->min > v->max) { ad_snprintf(why, why_len, "%s: min %g is above max %g", v->name, v->min, v->max); return NULL; }
+        rt->base = t.base;
+        rt->ndim = t.ndim;
+        rt->count = t.count;
+        rt->c_size = t.c_size;
         rt->trace_col = -1;
         if (v->traced) {
-            if (rt->type.base > 10 || rt->type.ndim) { snprintf(why, why_len, "%s: only numeric scalars can be traced, not %s", v->name, v->type); return NULL; }
+            if (t.base > 10 || t.ndim) { ad_snprintf(why, why_len, "%s: only numeric scalars can be traced, not %s", v->name, v->type); return NULL; }
             rt->trace_col = (int16_t)col;
             rt->ring_offset = off;
             dev->traced[col++] = (uint16_t)i;
-            off += rt->type.c_size;
+            off += t.c_size;
         }
         for (size_t j = 0; j < i; j++)
-            if (!strcmp(vars[j].name, v->name)) { snprintf(why, why_len, "'%s' is already registered", v->name); return NULL; }
+            if (!strcmp(vars[j].name, v->name)) { ad_snprintf(why, why_len, "'%s' is already registered", v->name); return NULL; }
     }
     dev->n_traced = col;
     for (size_t i = 0; i < n_fns; i++) {
-        if (!fns[i].name || !valid_name(fns[i].name) || !fns[i].fn) { snprintf(why, why_len, "function %zu: invalid name or no callback", i); return NULL; }
-        if (!fns[i].signature || parse_signature(fns[i].signature, &dev->frt[i])) { snprintf(why, why_len, "%s: bad signature '%s'; expected (name:type,...)->type", fns[i].name, fns[i].signature ? fns[i].signature : "(null)"); return NULL; }
+        if (!fns[i].name || !valid_name(fns[i].name) || !fns[i].fn) { ad_snprintf(why, why_len, "function %zu: invalid name or no callback", i); return NULL; }
+        sig_it it;
+        ad_type ret;
+        uint8_t n_args;
+        if (!fns[i].signature || sig_begin(fns[i].signature, &it, &ret, &n_args)) { ad_snprintf(why, why_len, "%s: bad signature '%s'; expected (name:type,...)->type", fns[i].name, fns[i].signature ? fns[i].signature : "(null)"); return NULL; }
         for (size_t j = 0; j < n_vars; j++)
-            if (!strcmp(vars[j].name, fns[i].name)) { snprintf(why, why_len, "'%s' is already registered", fns[i].name); return NULL; }
+            if (!strcmp(vars[j].name, fns[i].name)) { ad_snprintf(why, why_len, "'%s' is already registered", fns[i].name); return NULL; }
         for (size_t j = 0; j < i; j++)
-            if (!strcmp(fns[j].name, fns[i].name)) { snprintf(why, why_len, "'%s' is already registered", fns[i].name); return NULL; }
+            if (!strcmp(fns[j].name, fns[i].name)) { ad_snprintf(why, why_len, "'%s' is already registered", fns[i].name); return NULL; }
     }
     return dev;
 }
@@ -256,7 +286,11 @@ static void send_error_raw(ad_device *dev, ad_sink sink, int has_seq, uint64_t s
     ad_wr_str(&w, "code");
     ad_wr_uint(&w, (uint64_t)code);
     ad_wr_str(&w, "message");
-    ad_wr_strn(&w, message, (uint32_t)(n > 1024 ? 1024 : n));
+    /* the reason, cut to what the scratch holds beside the frame's 40 other bytes */
+    size_t most = dev->cfg.max_reply_bytes - 48u;
+    if (most > 1024) most = 1024;
+    while (n > most) { n--; while (n && ((uint8_t)message[n] & 0xc0) == 0x80) n--; } /* whole UTF-8 */
+    ad_wr_strn(&w, message, (uint32_t)n);
     sink.send(sink.ctx, dev->scratch, w.used, 0);
 }
 
@@ -296,7 +330,7 @@ static const char *admit_refusal(const ad_device *dev, char *buf, size_t len)
     uint32_t a, p;
     counts(dev, &a, &p);
     if (a >= dev->cfg.max_clients) {
-        snprintf(buf, len, "too many clients: this endpoint accepts at most %u", dev->cfg.max_clients);
+        ad_snprintf(buf, len, "too many clients: this endpoint accepts at most %u", dev->cfg.max_clients);
         return buf;
     }
     return NULL;
@@ -309,7 +343,7 @@ ad_session *ad_open(ad_device *dev, ad_sink sink, int64_t now_us)
     const char *refusal = admit_refusal(dev, why, sizeof why);
     counts(dev, &a, &p);
     if (!refusal && p >= dev->cfg.max_pending) {
-        snprintf(why, sizeof why, "too many connections waiting to authenticate: this endpoint "
+        ad_snprintf(why, sizeof why, "too many connections waiting to authenticate: this endpoint "
                  "accepts at most %u (each has %g s); retry shortly", dev->cfg.max_pending,
                  dev->cfg.auth_timeout_s);
         refusal = why;
@@ -318,7 +352,7 @@ ad_session *ad_open(ad_device *dev, ad_sink sink, int64_t now_us)
     for (uint32_t i = 0; !refusal && i < dev->n_sessions; i++)
         if (!dev->sessions[i].used) { s = &dev->sessions[i]; s->slot = (uint8_t)i; break; }
     if (!refusal && !s) {
-        snprintf(why, sizeof why, "too many connections: this device has %u connection slots",
+        ad_snprintf(why, sizeof why, "too many connections: this device has %u connection slots",
                  dev->n_sessions);
         refusal = why;
     }
@@ -472,7 +506,7 @@ static void hint(const ad_device *dev, const char *name, uint32_t len, int want_
     for (uint32_t i = 0; i < total && n < 3; i++) {
         const char *c = want_fn ? dev->fns[i].name : dev->vars[i].name;
         if (edit_distance(name, len, c) <= limit) {
-            used += (size_t)snprintf(out + used, out_len - used, "%s%s", n ? ", " : "; did you mean ", c);
+            used += (size_t)ad_snprintf(out + used, out_len - used, "%s%s", n ? ", " : "; did you mean ", c);
             if (used >= out_len) break;
             n++;
         }
@@ -480,16 +514,22 @@ static void hint(const ad_device *dev, const char *name, uint32_t len, int want_
     if (n && used + 1 < out_len) { out[used] = '?'; out[used + 1] = 0; }
 }
 
-static int unknown_var(const ad_device *dev, const char *name, uint32_t len, char *why, size_t wl)
+/* 404 for an unknown variable (want_fn 0) or function (1): the other kind of the same name,
+ * or the names close to it. Not inlined: its hint buffer would otherwise sit in the stack
+ * frame of every request. */
+AD_NOINLINE static int unknown_name(const ad_device *dev, const char *name, uint32_t len,
+                                    int want_fn, char *why, size_t wl)
 {
     char h[160];
     int shown = (int)(len > 80 ? 80 : len);
-    if (find_fn(dev, name, len) >= 0) {
-        snprintf(why, wl, "'%.*s' is a function, not a variable: call it with INVOKE", shown, name);
+    if (want_fn ? find_var(dev, name, len) >= 0 : find_fn(dev, name, len) >= 0) {
+        ad_snprintf(why, wl, want_fn ? "'%.*s' is a variable, not a function: READ, WRITE or stream it"
+                                     : "'%.*s' is a function, not a variable: call it with INVOKE",
+                     shown, name);
         return 404;
     }
-    hint(dev, name, len, 0, h, sizeof h);
-    snprintf(why, wl, "no variable named '%.*s'%s", shown, name, h);
+    hint(dev, name, len, want_fn, h, sizeof h);
+    ad_snprintf(why, wl, "no %s named '%.*s'%s", want_fn ? "function" : "variable", shown, name, h);
     return 404;
 }
 
@@ -546,7 +586,7 @@ static int parse_args(ad_rd *rd, const ad_val *map, const char *op, field *f, in
     for (int i = 0; i < nf; i++) {
         ad_val *v = &f[i].v;
         if (!f[i].present || (v->t == AD_VT_NIL && !f[i].required)) {
-            if (f[i].required) { snprintf(why, wl, "%s: missing field '%s'", op, f[i].name); return 400; }
+            if (f[i].required) { ad_snprintf(why, wl, "%s: missing field '%s'", op, f[i].name); return 400; }
             f[i].present = 0;
             continue;
         }
@@ -556,7 +596,7 @@ static int parse_args(ad_rd *rd, const ad_val *map, const char *op, field *f, in
                  || (v->t == AD_VT_FLOAT && (a & F_NUM)) || (v->t == AD_VT_ARRAY && (a & F_LIST))
                  || (v->t == AD_VT_NIL && (a & F_NIL));
         if (!ok) {
-            snprintf(why, wl, "%s: field '%s' must be %s, got %s", op, f[i].name, type_words(a),
+            ad_snprintf(why, wl, "%s: field '%s' must be %s, got %s", op, f[i].name, type_words(a),
                      val_type(v));
             return 400;
         }
@@ -581,7 +621,7 @@ static void ok_head(ad_wr *w, uint64_t seq, uint32_t n_keys)
 static int finish(ad_device *dev, ad_session *s, ad_wr *w, uint64_t seq, char *why, size_t wl)
 {
     if (w->overflow) {
-        snprintf(why, wl, "the reply takes %zu bytes; this device builds frames of at most %u "
+        ad_snprintf(why, wl, "the reply takes %zu bytes; this device builds frames of at most %u "
                  "bytes (use a LIST prefix or a shorter message)", w->used, dev->cfg.max_reply_bytes);
         return 413;
     }
@@ -590,10 +630,26 @@ static int finish(ad_device *dev, ad_session *s, ad_wr *w, uint64_t seq, char *w
     return 0;
 }
 
+void ad_var_type(const ad_device *dev, uint32_t i, ad_type *out)
+{
+    const ad_var_rt *rt = &dev->vrt[i];
+    if (rt->ndim > 1) {
+        ad_parse_type(dev->vars[i].type, strlen(dev->vars[i].type), out);
+    } else {
+        memset(out, 0, sizeof *out);
+        out->base = rt->base;
+        out->ndim = rt->ndim;
+        out->shape[0] = rt->count;
+        out->count = rt->count;
+    }
+    out->c_size = rt->c_size;
+}
+
 static void read_value_locked(ad_device *dev, uint32_t idx, ad_wr *w)
 {
-    const ad_var *v = &dev->vars[idx];
-    ad_write_value(w, &dev->vrt[idx].type, v->type, v->ptr);
+    ad_type t;
+    ad_var_type(dev, idx, &t);
+    ad_write_value(w, &t, dev->vars[idx].type, dev->vars[idx].ptr);
 }
 
 /* ---- commands ----------------------------------------------------------------------------- */
@@ -604,6 +660,49 @@ typedef struct req {
     ad_val args;    /* the args map head */
 } req;
 
+static void write_list(const ad_device *dev, ad_wr *w, uint64_t seq, const char *pre,
+                       uint32_t plen)
+{
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < dev->n_vars; i++) n += !strncmp(dev->vars[i].name, pre, plen) || !plen;
+    for (uint32_t i = 0; i < dev->n_fns; i++) n += !strncmp(dev->fns[i].name, pre, plen) || !plen;
+    ok_head(w, seq, 1);
+    ad_wr_str(w, "entries");
+    ad_wr_array(w, n);
+    for (uint32_t i = 0; i < dev->n_vars; i++) {
+        const ad_var *v = &dev->vars[i];
+        if (plen && strncmp(v->name, pre, plen)) continue;
+        ad_wr_map(w, 6u + v->has_min + v->has_max);
+        ad_wr_str(w, "name"); ad_wr_str(w, v->name);
+        ad_wr_str(w, "type"); ad_wr_str(w, v->type);
+        ad_wr_str(w, "kind"); ad_wr_str(w, v->kind == AD_PARAMETER ? "parameter" : "signal");
+        ad_wr_str(w, "access"); ad_wr_str(w, v->access == AD_RW ? "rw" : "r");
+        ad_wr_str(w, "unit"); ad_wr_str(w, v->unit ? v->unit : "");
+        ad_wr_str(w, "doc"); ad_wr_str(w, v->doc ? v->doc : "");
+        if (v->has_min) { ad_wr_str(w, "min"); ad_wr_f64(w, v->min); }
+        if (v->has_max) { ad_wr_str(w, "max"); ad_wr_f64(w, v->max); }
+    }
+    for (uint32_t i = 0; i < dev->n_fns; i++) {
+        const ad_fn *fn = &dev->fns[i];
+        if (plen && strncmp(fn->name, pre, plen)) continue;
+        ad_wr_map(w, 6);
+        ad_wr_str(w, "name"); ad_wr_str(w, fn->name);
+        ad_wr_str(w, "type"); ad_wr_str(w, fn->signature);
+        ad_wr_str(w, "kind"); ad_wr_str(w, "function");
+        ad_wr_str(w, "access"); ad_wr_str(w, "x");
+        ad_wr_str(w, "unit"); ad_wr_str(w, "");
+        ad_wr_str(w, "doc"); ad_wr_str(w, fn->doc ? fn->doc : "");
+    }
+}
+
+static void spill_to_sink(void *ctx, const uint8_t *bytes, size_t n)
+{
+    const ad_sink *sink = (const ad_sink *)ctx;
+    sink->part(sink->ctx, bytes, n);
+}
+
+/* LIST grows with the registry: a reply larger than the scratch goes out in parts when the
+ * transport takes parts (the framed link, TCP), else it is refused (413, use a prefix). */
 static int cmd_list(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
 {
     field f[] = {{"prefix", F_STR, 0, 0, {0}, {0}}};
@@ -611,40 +710,16 @@ static int cmd_list(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
     if (rc) return rc;
     const char *pre = f[0].present ? (const char *)f[0].v.p : "";
     uint32_t plen = f[0].present ? f[0].v.n : 0;
-    uint32_t n = 0;
-    for (uint32_t i = 0; i < dev->n_vars; i++) n += !strncmp(dev->vars[i].name, pre, plen) || !plen;
-    for (uint32_t i = 0; i < dev->n_fns; i++) n += !strncmp(dev->fns[i].name, pre, plen) || !plen;
     ad_wr w;
     begin(dev, &w);
-    ok_head(&w, r->seq, 1);
-    ad_wr_str(&w, "entries");
-    ad_wr_array(&w, n);
-    for (uint32_t i = 0; i < dev->n_vars; i++) {
-        const ad_var *v = &dev->vars[i];
-        if (plen && strncmp(v->name, pre, plen)) continue;
-        ad_wr_map(&w, 6u + v->has_min + v->has_max);
-        ad_wr_str(&w, "name"); ad_wr_str(&w, v->name);
-        ad_wr_str(&w, "type"); ad_wr_str(&w, v->type);
-        ad_wr_str(&w, "kind"); ad_wr_str(&w, v->kind == AD_PARAMETER ? "parameter" : "signal");
-        ad_wr_str(&w, "access"); ad_wr_str(&w, v->access == AD_RW ? "rw" : "r");
-        ad_wr_str(&w, "unit"); ad_wr_str(&w, v->unit ? v->unit : "");
-        ad_wr_str(&w, "doc"); ad_wr_str(&w, v->doc ? v->doc : "");
-        if (v->has_min) { ad_wr_str(&w, "min"); ad_wr_f64(&w, v->min); }
-        if (v->has_max) { ad_wr_str(&w, "max"); ad_wr_f64(&w, v->max); }
-    }
-    for (uint32_t i = 0; i < dev->n_fns; i++) {
-        const ad_fn *fn = &dev->fns[i];
-        if (plen && strncmp(fn->name, pre, plen)) continue;
-        ad_wr_map(&w, 6);
-        ad_wr_str(&w, "name"); ad_wr_str(&w, fn->name);
-        ad_wr_str(&w, "type"); ad_wr_str(&w, fn->signature);
-        ad_wr_str(&w, "kind"); ad_wr_str(&w, "function");
-        ad_wr_str(&w, "access"); ad_wr_str(&w, "x");
-        ad_wr_str(&w, "unit"); ad_wr_str(&w, "");
-        ad_wr_str(&w, "doc"); ad_wr_str(&w, fn->doc ? fn->doc : "");
-    }
-    (void)s;
-    return finish(dev, s, &w, r->seq, why, wl);
+    write_list(dev, &w, r->seq, pre, plen);
+    if (!w.overflow || !s->sink.begin || s->sink.begin(s->sink.ctx, w.used))
+        return finish(dev, s, &w, r->seq, why, wl); /* whole, or 413 */
+    ad_wr_init_spill(&w, dev->scratch, dev->cfg.max_reply_bytes, spill_to_sink, &s->sink);
+    write_list(dev, &w, r->seq, pre, plen);
+    ad_wr_flush(&w);
+    s->sink.end(s->sink.ctx);
+    return 0;
 }
 
 static int cmd_define(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
@@ -653,36 +728,36 @@ static int cmd_define(ad_device *dev, ad_session *s, req *r, char *why, size_t w
     int rc = parse_args(&r->rd, &r->args, r->op, f, 1, why, wl);
     if (rc) return rc;
     uint32_t n = f[0].v.n;
-    if (!n) { snprintf(why, wl, "DEFINE: field 'names' must be a non-empty array of names"); return 400; }
+    if (!n) { ad_snprintf(why, wl, "DEFINE: field 'names' must be a non-empty array of names"); return 400; }
     /* names are checked as strings first (400), then the limit (413), then looked up (404) */
     ad_rd it = f[0].items;
     for (uint32_t k = 0; k < n; k++) {
         ad_val v;
         ad_rd_next(&it, &v);
-        if (v.t != AD_VT_STR) { snprintf(why, wl, "DEFINE: every entry of 'names' must be a string"); return 400; }
+        if (v.t != AD_VT_STR) { ad_snprintf(why, wl, "DEFINE: every entry of 'names' must be a string"); return 400; }
         ad_rd_skip_items(&it, &v);
     }
     if (n > dev->cfg.max_names_per_message) {
-        snprintf(why, wl, "DEFINE of %u names; at most %u per message", n, dev->cfg.max_names_per_message);
+        ad_snprintf(why, wl, "DEFINE of %u names; at most %u per message", n, dev->cfg.max_names_per_message);
         return 413;
     }
     uint32_t need = rec_bytes((uint16_t)n);
-    if (n > 0xffff) { snprintf(why, wl, "DEFINE of %u names; at most 65535", n); return 413; }
+    if (n > 0xffff) { ad_snprintf(why, wl, "DEFINE of %u names; at most 65535", n); return 413; }
     /* build the record at the end of the pool; it becomes the message if new */
     if (dev->msg_pool_used + need > dev->msg_pool_bytes) {
         /* a message of the same names may still exist: the lookup below needs no room */
         need = 0;
     }
-    uint16_t stack_idx[256];
+    uint16_t stack_idx[64];
     uint16_t *idx = need ? (uint16_t *)(dev->msg_pool + dev->msg_pool_used + REC_HEAD)
-                         : (n <= 256 ? stack_idx : NULL);
-    if (!idx) { snprintf(why, wl, "the register is full (%u bytes); UNDEFINE some first", dev->msg_pool_bytes); return 429; }
+                         : (n <= 64 ? stack_idx : NULL);
+    if (!idx) { ad_snprintf(why, wl, "the register is full (%u bytes); UNDEFINE some first", dev->msg_pool_bytes); return 429; }
     it = f[0].items;
     for (uint32_t k = 0; k < n; k++) {
         ad_val v;
         ad_rd_next(&it, &v);
         int i = find_var(dev, (const char *)v.p, v.n);
-        if (i < 0) return unknown_var(dev, (const char *)v.p, v.n, why, wl);
+        if (i < 0) return unknown_name(dev, (const char *)v.p, v.n, 0, why, wl);
         idx[k] = (uint16_t)i;
     }
     /* the same list already registered: the same ID */
@@ -696,10 +771,10 @@ static int cmd_define(ad_device *dev, ad_session *s, req *r, char *why, size_t w
     }
     if (!found) {
         if (dev->n_messages >= dev->cfg.max_messages) {
-            snprintf(why, wl, "the register holds %u messages; UNDEFINE some first", dev->cfg.max_messages);
+            ad_snprintf(why, wl, "the register holds %u messages; UNDEFINE some first", dev->cfg.max_messages);
             return 429;
         }
-        if (!need) { snprintf(why, wl, "the register is full (%u bytes); UNDEFINE some first", dev->msg_pool_bytes); return 429; }
+        if (!need) { ad_snprintf(why, wl, "the register is full (%u bytes); UNDEFINE some first", dev->msg_pool_bytes); return 429; }
         uint8_t *rec = dev->msg_pool + dev->msg_pool_used;
         uint32_t id = dev->next_msg++;
         uint16_t n16 = (uint16_t)n;
@@ -725,7 +800,7 @@ static int cmd_define(ad_device *dev, ad_session *s, req *r, char *why, size_t w
 static int own_message(ad_device *dev, ad_session *s, int64_t id, ad_msg *m, char *why, size_t wl)
 {
     if (id < 0 || id > 0xffffffffll || ad_msg_find(dev, (uint32_t)id, m) || !(m->holders & (1ull << s->slot))) {
-        snprintf(why, wl, "message %lld is not defined on this connection; DEFINE it first", (long long)id);
+        ad_snprintf(why, wl, "message %lld is not defined on this connection; DEFINE it first", (long long)id);
         return 404;
     }
     return 0;
@@ -775,7 +850,7 @@ static int cmd_read(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
 
 static void fmt_bound(char *out, size_t n, double v, const char *unit)
 {
-    snprintf(out, n, "%g%s%s", v, unit && *unit ? " " : "", unit ? unit : "");
+    ad_snprintf(out, n, "%g%s%s", v, unit && *unit ? " " : "", unit ? unit : "");
 }
 
 static int check_range(const ad_var *v, const ad_type *t, const void *value, char *why, size_t wl)
@@ -791,12 +866,12 @@ static int check_range(const ad_var *v, const ad_type *t, const void *value, cha
         if (isnan(x)) { low = v->has_min; high = !low; }
         if (low || high) {
             char lo[48], hi[48];
-            if (v->has_min) snprintf(lo, sizeof lo, "%g", v->min); else snprintf(lo, sizeof lo, "-∞");
-            if (v->has_max) snprintf(hi, sizeof hi, "%g", v->max); else snprintf(hi, sizeof hi, "∞");
+            if (v->has_min) ad_snprintf(lo, sizeof lo, "%g", v->min); else ad_snprintf(lo, sizeof lo, "-∞");
+            if (v->has_max) ad_snprintf(hi, sizeof hi, "%g", v->max); else ad_snprintf(hi, sizeof hi, "∞");
             char bad[48], bound[64];
-            snprintf(bad, sizeof bad, "%g", x);
+            ad_snprintf(bad, sizeof bad, "%g", x);
             fmt_bound(bound, sizeof bound, low ? v->min : v->max, unit);
-            snprintf(why, wl, "%s = %s%s%s is %s its %s %s; allowed %s..%s%s%s", v->name, bad, sp,
+            ad_snprintf(why, wl, "%s = %s%s%s is %s its %s %s; allowed %s..%s%s%s", v->name, bad, sp,
                      unit, low ? "below" : "above", low ? "minimum" : "maximum", bound, lo, hi,
                      sp, unit);
             return 422;
@@ -815,14 +890,14 @@ static int cmd_write(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
     rc = own_message(dev, s, id, &m, why, wl);
     if (rc) return rc;
     if (f[1].v.n != m.n) {
-        snprintf(why, wl, "WRITE of message %lld: %u values for %u variables", (long long)id,
+        ad_snprintf(why, wl, "WRITE of message %lld: %u values for %u variables", (long long)id,
                  f[1].v.n, m.n);
         return 422;
     }
     for (uint32_t k = 0; k < m.n; k++) {
         const ad_var *v = &dev->vars[m.idx[k]];
         if (v->access != AD_RW) {
-            snprintf(why, wl, "%s is read-only (kind %s, access r)", v->name,
+            ad_snprintf(why, wl, "%s is read-only (kind %s, access r)", v->name,
                      v->kind == AD_PARAMETER ? "parameter" : "signal");
             return 405;
         }
@@ -832,9 +907,11 @@ static int cmd_write(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
     uint32_t off = 0;
     for (uint32_t k = 0; k < m.n; k++) {
         const ad_var *v = &dev->vars[m.idx[k]];
-        const ad_type *t = &dev->vrt[m.idx[k]].type;
+        ad_type type;
+        ad_var_type(dev, m.idx[k], &type);
+        const ad_type *t = &type;
         if (off + up8(t->c_size) > dev->stage_bytes) {
-            snprintf(why, wl, "WRITE of message %lld is larger than this device stages", (long long)id);
+            ad_snprintf(why, wl, "WRITE of message %lld is larger than this device stages", (long long)id);
             return 413;
         }
         rc = ad_coerce(&it, t, v->type, dev->stage + off, v->name, why, wl);
@@ -844,7 +921,7 @@ static int cmd_write(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
         if (v->check) {
             char reason[160] = "";
             if (v->check(v, dev->stage + off, reason, sizeof reason)) {
-                snprintf(why, wl, "%s: the device refused the value: %s", v->name, reason);
+                ad_snprintf(why, wl, "%s: the device refused the value: %s", v->name, reason);
                 return 422;
             }
         }
@@ -854,9 +931,9 @@ static int cmd_write(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
     ad_port_lock();
     off = 0;
     for (uint32_t k = 0; k < m.n; k++) {
-        const ad_type *t = &dev->vrt[m.idx[k]].type;
-        memcpy(dev->vars[m.idx[k]].ptr, dev->stage + off, t->c_size);
-        off += (uint32_t)up8(t->c_size);
+        uint32_t size = dev->vrt[m.idx[k]].c_size;
+        memcpy(dev->vars[m.idx[k]].ptr, dev->stage + off, size);
+        off += (uint32_t)up8(size);
     }
     ad_last_tick(dev, &tick, &t_us);
     ad_port_unlock();
@@ -872,13 +949,13 @@ static int coerce_arg(ad_device *dev, ad_rd *rd, const ad_fn *fn, const ad_arg *
                       ad_argval *out, char *why, size_t wl)
 {
     char where[120];
-    snprintf(where, sizeof where, "%s(%.*s)", fn->name, (int)a->name_len, a->name);
+    ad_snprintf(where, sizeof where, "%s(%.*s)", fn->name, (int)a->name_len, a->name);
     const ad_type *t = &a->type;
     if (t->base == AD_T_STR) {
         ad_val v;
         ad_rd_next(rd, &v);
         if (v.t != AD_VT_STR) {
-            snprintf(why, wl, "%s: expected str, got %s", where, val_type(&v));
+            ad_snprintf(why, wl, "%s: expected str, got %s", where, val_type(&v));
             ad_rd_skip_items(rd, &v);
             return 422;
         }
@@ -908,7 +985,7 @@ static int coerce_arg(ad_device *dev, ad_rd *rd, const ad_fn *fn, const ad_arg *
         ad_ndarray arr;
         ad_parse_ndarray(v.p, v.n, &arr);
         if (t->ndim == AD_VARLEN && arr.ndim != 1) {
-            snprintf(why, wl, "%s: expected a 1-D array %.*s, got %u dimensions", where,
+            ad_snprintf(why, wl, "%s: expected a 1-D array %.*s, got %u dimensions", where,
                      (int)a->type_len, a->type_text, arr.ndim);
             return 422;
         }
@@ -925,7 +1002,7 @@ static int coerce_arg(ad_device *dev, ad_rd *rd, const ad_fn *fn, const ad_arg *
         count = v.n;
         /* a 1-D array: every element a number */
     } else if (v.t != AD_VT_ARRAY) {
-        snprintf(why, wl, "%s: expected an array %.*s, got %s", where, (int)a->type_len,
+        ad_snprintf(why, wl, "%s: expected an array %.*s, got %s", where, (int)a->type_len,
                  a->type_text, val_type(&v));
         ad_rd_skip_items(rd, &v);
         return 422;
@@ -933,7 +1010,7 @@ static int coerce_arg(ad_device *dev, ad_rd *rd, const ad_fn *fn, const ad_arg *
     uint32_t isz = ad_scalar_size(t->base);
     uint64_t bytes = (uint64_t)count * isz;
     if (dev->argbuf_used + bytes > dev->argbuf_bytes) {
-        snprintf(why, wl, "%s: %u elements do not fit this device's argument buffer (%u bytes)",
+        ad_snprintf(why, wl, "%s: %u elements do not fit this device's argument buffer (%u bytes)",
                  where, count, dev->argbuf_bytes);
         return 413;
     }
@@ -953,7 +1030,7 @@ static int coerce_arg(ad_device *dev, ad_rd *rd, const ad_fn *fn, const ad_arg *
 
 static void write_result(ad_wr *w, ad_call *c)
 {
-    if (!c->has_result || c->rt->ret.base == AD_T_NONE) { ad_wr_nil(w); return; }
+    if (!c->has_result || c->ret.base == AD_T_NONE) { ad_wr_nil(w); return; }
     switch (c->result_kind) {
     case 1: ad_wr_f64(w, c->result.f); break;
     case 2: ad_wr_int(w, c->result.i); break;
@@ -972,13 +1049,20 @@ static void write_result(ad_wr *w, ad_call *c)
 }
 
 /* the declared return type decides; a mismatch is the device's bug: ERR 500 */
+static const char *return_type(const ad_fn *fn)
+{
+    const char *p = fn->signature;
+    while (*p && !(p[0] == ')' && p[1] == '-' && p[2] == '>')) p++;
+    return *p ? p + 3 : p;
+}
+
 static int check_result(ad_call *c, char *why, size_t wl)
 {
-    const ad_type *t = &c->rt->ret;
+    const ad_type *t = &c->ret;
     if (t->base == AD_T_NONE) return 0;
     if (!c->has_result) {
-        snprintf(why, wl, "%s returned no value; its declared type is %s", c->fn->name,
-                 strstr(c->fn->signature, ")->") + 3);
+        ad_snprintf(why, wl, "%s returned no value; its declared type is %s", c->fn->name,
+                 return_type(c->fn));
         return 500;
     }
     int ok;
@@ -988,8 +1072,8 @@ static int check_result(ad_call *c, char *why, size_t wl)
     else if (t->base >= 9) ok = c->result_kind == 1;
     else ok = c->result_kind == 2 || c->result_kind == 3;
     if (!ok) {
-        snprintf(why, wl, "%s returned a value that does not match its declared type %s",
-                 c->fn->name, strstr(c->fn->signature, ")->") + 3);
+        ad_snprintf(why, wl, "%s returned a value that does not match its declared type %s",
+                 c->fn->name, return_type(c->fn));
         return 500;
     }
     return 0;
@@ -1011,7 +1095,7 @@ static int run_call(ad_device *dev, ad_session *s, ad_call *c, int rc, char *why
 {
     if (rc == AD_PENDING && c->resume) {
         if (dev->pending_calls >= dev->cfg.max_pending_calls) {
-            snprintf(why, wl, "too many calls waiting at once: at most %u", dev->cfg.max_pending_calls);
+            ad_snprintf(why, wl, "too many calls waiting at once: at most %u", dev->cfg.max_pending_calls);
             return 429;
         }
         dev->pending_calls++;
@@ -1019,7 +1103,7 @@ static int run_call(ad_device *dev, ad_session *s, ad_call *c, int rc, char *why
         return -1; /* answered later, from ad_poll */
     }
     if (rc != AD_OK) {
-        snprintf(why, wl, "%s failed: %s", c->fn->name, c->fail[0] ? c->fail : "the device function failed");
+        ad_snprintf(why, wl, "%s failed: %s", c->fn->name, c->fail[0] ? c->fail : "the device function failed");
         return 500;
     }
     return reply_call(dev, s, c, why, wl);
@@ -1033,22 +1117,15 @@ static int cmd_invoke(ad_device *dev, ad_session *s, req *r, char *why, size_t w
     const char *name = (const char *)f[0].v.p;
     uint32_t nlen = f[0].v.n;
     int i = find_fn(dev, name, nlen);
-    if (i < 0) {
-        char h[160];
-        int shown = (int)(nlen > 80 ? 80 : nlen);
-        if (find_var(dev, name, nlen) >= 0) {
-            snprintf(why, wl, "'%.*s' is a variable, not a function: READ, WRITE or stream it", shown, name);
-            return 404;
-        }
-        hint(dev, name, nlen, 1, h, sizeof h);
-        snprintf(why, wl, "no function named '%.*s'%s", shown, name, h);
-        return 404;
-    }
+    if (i < 0) return unknown_name(dev, name, nlen, 1, why, wl);
     const ad_fn *fn = &dev->fns[i];
-    const ad_fn_rt *rt = &dev->frt[i];
+    sig_it sig;
+    ad_type ret;
+    uint8_t n_args;
+    sig_begin(fn->signature, &sig, &ret, &n_args); /* checked at ad_init */
     uint32_t given = f[1].present ? f[1].v.n : 0;
-    if (given != rt->n_args) {
-        snprintf(why, wl, "%s takes %u arguments %s, got %u", fn->name, rt->n_args, fn->signature, given);
+    if (given != n_args) {
+        ad_snprintf(why, wl, "%s takes %u arguments %s, got %u", fn->name, n_args, fn->signature, given);
         return 422;
     }
     ad_call *c = &s->call;
@@ -1056,12 +1133,15 @@ static int cmd_invoke(ad_device *dev, ad_session *s, req *r, char *why, size_t w
     c->dev = dev;
     c->session = s;
     c->fn = fn;
-    c->rt = rt;
+    c->n_args = n_args;
+    c->ret = ret;
     c->seq = r->seq;
     dev->argbuf_used = 0;
     ad_rd it = f[1].items;
-    for (uint32_t k = 0; k < rt->n_args; k++) {
-        rc = coerce_arg(dev, &it, fn, &rt->args[k], &c->args[k], why, wl);
+    for (uint32_t k = 0; k < n_args; k++) {
+        ad_arg a;
+        sig_next(&sig, &a);
+        rc = coerce_arg(dev, &it, fn, &a, &c->args[k], why, wl);
         if (rc) return rc;
     }
     ad_port_lock();
@@ -1085,7 +1165,7 @@ static void poll_calls(ad_device *dev, int64_t now_us)
         dev->pending_calls--;
         int code = rc == AD_OK ? reply_call(dev, s, c, why, sizeof why) : 0;
         if (rc != AD_OK) {
-            snprintf(why, sizeof why, "%s failed: %s", c->fn->name, c->fail[0] ? c->fail : "the device function failed");
+            ad_snprintf(why, sizeof why, "%s failed: %s", c->fn->name, c->fail[0] ? c->fail : "the device function failed");
             code = 500;
         }
         if (code) send_error_raw(dev, s->sink, 1, c->seq, code, why);
@@ -1117,7 +1197,7 @@ static int cmd_stream_stop(ad_device *dev, ad_session *s, req *r, char *why, siz
     int rc = cmd_msg_only(dev, s, r, NULL, &id, why, wl);
     if (rc) return rc;
     if (id < 0 || id > 0xffffffffll || ad_stream_stop(dev, s, (uint32_t)id)) {
-        snprintf(why, wl, "no stream of message %lld runs on this connection", (long long)id);
+        ad_snprintf(why, wl, "no stream of message %lld runs on this connection", (long long)id);
         return 404;
     }
     ad_wr w;
@@ -1164,6 +1244,12 @@ void ad_get_stats(const ad_device *dev, ad_stats *o)
     o->ring_lost_samples = dev->ring_lost;
 }
 
+/* packets go to the transport at once: its buffer is the queue */
+static uint64_t queued(const ad_session *c)
+{
+    return c->sink.queued ? c->sink.queued(c->sink.ctx) : 0;
+}
+
 static int cmd_stats(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
 {
     ad_stats st;
@@ -1186,9 +1272,9 @@ static int cmd_stats(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
         const ad_session *c = &dev->sessions[i];
         if (!c->used || c->state == AD_CLOSED) continue;
         char id[16];
-        snprintf(id, sizeof id, "%u", c->id);
+        ad_snprintf(id, sizeof id, "%u", c->id);
         ad_wr_str(&w, id);
-        ad_wr_uint(&w, 0); /* packets go to the transport at once; its own buffer holds them */
+        ad_wr_uint(&w, queued(c));
     }
     ad_wr_str(&w, "per_client"); ad_wr_array(&w, n);
     for (uint32_t i = 0; i < dev->n_sessions; i++) {
@@ -1199,7 +1285,7 @@ static int cmd_stats(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
         ad_wr_str(&w, "name"); ad_wr_str(&w, c->name);
         ad_wr_str(&w, "role"); ad_wr_str(&w, ROLE_NAMES[c->role]);
         ad_wr_str(&w, "streams"); ad_wr_uint(&w, c->n_streams);
-        ad_wr_str(&w, "queue_depth"); ad_wr_uint(&w, 0);
+        ad_wr_str(&w, "queue_depth"); ad_wr_uint(&w, queued(c));
         ad_wr_str(&w, "dropped_samples"); ad_wr_uint(&w, c->dropped_samples);
         ad_wr_str(&w, "dropped_packets"); ad_wr_uint(&w, c->dropped_packets);
     }
@@ -1226,7 +1312,7 @@ static void hello_reply(ad_device *dev, ad_session *s, uint64_t seq)
     ad_wr_str(&w, "role");
     if (s->role) ad_wr_str(&w, ROLE_NAMES[s->role]); else ad_wr_nil(&w);
     ad_wr_str(&w, "loop_rate_hz"); ad_wr_f64(&w, c->loop_rate_hz);
-    ad_wr_str(&w, "limits"); ad_wr_map(&w, 11);
+    ad_wr_str(&w, "limits"); ad_wr_map(&w, 13);
     ad_wr_str(&w, "max_frame_bytes"); ad_wr_uint(&w, c->max_frame_bytes);
     ad_wr_str(&w, "max_depth"); ad_wr_uint(&w, c->max_depth);
     ad_wr_str(&w, "max_array_len"); ad_wr_uint(&w, c->max_array_len);
@@ -1238,6 +1324,8 @@ static void hello_reply(ad_device *dev, ad_session *s, uint64_t seq)
     ad_wr_str(&w, "queue_packets"); ad_wr_uint(&w, c->queue_packets);
     ad_wr_str(&w, "max_clients"); ad_wr_uint(&w, c->max_clients);
     ad_wr_str(&w, "max_pending"); ad_wr_uint(&w, c->max_pending);
+    ad_wr_str(&w, "max_pending_frame_bytes"); ad_wr_uint(&w, c->max_pending_frame_bytes);
+    ad_wr_str(&w, "max_pending_frames"); ad_wr_uint(&w, c->max_pending_frames);
     ad_send_frame(dev, s, &w);
 }
 
@@ -1250,7 +1338,7 @@ static int cmd_hello(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
     uint32_t n = f[0].v.n, major = 0;
     while (major < n && v[major] != '.') major++;
     if (major != 1 || v[0] != '1') {
-        snprintf(why, wl, "protocol version '%.*s' is not supported; this endpoint speaks %s",
+        ad_snprintf(why, wl, "protocol version '%.*s' is not supported; this endpoint speaks %s",
                  (int)(n > 40 ? 40 : n), v, AD_VERSION);
         return 426;
     }
@@ -1264,11 +1352,11 @@ static int cmd_hello(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
     if (!auth_required(dev)) {
         char buf[160];
         const char *refusal = admit_refusal(dev, buf, sizeof buf);
-        if (refusal) { snprintf(why, wl, "%s", refusal); return 429; }
+        if (refusal) { ad_snprintf(why, wl, "%s", refusal); return 429; }
         s->role = AD_ROLE_OPERATOR;
         s->state = AD_READY;
     } else {
-        if (ad_port_random(s->nonce, 32)) { snprintf(why, wl, "no random source"); return 500; }
+        if (ad_port_random(s->nonce, 32)) { ad_snprintf(why, wl, "no random source"); return 500; }
         s->state = AD_AWAIT_AUTH;
     }
     hello_reply(dev, s, r->seq);
@@ -1282,13 +1370,13 @@ static int cmd_auth(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
     int rc = parse_args(&r->rd, &r->args, r->op, f, 3, why, wl);
     if (rc) return rc;
     uint32_t cn = f[0].v.n;
-    if (cn < 16 || cn > 256) { snprintf(why, wl, "AUTH: cnonce must hold 16..256 bytes"); return 400; }
+    if (cn < 16 || cn > 256) { ad_snprintf(why, wl, "AUTH: cnonce must hold 16..256 bytes"); return 400; }
     int requested = AD_ROLE_OPERATOR;
     if (f[2].present && f[2].v.t == AD_VT_STR) {
         if (f[2].v.n == 8 && !memcmp(f[2].v.p, "observer", 8)) requested = AD_ROLE_OBSERVER;
         else if (f[2].v.n == 8 && !memcmp(f[2].v.p, "operator", 8)) requested = AD_ROLE_OPERATOR;
         else {
-            snprintf(why, wl, "AUTH: unknown role '%.*s'; expected observer or operator",
+            ad_snprintf(why, wl, "AUTH: unknown role '%.*s'; expected observer or operator",
                      (int)(f[2].v.n > 32 ? 32 : f[2].v.n), (const char *)f[2].v.p);
             return 400;
         }
@@ -1309,12 +1397,12 @@ static int cmd_auth(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
     if (granted > requested) granted = requested;
     if (granted == AD_ROLE_NONE) {
         s->state = AD_CLOSED;
-        snprintf(why, wl, "authentication failed: wrong password");
+        ad_snprintf(why, wl, "authentication failed: wrong password");
         return 401;
     }
     char buf[160];
     const char *refusal = admit_refusal(dev, buf, sizeof buf);
-    if (refusal) { s->state = AD_CLOSED; snprintf(why, wl, "%s", refusal); return 429; }
+    if (refusal) { s->state = AD_CLOSED; ad_snprintf(why, wl, "%s", refusal); return 429; }
     s->role = (uint8_t)granted;
     s->state = AD_READY;
     ad_wr w;
@@ -1358,23 +1446,50 @@ static const command COMMANDS[] = {
 };
 #define N_COMMANDS (sizeof COMMANDS / sizeof COMMANDS[0])
 
+void ad_refuse(ad_device *dev, ad_session *s, int code, const char *why)
+{
+    if (s->used && !s->wants_close) fail(dev, s, 0, 0, code, why, 1);
+}
+
+/* Before AUTH, a peer gets almost nothing (§8): small frames, and few of them. */
+static int pre_auth(const ad_device *dev, const ad_session *s)
+{
+    return auth_required(dev) && s->role == AD_ROLE_NONE;
+}
+
+uint32_t ad_frame_limit(const ad_device *dev, const ad_session *s)
+{
+    uint32_t small = dev->cfg.max_pending_frame_bytes;
+    return pre_auth(dev, s) && small < dev->cfg.max_frame_bytes ? small : dev->cfg.max_frame_bytes;
+}
+
 void ad_refuse_oversize(ad_device *dev, ad_session *s, uint64_t announced)
 {
     char why[160];
-    snprintf(why, sizeof why, "frame of %llu bytes announced; the limit is %u bytes",
-             (unsigned long long)announced, dev->cfg.max_frame_bytes);
+    ad_snprintf(why, sizeof why, "frame of %llu bytes announced; the limit is %u bytes%s",
+             (unsigned long long)announced, ad_frame_limit(dev, s),
+             pre_auth(dev, s) ? " before authentication" : "");
     fail(dev, s, 0, 0, 413, why, 1);
 }
 
 void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len, int64_t now_us)
 {
-    char why[600];
+    char why[AD_WHY_BYTES];
     ad_limits lim = {dev->cfg.max_frame_bytes, dev->cfg.max_depth, dev->cfg.max_array_len,
                      dev->cfg.max_str_bytes};
     (void)now_us;
     if (!s->used || s->state == AD_CLOSED || s->wants_close) return;
     int has_seq = 0;
     uint64_t seq = 0;
+    if (pre_auth(dev, s)) {
+        if (len > ad_frame_limit(dev, s)) { ad_refuse_oversize(dev, s, len); return; }
+        if (++s->frames_before_auth > dev->cfg.max_pending_frames) {
+            ad_snprintf(why, sizeof why, "more than %u frames before authenticating",
+                        dev->cfg.max_pending_frames);
+            fail(dev, s, 0, 0, 429, why, 1);
+            return;
+        }
+    }
     int code = ad_validate(frame, len, &lim, why, sizeof why);
     if (code == 413) { fail(dev, s, 0, 0, 413, why, 1); return; }
     req r;
@@ -1395,7 +1510,7 @@ void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len,
             r.rd = rd;
             if (!has_seq) {
                 code = 400;
-                snprintf(why, sizeof why, "request seq must be an unsigned integer below 2**63");
+                ad_snprintf(why, sizeof why, "request seq must be an unsigned integer below 2**63");
             } else {
                 for (size_t i = 0; op.t == AD_VT_STR && i < N_COMMANDS; i++)
                     if (strlen(COMMANDS[i].op) == op.n && !memcmp(COMMANDS[i].op, op.p, op.n))
@@ -1403,21 +1518,21 @@ void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len,
                 if (!cmd) {
                     code = 400;
                     if (op.t == AD_VT_STR)
-                        snprintf(why, sizeof why, "unknown command '%.*s'; expected one of HELLO AUTH LIST "
+                        ad_snprintf(why, sizeof why, "unknown command '%.*s'; expected one of HELLO AUTH LIST "
                                  "DEFINE UNDEFINE READ WRITE INVOKE STREAM_START STREAM_STOP PING STATS BYE",
                                  (int)(op.n > 40 ? 40 : op.n), (const char *)op.p);
                     else
-                        snprintf(why, sizeof why, "unknown command of type %s; expected one of HELLO AUTH "
+                        ad_snprintf(why, sizeof why, "unknown command of type %s; expected one of HELLO AUTH "
                                  "LIST DEFINE UNDEFINE READ WRITE INVOKE STREAM_START STREAM_STOP PING STATS BYE",
                                  val_type(&op));
                 } else if (r.args.t != AD_VT_MAP) {
                     code = 400;
-                    snprintf(why, sizeof why, "%s: args must be a map", cmd->op);
+                    ad_snprintf(why, sizeof why, "%s: args must be a map", cmd->op);
                 }
             }
         } else {
             code = 400;
-            snprintf(why, sizeof why, "a request frame is the array [OP, seq, args]");
+            ad_snprintf(why, sizeof why, "a request frame is the array [OP, seq, args]");
         }
     }
     if (!code) {
@@ -1425,13 +1540,13 @@ void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len,
         if (!(cmd->allowed & bit)) {
             code = 409;
             if (s->state == AD_READY)
-                snprintf(why, sizeof why, "%s is not allowed after the handshake", cmd->op);
+                ad_snprintf(why, sizeof why, "%s is not allowed after the handshake", cmd->op);
             else
-                snprintf(why, sizeof why, "%s is not allowed before %s", cmd->op,
+                ad_snprintf(why, sizeof why, "%s is not allowed before %s", cmd->op,
                          s->state == AD_AWAIT_HELLO ? "HELLO" : "AUTH");
         } else if (s->role < cmd->role) {
             code = 403;
-            snprintf(why, sizeof why, "%s needs the %s role; this connection is %s", cmd->op,
+            ad_snprintf(why, sizeof why, "%s needs the %s role; this connection is %s", cmd->op,
                      ROLE_NAMES[cmd->role], ROLE_NAMES[s->role]);
         }
     }
@@ -1474,7 +1589,7 @@ void ad_poll(ad_device *dev, int64_t now_us)
         ad_session *s = &dev->sessions[i];
         if (!s->used || s->wants_close || s->state == AD_READY || s->state == AD_CLOSED) continue;
         if (now_us - s->opened_us >= limit_us) {
-            snprintf(why, sizeof why, "not authenticated within %g s", dev->cfg.auth_timeout_s);
+            ad_snprintf(why, sizeof why, "not authenticated within %g s", dev->cfg.auth_timeout_s);
             fail(dev, s, 0, 0, 408, why, 1);
         }
     }
@@ -1482,8 +1597,24 @@ void ad_poll(ad_device *dev, int64_t now_us)
     ad_stream_poll(dev);
 }
 
+int64_t ad_poll_delay_us(const ad_device *dev, int64_t now_us, int64_t max_us)
+{
+    int64_t delay = max_us;
+    if (dev->pending_calls) return delay < 1000 ? delay : 1000;
+    int64_t limit_us = (int64_t)(dev->cfg.auth_timeout_s * 1e6);
+    for (uint32_t i = 0; i < dev->n_sessions; i++) {
+        const ad_session *s = &dev->sessions[i];
+        if (!s->used || s->wants_close || s->state == AD_READY || s->state == AD_CLOSED) continue;
+        int64_t left = s->opened_us + limit_us - now_us;
+        if (left < delay) delay = left;
+    }
+    int64_t streams = ad_stream_delay_us((ad_device *)dev);
+    if (streams < delay) delay = streams;
+    return delay > 0 ? delay : 0;
+}
+
 /* ---- function call API ---------------------------------------------------------------------- */
-uint32_t ad_arg_count(const ad_call *c) { return c->rt->n_args; }
+uint32_t ad_arg_count(const ad_call *c) { return c->n_args; }
 double ad_arg_f64(const ad_call *c, uint32_t i)
 {
     const ad_argval *a = &c->args[i];
@@ -1536,7 +1667,7 @@ void ad_return_f64_array(ad_call *c, const double *v, uint32_t n)
 }
 int ad_fail(ad_call *c, const char *message)
 {
-    snprintf(c->fail, sizeof c->fail, "%s", message);
+    ad_snprintf(c->fail, sizeof c->fail, "%s", message);
     return AD_FAILED;
 }
 int ad_defer(ad_call *c, ad_resume_fn resume)

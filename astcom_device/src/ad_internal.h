@@ -47,9 +47,12 @@ void ad_write_value(ad_wr *w, const ad_type *t, const char *type_text, const voi
 double ad_load_f64(uint8_t base, const void *p);
 int64_t ad_load_i64(uint8_t base, const void *p);
 
+/* What the library keeps of each variable (16 bytes): its type's kind and sizes; the shape
+ * of a fixed array of more than one dimension is read again from the type text. */
 typedef struct ad_var_rt {
-    ad_type type;
+    uint8_t base, ndim;     /* as ad_type */
     int16_t trace_col;      /* index among traced signals, -1 if not traced */
+    uint32_t count, c_size; /* elements; bytes of its C storage (str: the capacity) */
     uint32_t ring_offset;   /* byte offset in a ring row */
 } ad_var_rt;
 
@@ -62,11 +65,19 @@ typedef struct ad_arg {
 } ad_arg;
 
 #define AD_MAX_ARGS 8
-typedef struct ad_fn_rt {
-    uint8_t n_args;
-    ad_arg args[AD_MAX_ARGS];
-    ad_type ret;
-} ad_fn_rt;
+
+/* Keep a function's locals out of its callers' frames (the MCU's stack is small). */
+#if defined(__GNUC__)
+#define AD_NOINLINE __attribute__((noinline))
+#else
+#define AD_NOINLINE
+#endif
+
+/* The buffer of a request's error text (an MCU build may make it smaller: longer texts
+ * are cut) */
+#ifndef AD_WHY_BYTES
+#define AD_WHY_BYTES 600
+#endif
 
 /* A function call in progress: decoded arguments and the result to send. */
 typedef struct ad_argval {
@@ -81,7 +92,8 @@ struct ad_call {
     ad_device *dev;
     ad_session *session;
     const ad_fn *fn;
-    const ad_fn_rt *rt;
+    uint8_t n_args;
+    ad_type ret;            /* the declared return type */
     ad_argval args[AD_MAX_ARGS];
     uint64_t seq;
     uint8_t has_result, result_kind;  /* 0 none, 1 f64, 2 i64, 3 u64, 4 bool, 5 str, 6 f64[] */
@@ -108,6 +120,7 @@ struct ad_session {
     uint8_t nonce[32];
     char name[65];
     uint32_t protocol_errors;
+    uint32_t frames_before_auth;
     uint32_t n_streams;
     uint64_t dropped_samples, dropped_packets;
     ad_call call;
@@ -136,7 +149,6 @@ struct ad_device {
     ad_var_rt *vrt;
     uint32_t n_vars;
     const ad_fn *fns;
-    ad_fn_rt *frt;
     uint32_t n_fns;
     double tick_us;
     /* the ring: written by ad_tick, read by ad_poll */
@@ -162,6 +174,9 @@ struct ad_device {
     uint64_t dropped_closed, ring_lost;
 };
 
+/* The whole type of variable `i`. */
+void ad_var_type(const ad_device *dev, uint32_t i, ad_type *out);
+
 /* messages */
 typedef struct ad_msg {
     uint32_t id;
@@ -174,6 +189,8 @@ int ad_msg_find(ad_device *dev, uint32_t id, ad_msg *out);
 
 /* streams (ad_stream.c) */
 void ad_stream_poll(ad_device *dev);
+/* µs until the first sampler has a whole packet in the ring (INT64_MAX: no stream) */
+int64_t ad_stream_delay_us(ad_device *dev);
 void ad_stream_drop_session(ad_device *dev, ad_session *s);
 void ad_stream_drop_message(ad_device *dev, ad_session *s, uint32_t msg);
 int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate_hz, ad_wr *w,
@@ -181,6 +198,9 @@ int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate_hz,
 int ad_stream_stop(ad_device *dev, ad_session *s, uint32_t msg);
 void ad_last_tick(ad_device *dev, int64_t *tick, int64_t *t_us);
 int64_t ad_round_half_up(double x);
+
+/* ERR nil `code` with `why`, then the session closes (a transport's refusal) */
+void ad_refuse(ad_device *dev, ad_session *s, int code, const char *why);
 
 /* sending (ad_device.c) */
 void ad_send_frame(ad_device *dev, ad_session *s, const ad_wr *w);

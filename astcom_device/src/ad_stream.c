@@ -37,7 +37,7 @@ void ad_tick(ad_device *dev, uint64_t tick, int64_t t_us)
     for (uint32_t c = 0; c < dev->n_traced; c++) {
         uint16_t i = dev->traced[c];
         const ad_var_rt *rt = &dev->vrt[i];
-        memcpy(row + rt->ring_offset, dev->vars[i].ptr, rt->type.c_size);
+        memcpy(row + rt->ring_offset, dev->vars[i].ptr, rt->c_size);
     }
     int new_seg = 1;
     if (dev->n_seg) {
@@ -78,7 +78,7 @@ static uint32_t message_groups(const ad_device *dev, const ad_msg *m, col_group 
 {
     uint32_t n = 0;
     for (uint32_t k = 0; k < m->n; k++) {
-        const ad_type *t = &dev->vrt[m->idx[k]].type;
+        const ad_var_rt *t = &dev->vrt[m->idx[k]];
         uint32_t j;
         for (j = 0; j < n && g[j].dtype != t->base; j++) {}
         if (j == n) {
@@ -102,10 +102,10 @@ static void write_layout(ad_wr *w, const ad_device *dev, const ad_msg *m)
     char name[160];
     for (uint32_t k = 0; k < m->n; k++) {
         const ad_var *v = &dev->vars[m->idx[k]];
-        const ad_type *t = &dev->vrt[m->idx[k]].type;
+        const ad_var_rt *t = &dev->vrt[m->idx[k]];
         if (!t->ndim) { ad_wr_str(w, v->name); continue; }
         for (uint32_t e = 0; e < t->count; e++) {
-            snprintf(name, sizeof name, "%s[%u]", v->name, e);
+            ad_snprintf(name, sizeof name, "%s[%u]", v->name, e);
             ad_wr_str(w, name);
         }
     }
@@ -120,7 +120,7 @@ static void write_layout(ad_wr *w, const ad_device *dev, const ad_msg *m)
         ad_wr_array(w, g[j].n_cols);
         uint32_t col = 0;
         for (uint32_t k = 0; k < m->n; k++) {
-            const ad_type *t = &dev->vrt[m->idx[k]].type;
+            const ad_var_rt *t = &dev->vrt[m->idx[k]];
             for (uint32_t e = 0; e < t->count; e++, col++)
                 if (t->base == g[j].dtype) ad_wr_uint(w, col);
         }
@@ -153,27 +153,27 @@ int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate, ad
     size_t used = 0;
     why[0] = 0;
     for (uint32_t k = 0; k < m.n; k++) {
-        const ad_type *t = &dev->vrt[m.idx[k]].type;
+        const ad_var_rt *t = &dev->vrt[m.idx[k]];
         if (t->base <= 10 && t->ndim != AD_VARLEN) continue;
-        used += (size_t)snprintf(why + used, used < wl ? wl - used : 0, "%s%s (%s)",
+        used += (size_t)ad_snprintf(why + used, used < wl ? wl - used : 0, "%s%s (%s)",
                                  used ? ", " : "cannot stream ", dev->vars[m.idx[k]].name,
                                  dev->vars[m.idx[k]].type);
     }
     if (used) {
-        if (used < wl) snprintf(why + used, wl - used, ": streams carry numeric scalars and "
+        if (used < wl) ad_snprintf(why + used, wl - used, ": streams carry numeric scalars and "
                                 "fixed-size numeric arrays");
         return 422;
     }
     double loop = dev->cfg.loop_rate_hz, lowest = loop / 4294967296.0;
     if (!(rate >= lowest && rate <= loop * (1 + 1e-9))) {
-        snprintf(why, wl, "rate_hz %g out of range: expected %.6g <= rate_hz <= %g: at most the "
+        ad_snprintf(why, wl, "rate_hz %g out of range: expected %.6g <= rate_hz <= %g: at most the "
                  "device loop rate (every tick), at least one sample every 2^32 ticks", rate,
                  lowest, loop);
         return 422;
     }
     ad_sampler *old = find_sub(dev, s, msg);
     if (!old && s->n_streams >= dev->cfg.max_streams_per_client) {
-        snprintf(why, wl, "this connection already runs %u streams (the maximum)", s->n_streams);
+        ad_snprintf(why, wl, "this connection already runs %u streams (the maximum)", s->n_streams);
         return 429;
     }
     /* k = round(loop / rate), ties to even, as Python's round() */
@@ -193,7 +193,7 @@ int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate, ad
             if (!dev->samplers[i].used && &dev->samplers[i] != old) sp = &dev->samplers[i];
         if (!sp && old && old->subscribers == (1ull << s->slot)) sp = old; /* re-rate in place */
         if (!sp) {
-            snprintf(why, wl, "this device samples at most %u (message, rate) groups at once",
+            ad_snprintf(why, wl, "this device samples at most %u (message, rate) groups at once",
                      dev->cfg.max_samplers);
             return 429;
         }
@@ -209,8 +209,13 @@ int ad_stream_start(ad_device *dev, ad_session *s, uint32_t msg, double rate, ad
         uint32_t overhead = 96 + ng * (8 + 40);
         uint64_t fit = row_bytes ? (dev->cfg.max_reply_bytes - overhead) / row_bytes : spp;
         uint64_t by_len = cols ? dev->cfg.max_array_len / cols : spp;
+        /* a packet spans at most half the ring: the other half is the time the
+         * communication side has to build it before its first row is overwritten (a
+         * 20-ms ring with 20-ms packets would leave none) */
+        uint64_t by_ring = dev->cfg.ring_ticks / 2u / k;
         if (spp > fit) spp = fit;
         if (spp > by_len) spp = by_len;
+        if (spp > by_ring) spp = by_ring;
         if (spp < 1) spp = 1;
         sp->spp = (uint32_t)spp;
         int64_t tick, t_us;
@@ -325,18 +330,27 @@ static void encode_packet(ad_device *dev, ad_sampler *sp, const ad_msg *m, const
         for (uint32_t i = 0; i < n; i++) {
             uint64_t r = row + (uint64_t)i * sp->k;
             const uint8_t *ring_row = dev->ring + (size_t)(r % dev->cfg.ring_ticks) * dev->row_bytes;
+            /* columns that lie side by side in the ring row are copied in one run */
+            const uint8_t *run = NULL;
+            uint32_t run_len = 0;
             for (uint32_t k = 0; k < m->n; k++) {
                 const ad_var_rt *rt = &dev->vrt[m->idx[k]];
-                if (rt->type.base != g[j].dtype) continue;
+                if (rt->base != g[j].dtype) continue;
                 if (rt->trace_col >= 0) {
-                    ad_wr_raw(w, ring_row + rt->ring_offset, isz);
+                    const uint8_t *p = ring_row + rt->ring_offset;
+                    if (run && run + run_len == p) { run_len += isz; continue; }
+                    if (run) ad_wr_raw(w, run, run_len);
+                    run = p;
+                    run_len = isz;
                 } else {
+                    if (run) { ad_wr_raw(w, run, run_len); run = NULL; }
                     /* parameters and untraced signals: their value now (end of the block) */
                     ad_port_lock();
-                    ad_wr_raw(w, dev->vars[m->idx[k]].ptr, rt->type.count * isz);
+                    ad_wr_raw(w, dev->vars[m->idx[k]].ptr, rt->count * isz);
                     ad_port_unlock();
                 }
             }
+            if (run) ad_wr_raw(w, run, run_len);
         }
     }
 }
@@ -406,6 +420,24 @@ static void poll_sampler(ad_device *dev, ad_sampler *sp, const ring_view *v)
         }
         sp->next_tick = tick + (uint64_t)n * sp->k;
     }
+}
+
+int64_t ad_stream_delay_us(ad_device *dev)
+{
+    int64_t tick, t_us, best = INT64_MAX;
+    ad_port_lock();
+    ad_last_tick(dev, &tick, &t_us);
+    ad_port_unlock();
+    for (uint32_t i = 0; i < dev->cfg.max_samplers; i++) {
+        const ad_sampler *sp = &dev->samplers[i];
+        if (!sp->used) continue;
+        /* its packet is whole when the tick of its last sample is in the ring */
+        double last = (double)sp->next_tick + (double)(sp->spp - 1u) * (double)sp->k;
+        double ticks = last - (double)tick;
+        int64_t us = ticks <= 0 ? 0 : (int64_t)(ticks * dev->tick_us);
+        if (us < best) best = us;
+    }
+    return best;
 }
 
 void ad_stream_poll(ad_device *dev)

@@ -157,9 +157,9 @@ static const char *vt_name(uint8_t t)
 
 static int fmt_num(const num *n, char *out, size_t len)
 {
-    if (n->kind == 0) return snprintf(out, len, "%llu", (unsigned long long)n->u);
-    if (n->kind == 1) return snprintf(out, len, "%lld", (long long)n->i);
-    return snprintf(out, len, "%.17g", n->f);
+    if (n->kind == 0) return ad_snprintf(out, len, "%llu", (unsigned long long)n->u);
+    if (n->kind == 1) return ad_snprintf(out, len, "%lld", (long long)n->i);
+    return ad_snprintf(out, len, "%.17g", n->f);
 }
 
 static const int64_t IMIN[11] = {0, INT8_MIN, INT16_MIN, INT32_MIN, INT64_MIN, 0, 0, 0, 0, 0, 0};
@@ -178,7 +178,7 @@ static int store_num(const num *n, uint8_t base, void *dst, const char *where, i
         int ok = n->kind == 3 || (n->kind == 0 && n->u <= 1)
                  || (elem && n->kind == 2 && (n->f == 0.0 || n->f == 1.0));
         if (!ok) {
-            snprintf(why, why_len, elem ? "%s: expected bool elements (true/false or 0/1)"
+            ad_snprintf(why, why_len, elem ? "%s: expected bool elements (true/false or 0/1)"
                                         : "%s: expected bool (true/false), got %s", where, shown);
             return 422;
         }
@@ -187,7 +187,7 @@ static int store_num(const num *n, uint8_t base, void *dst, const char *where, i
         return 0;
     }
     if (n->kind == 3) {
-        snprintf(why, why_len, elem ? "%s: expected %s elements, got a bool element"
+        ad_snprintf(why, why_len, elem ? "%s: expected %s elements, got a bool element"
                                     : "%s: expected %s, got bool %s", where, NAMES[base],
                  n->u ? "True" : "False");
         return 422;
@@ -196,7 +196,7 @@ static int store_num(const num *n, uint8_t base, void *dst, const char *where, i
         double d = n->kind == 0 ? (double)n->u : n->kind == 1 ? (double)n->i : n->f;
         if (base == 9) {
             if (isfinite(d) && fabs(d) > FLT_MAX) {
-                snprintf(why, why_len, elem ? "%s: elements out of range for f32"
+                ad_snprintf(why, why_len, elem ? "%s: elements out of range for f32"
                                             : "%s: %s out of range for f32", where, shown);
                 return 422;
             }
@@ -212,7 +212,7 @@ static int store_num(const num *n, uint8_t base, void *dst, const char *where, i
     uint64_t mag = 0;
     if (n->kind == 2) {
         if (!isfinite(n->f) || n->f != floor(n->f)) {
-            snprintf(why, why_len, elem ? "%s: expected integer elements for %s, got fractions"
+            ad_snprintf(why, why_len, elem ? "%s: expected integer elements for %s, got fractions"
                                         : "%s: expected an integer for %s, got %s", where,
                      NAMES[base], shown);
             return 422;
@@ -228,13 +228,13 @@ static int store_num(const num *n, uint8_t base, void *dst, const char *where, i
     int bad = neg ? (IMIN[base] == 0 || mag > (uint64_t)(-(IMIN[base] + 1)) + 1) : mag > UMAX[base];
     if (bad) {
         char lo[24], hi[24];
-        snprintf(lo, sizeof lo, "%lld", (long long)IMIN[base]);
-        snprintf(hi, sizeof hi, "%llu", (unsigned long long)UMAX[base]);
-        snprintf(why, why_len, elem ? "%s: elements out of range for %s (%s..%s)"
+        ad_snprintf(lo, sizeof lo, "%lld", (long long)IMIN[base]);
+        ad_snprintf(hi, sizeof hi, "%llu", (unsigned long long)UMAX[base]);
+        ad_snprintf(why, why_len, elem ? "%s: elements out of range for %s (%s..%s)"
                                     : "%s: %s out of range for %s (%s..%s)", where,
                  elem ? NAMES[base] : shown, elem ? lo : NAMES[base], elem ? hi : lo,
                  elem ? "" : hi);
-        if (elem) snprintf(why, why_len, "%s: elements out of range for %s (%s..%s)", where,
+        if (elem) ad_snprintf(why, why_len, "%s: elements out of range for %s (%s..%s)", where,
                            NAMES[base], lo, hi);
         return 422;
     }
@@ -280,17 +280,17 @@ static int coerce_nested(ad_rd *rd, const ad_val *head, const ad_type *t, uint32
     uint32_t want = t->ndim == AD_VARLEN ? head->n : t->shape[dim];
     uint32_t isz = ad_scalar_size(t->base);
     if (head->n != want) {
-        snprintf(why, why_len, "%s: expected shape (%u%s) for dimension %u, got %u elements",
+        ad_snprintf(why, why_len, "%s: expected shape (%u%s) for dimension %u, got %u elements",
                  where, want, "", dim, head->n);
         return 422;
     }
     for (uint32_t k = 0; k < head->n; k++) {
         ad_val v;
-        if (ad_rd_next(rd, &v)) { snprintf(why, why_len, "%s: bad array", where); return 422; }
+        if (ad_rd_next(rd, &v)) { ad_snprintf(why, why_len, "%s: bad array", where); return 422; }
         uint32_t last = t->ndim == AD_VARLEN ? 1 : t->ndim;
         if (dim + 1 < last) {
             if (v.t != AD_VT_ARRAY) {
-                snprintf(why, why_len, "%s: expected a %u-D array", where, last);
+                ad_snprintf(why, why_len, "%s: expected a %u-D array", where, last);
                 return 422;
             }
             int r = coerce_nested(rd, &v, t, dim + 1, dst, filled, where, why, why_len);
@@ -299,7 +299,7 @@ static int coerce_nested(ad_rd *rd, const ad_val *head, const ad_type *t, uint32
         }
         num n;
         if (to_num(&v, &n)) {
-            snprintf(why, why_len, "%s: expected %s elements, got %s elements", where,
+            ad_snprintf(why, why_len, "%s: expected %s elements, got %s elements", where,
                      SCALARS[t->base], vt_name(v.t));
             return 422;
         }
@@ -314,10 +314,10 @@ int ad_coerce(ad_rd *rd, const ad_type *t, const char *type_text, void *dst, con
               char *why, size_t why_len)
 {
     ad_val v;
-    if (ad_rd_next(rd, &v)) { snprintf(why, why_len, "%s: missing value", where); return 422; }
+    if (ad_rd_next(rd, &v)) { ad_snprintf(why, why_len, "%s: missing value", where); return 422; }
     if (t->base == AD_T_STRUCT) {
         if (v.t != AD_VT_MAP) {
-            snprintf(why, why_len, "%s: expected a map for %s, got %s", where, type_text,
+            ad_snprintf(why, why_len, "%s: expected a map for %s, got %s", where, type_text,
                      vt_name(v.t));
             ad_rd_skip_items(rd, &v);
             return 422;
@@ -330,14 +330,14 @@ int ad_coerce(ad_rd *rd, const ad_type *t, const char *type_text, void *dst, con
         ad_struct_begin(&it, type_text);
         while (!ad_struct_next(&it, &fname, &flen, &fbase)) nfields++;
         if (v.n != nfields) {
-            snprintf(why, why_len, "%s: expected fields of %s, got %u fields", where, type_text, v.n);
+            ad_snprintf(why, why_len, "%s: expected fields of %s, got %u fields", where, type_text, v.n);
             ad_rd_skip_items(rd, &v);
             return 422;
         }
         for (uint32_t k = 0; k < v.n; k++) {
             ad_val key;
             if (ad_rd_next(rd, &key) || key.t != AD_VT_STR) {
-                snprintf(why, why_len, "%s: expected field names", where);
+                ad_snprintf(why, why_len, "%s: expected field names", where);
                 return 422;
             }
             ad_struct_begin(&it, type_text);
@@ -351,17 +351,17 @@ int ad_coerce(ad_rd *rd, const ad_type *t, const char *type_text, void *dst, con
                 idx++;
             }
             if (!found || (seen >> idx) & 1u) {
-                snprintf(why, why_len, "%s: expected fields of %s, got %.*s", where, type_text,
+                ad_snprintf(why, why_len, "%s: expected fields of %s, got %.*s", where, type_text,
                          (int)(key.n > 32 ? 32 : key.n), (const char *)key.p);
                 return 422;
             }
             seen |= 1u << idx;
             char fwhere[96];
-            snprintf(fwhere, sizeof fwhere, "%s.%.*s", where, (int)flen, fname);
+            ad_snprintf(fwhere, sizeof fwhere, "%s.%.*s", where, (int)flen, fname);
             ad_val fv;
             num n;
             if (ad_rd_next(rd, &fv) || to_num(&fv, &n)) {
-                snprintf(why, why_len, "%s: expected %s, got %s", fwhere, SCALARS[fbase],
+                ad_snprintf(why, why_len, "%s: expected %s, got %s", fwhere, SCALARS[fbase],
                          vt_name(fv.t));
                 return 422;
             }
@@ -372,12 +372,12 @@ int ad_coerce(ad_rd *rd, const ad_type *t, const char *type_text, void *dst, con
     }
     if (t->base == AD_T_STR) {
         if (v.t != AD_VT_STR) {
-            snprintf(why, why_len, "%s: expected str, got %s", where, vt_name(v.t));
+            ad_snprintf(why, why_len, "%s: expected str, got %s", where, vt_name(v.t));
             ad_rd_skip_items(rd, &v);
             return 422;
         }
         if (v.n + 1 > t->c_size) {
-            snprintf(why, why_len, "%s: a str of %u bytes does not fit; at most %u bytes", where,
+            ad_snprintf(why, why_len, "%s: a str of %u bytes does not fit; at most %u bytes", where,
                      v.n, t->c_size ? t->c_size - 1 : 0);
             return 422;
         }
@@ -388,7 +388,7 @@ int ad_coerce(ad_rd *rd, const ad_type *t, const char *type_text, void *dst, con
     if (t->ndim == 0) {
         num n;
         if (to_num(&v, &n)) {
-            snprintf(why, why_len, "%s: expected %s, got %s", where, SCALARS[t->base],
+            ad_snprintf(why, why_len, "%s: expected %s, got %s", where, SCALARS[t->base],
                      vt_name(v.t));
             ad_rd_skip_items(rd, &v);
             return 422;
@@ -402,12 +402,12 @@ int ad_coerce(ad_rd *rd, const ad_type *t, const char *type_text, void *dst, con
         int same = a.ndim == t->ndim;
         for (uint8_t d = 0; same && d < a.ndim; d++) same = a.shape[d] == t->shape[d];
         if (!same) {
-            snprintf(why, why_len, "%s: expected shape of %s, got an array of %u elements in "
+            ad_snprintf(why, why_len, "%s: expected shape of %s, got an array of %u elements in "
                      "%u dimensions", where, type_text, a.count, a.ndim);
             return 422;
         }
         if (a.dtype == 0 && t->base != 0) {
-            snprintf(why, why_len, "%s: expected %s elements, got bool elements", where,
+            ad_snprintf(why, why_len, "%s: expected %s elements, got bool elements", where,
                      SCALARS[t->base]);
             return 422;
         }
@@ -421,7 +421,7 @@ int ad_coerce(ad_rd *rd, const ad_type *t, const char *type_text, void *dst, con
         return 0;
     }
     if (v.t != AD_VT_ARRAY) {
-        snprintf(why, why_len, "%s: expected an array %s, got %s", where, type_text, vt_name(v.t));
+        ad_snprintf(why, why_len, "%s: expected an array %s, got %s", where, type_text, vt_name(v.t));
         ad_rd_skip_items(rd, &v);
         return 422;
     }
@@ -452,7 +452,8 @@ void ad_write_value(ad_wr *w, const ad_type *t, const char *type_text, const voi
         return;
     }
     if (t->base == AD_T_STR) {
-        size_t n = strnlen((const char *)p, t->c_size);
+        const uint8_t *nul = memchr(p, 0, t->c_size); /* the buffer may be full, no NUL */
+        size_t n = nul ? (size_t)(nul - (const uint8_t *)p) : t->c_size;
         ad_wr_strn(w, (const char *)p, (uint32_t)n);
         return;
     }

@@ -212,3 +212,17 @@ export function jsonLines(events) {
     kind: e.kind, message: e.message, fields: e.fields ?? {},
   })).join('\n') + (events.length ? '\n' : '');
 }
+
+// ------------------------------------------------------------------ routine events
+/**
+ * Events that come every few seconds whatever happens, hidden on the Log tab unless asked
+ * for: [kind, field, value] (field null: every event of that kind). The mount's clock syncs
+ * (`clock_sync`) and the VSS's `time.set_utc` calls that arm them were about 80 % of a
+ * night's rows.
+ */
+export const ROUTINE_EVENTS = [['clock_sync', null, null], ['command', 'command', 'time.set_utc']];
+
+/** True when `e` is a routine event (ROUTINE_EVENTS). */
+export function isRoutine(e) {
+  return ROUTINE_EVENTS.some(([kind, field, value]) => e.kind === kind && (field === null || e.fields?.[field] === value));
+}

@@ -114,3 +114,27 @@ export function niceTicks(min, max, minTicks = 4) {
   }
   return [min, max];
 }
+
+/**
+ * Return a time cell: UTC as `YYYY-MM-DD HH:MM:SS.sss` from µs since 1970 (mount time or a
+ * clock), '—' when unknown. Every clock value on the Board and Telescope tabs uses it: one
+ * format, millisecond precision (the label says UTC and which clock).
+ */
+export function utcCell(tUs) {
+  if (tUs === null || tUs === undefined || !Number.isFinite(Number(tUs))) return '—';
+  return new Date(Math.floor(Number(tUs) / 1000)).toISOString().replace('T', ' ').slice(0, 23);
+}
+
+/** Return `HH:MM:SS` (UTC) of a wall time in ms, for "last update" notes; '—' when unknown. */
+export function utcClock(ms) {
+  return ms ? new Date(ms).toISOString().slice(11, 19) : '—';
+}
+
+/** Return how long ago `thenMs` was at `nowMs`: "4 s ago", "2 min 5 s ago", "3 h 10 min ago". */
+export function ageText(thenMs, nowMs) {
+  if (!thenMs) return '';
+  const s = Math.max(0, Math.floor((nowMs - thenMs) / 1000));
+  if (s < 60) return `${s} s ago`;
+  if (s < 3600) return `${Math.floor(s / 60)} min ${s % 60} s ago`;
+  return `${Math.floor(s / 3600)} h ${Math.floor((s % 3600) / 60)} min ago`;
+}

@@ -21,7 +21,7 @@ export class LogFeed {
     this.waiting = [];
     this.feeds = Object.fromEntries(sources.map((s) => [s.name, { since: 0, link: null, busy: false, skipped: 0, problem: '' }]));
     this.state = reactive({
-      version: 0, following: true, pending: 0, total: 0,
+      version: 0, following: true, pending: 0, total: 0, polls: 0, // polls: rounds completed
       status: Object.fromEntries(sources.map((s) => [s.name, 'not polled yet'])),
     });
   }
@@ -80,8 +80,9 @@ export class LogFeed {
   }
 
   /** Poll every source once. */
-  poll() {
-    return Promise.all(this.sources.map((s) => this.pollOne(s)));
+  async poll() {
+    await Promise.all(this.sources.map((s) => this.pollOne(s)));
+    this.state.polls += 1;
   }
 
   /** Pause (`false`: new events wait aside) or follow (`true`: they join the rows). */

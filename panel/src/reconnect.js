@@ -12,7 +12,7 @@ export function reconnectDelayMs(attempt) {
 /**
  * Call `attempt(n)` after a pause, again after each failure, until one resolves or
  * `cancel()`. `giveUp(err)` true stops after that failure (e.g. a wrong password).
- * Returns {cancel(), done: Promise<boolean>} (done: true once an attempt succeeded).
+ * Returns {now(), cancel(), done: Promise<boolean>} (done: true once an attempt succeeded).
  */
 export function keepTrying(attempt, { delayMs = reconnectDelayMs, giveUp = () => false } = {}) {
   let cancelled = false;
@@ -41,6 +41,12 @@ export function keepTrying(attempt, { delayMs = reconnectDelayMs, giveUp = () =>
   };
   timer = setTimeout(run, delayMs(0));
   return {
+    /** Try again at once instead of after the pause (when something says where to look). */
+    now() {
+      if (cancelled || !timer) return; // an attempt is under way: it or the next one will do
+      clearTimeout(timer);
+      timer = setTimeout(run, 0);
+    },
     cancel() {
       cancelled = true;
       if (timer) clearTimeout(timer);

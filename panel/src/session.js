@@ -125,6 +125,28 @@ async function reopen() {
   }
 }
 
+/**
+ * The VirtualStar Server says its mount answers ASTCom at `to` (status `mount_endpoint`),
+ * where it said `from` before. When this page's link is the one to `from` (connected or
+ * retrying), it moves to `to` with the same password and role: a restarted `vs server
+ * --emulator` whose endpoint came back elsewhere is found again. A link to another
+ * endpoint is left alone. Returns true when the link moved.
+ */
+export function mountEndpointMoved(from, to) {
+  if (!to || !from || to === from || session.url !== from) return false;
+  if (session.status !== 'connected' && session.status !== 'reconnecting') return false;
+  logEvent(`the VSS says the mount's ASTCom endpoint moved from ${from} to ${to}: following it`, 'info');
+  session.url = to;
+  if (session.status === 'connected') {
+    // the old endpoint still answers: leave it as a lost link would, and retry at the new one
+    const control = links.control;
+    if (control) lost(control, new Error(`the mount's endpoint moved to ${to}`));
+  } else if (links.retry) {
+    links.retry.now?.(); // the next attempt goes to session.url at once
+  }
+  return true;
+}
+
 export async function disconnect() {
   links.retry?.cancel();
   links.retry = null;
@@ -132,6 +154,16 @@ export async function disconnect() {
   session.status = 'disconnected';
   session.stale = false;
   await closeLinks();
+}
+
+/**
+ * Why this page may not write or call on the endpoint now ('' when it may): the reason a
+ * WRITE/INVOKE button is disabled, shown beside it (ASTCom: only operators write and call).
+ */
+export function writeBlocked() {
+  if (session.status !== 'connected') return 'connect on the Board tab first';
+  if (session.grantedRole !== 'operator') return `operator only (this connection is ${session.grantedRole})`;
+  return '';
 }
 
 export function requireControl() {

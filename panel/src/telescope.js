@@ -3,10 +3,12 @@
 //
 // The status and the program are polled every second, and at once on an `operation`,
 // `fault` or `program` event. A lost connection is retried until the user disconnects;
-// meanwhile the last status stays on screen, marked stale.
+// meanwhile the last status stays on screen, marked stale. The server says where its mount
+// answers ASTCom (`mount_endpoint`); when that moves, the Board's link follows it.
 import { markRaw, reactive } from 'vue';
 import { keepTrying } from './reconnect.js';
-import { logEvent } from './session.js';
+import { logEvent, mountEndpointMoved } from './session.js';
+import { commandOutcome, commandText, rememberPlace } from './telescope-view.js';
 import { VssClient } from './vss/client.js';
 
 export const DEFAULT_VSS_URL = 'ws://127.0.0.1:8740';
@@ -25,6 +27,9 @@ export const telescope = reactive({
   updatedMs: null, // wall time of the last status
   stale: false, // the status on screen is from before the connection was lost
   faults: [], // recent fault events {time, text}
+  lastPlace: null, // {place, atMs}: where the mount last pointed, kept while it is away
+  mountEndpoint: null, // where the server last said its mount answers ASTCom
+  lastCommand: null, // the Telescope tab's last command: {atMs (sent, page clock), what, outcome, text}
 });
 
 const link = { client: null, password: '', retry: null, timer: null };
@@ -36,6 +41,8 @@ async function refresh() {
   try {
     const [state, program] = await Promise.all([c.request('status'), c.request('program')]);
     if (c !== link.client) return;
+    telescope.lastPlace = rememberPlace(state, telescope.lastPlace, Date.now());
+    noteMountEndpoint(state.mount_endpoint);
     telescope.state = state;
     telescope.program = program?.state && program.state !== 'none' ? program : null;
     telescope.updatedMs = Date.now();
@@ -43,6 +50,14 @@ async function refresh() {
   } catch (err) {
     if (c === link.client && err.code !== 'closed') logEvent(`VSS status: ${err.message}`);
   }
+}
+
+/** The server said where its mount answers ASTCom (null: nowhere, or not said). */
+function noteMountEndpoint(url) {
+  if (typeof url !== 'string' || !url) return;
+  const before = telescope.mountEndpoint;
+  telescope.mountEndpoint = url;
+  if (before && before !== url) mountEndpointMoved(before, url);
 }
 
 function onEvent(event, data) {
@@ -69,6 +84,7 @@ async function open(url, password, role) {
   telescope.status = 'connected';
   client.onEvent(onEvent);
   client.onClose((err) => lost(client, err));
+  noteMountEndpoint(client.hello.mount_endpoint); // said in the hello when no password is needed
   await refresh();
 }
 
@@ -118,23 +134,37 @@ export async function disconnectVss() {
   c?.close();
 }
 
-/** Send a command to the VSS and log what was asked and how it ended; rethrows errors. */
-export async function vssCommand(cmd, params = {}) {
+/**
+ * Send a command to the VSS and log what was asked and how it ended; rethrows errors.
+ * `show` (the Telescope tab's own commands): also keep the outcome in
+ * `telescope.lastCommand`, shown on the tab that sent it.
+ */
+export async function vssCommand(cmd, params = {}, { show = false } = {}) {
   const c = link.client;
-  const what = `VSS ${cmd}${Object.keys(params).length ? ` ${JSON.stringify(params)}` : ''}`;
+  const what = commandText(cmd, params);
+  const sentMs = Date.now();
+  const record = (outcome, text) => {
+    if (show) telescope.lastCommand = { atMs: sentMs, what, outcome, text };
+  };
   if (!c) {
-    const err = new Error(`${what}: not connected to the VirtualStar Server (Telescope tab)`);
+    const err = new Error(`VSS ${what}: not connected to the VirtualStar Server (Telescope tab)`);
+    record('refused', 'not sent: not connected to the VirtualStar Server');
     logEvent(err.message);
     throw err;
   }
-  logEvent(`${what} sent`, 'info');
+  logEvent(`VSS ${what} sent`, 'info');
+  record('sent', 'sent, waiting for the answer');
   try {
     const result = await c.request(cmd, params, MOVE_TIMEOUT_MS);
-    logEvent(`${what}: done${result?.phase ? ` (${result.phase})` : ''}`, 'info');
+    const { outcome, text } = commandOutcome(cmd, { result });
+    record(outcome, text);
+    logEvent(`VSS ${what}: ${text}`, 'info');
     refresh();
     return result;
   } catch (err) {
-    logEvent(`${what}: ${err.code ? `${err.code}: ` : ''}${err.message}`);
+    const { outcome, text } = commandOutcome(cmd, { error: err });
+    record(outcome, text);
+    logEvent(`VSS ${what}: ${text}`, outcome === 'ended' ? 'info' : 'error');
     refresh();
     throw err;
   }

@@ -212,3 +212,64 @@ def test_alpycas_broadcast_discovery_finds_the_device_inside_a_private_network_n
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "127.0.0.1:11124" in out.stdout
+
+
+def raw_put(rig, member: str, body: bytes, content_type: str | None) -> tuple[int, str]:
+    """A PUT with exactly these body bytes and Content-Type (None: no header); (status, text)."""
+    import http.client
+
+    conn = http.client.HTTPConnection(rig.address, timeout=60)
+    try:
+        headers = {"Content-Length": str(len(body))}
+        if content_type is not None:
+            headers["Content-Type"] = content_type
+        conn.request("PUT", f"/api/v1/telescope/0/{member}", body=body, headers=headers)
+        resp = conn.getresponse()
+        return resp.status, resp.read().decode("utf-8", errors="replace")
+    finally:
+        conn.close()
+
+
+FORM = "application/x-www-form-urlencoded"
+MULTIPART = "multipart/form-data; boundary=XyZ"
+
+
+def _part(headers: str, value: bytes) -> bytes:
+    return b"--XyZ\r\n" + headers.encode() + b"\r\n\r\n" + value + b"\r\n"
+
+
+@pytest.mark.parametrize(("body", "content_type", "says"), [
+    (b"TargetDeclination=\xff\xfe12", FORM, "not utf-8 text (byte 18"),
+    (b"TargetDeclination=%FF%FE", FORM, "%-escape"),
+    (b"TargetDeclination=1", FORM + "; charset=klingon", "charset 'klingon' is unknown"),
+    (b"&".join(b"a%d=1" % i for i in range(200)), FORM, "more than 64 fields"),
+    (b'{"TargetDeclination": 12}', "application/json", "not application/json"),
+    (b"\x00\x01\xfe binary", None, "not utf-8 text"),
+    (_part('Content-Disposition: form-data', b"12") + b"--XyZ--\r\n", MULTIPART,
+     "multipart body cannot be read"),
+    (_part("Content-Type: text/plain", b"12") + b"--XyZ--\r\n", MULTIPART,
+     "multipart body cannot be read"),
+    (b"no boundary here", "multipart/form-data", "multipart body cannot be read"),
+    (b"--other\r\n\r\n", MULTIPART, "multipart body cannot be read"),
+    (_part('Content-Disposition: form-data; name="TargetDeclination"\r\n'
+           "Content-Type: text/plain; charset=utf-8", b"\xff12") + b"--XyZ--\r\n", MULTIPART,
+     "multipart body cannot be read"),
+    (_part('Content-Disposition: form-data; name="TargetDeclination"; filename="d.txt"',
+           b"12") + b"--XyZ--\r\n", MULTIPART, "is a file upload"),
+])
+def test_a_malformed_put_body_of_any_kind_is_http_400_saying_why(night, body, content_type,
+                                                                 says):
+    call(night, "PUT", "connected", {"Connected": "True"})
+    status, text = raw_put(night, "targetdeclination", body, content_type)
+    assert status == 400, text
+    assert says.lower() in text.lower()
+    # the façade still answers, and a well-formed multipart PUT is read
+    good = _part('Content-Disposition: form-data; name="TargetDeclination"', b"21.5")
+    status, text = raw_put(night, "targetdeclination", good + b"--XyZ--\r\n", MULTIPART)
+    assert status == 200 and json.loads(text)["ErrorNumber"] == 0
+    assert call(night, "GET", "targetdeclination")[1]["Value"] == 21.5
+
+
+def test_a_put_without_a_content_type_is_read_as_a_form(night):
+    status, text = raw_put(night, "connected", b"Connected=True&ClientTransactionID=9", None)
+    assert status == 200 and json.loads(text)["ClientTransactionID"] == 9

@@ -154,13 +154,57 @@ def test_abort_slew_stops_the_slew_and_tracking_goes_on_where_it_stopped(night, 
             scope.SlewToCoordinatesAsync(ra_h, dec)
             assert scope.Slewing
         scope.AbortSlew()
-    assert not scope.Slewing and scope.Tracking  # ASCOM: tracking as before the slew
-    mount_sleep(night, 15.0)  # the track of where it stopped has joined
+    assert scope.Tracking  # ASCOM: tracking as before the slew
+    wait_for(lambda: not scope.Slewing, what="the track of where it stopped to settle")
     here = (scope.RightAscension, scope.Declination)
     mount_sleep(night, 10.0)
     now = (scope.RightAscension, scope.Declination)
     assert abs(now[0] - here[0]) * 15 * 3600 < 1 and abs(now[1] - here[1]) * 3600 < 1
     assert abs(now[0] - ra_h) * 15 > 1.0  # it stopped on the way, not at the target
+
+
+def _device_states(scope, mount_s: float) -> list[dict]:
+    """DeviceState read over and over for `mount_s` seconds of mount time (its TimeStamp)."""
+    from virtualstar.astro import UtcTimes
+
+    reads = []
+    while True:
+        state = {item["Name"]: item["Value"] for item in scope.DeviceState}
+        stamp = state["TimeStamp"]
+        if not isinstance(stamp, str):
+            stamp = stamp.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+        state["t_us"] = int(UtcTimes.from_iso([stamp.replace("+00:00", "")]).to_unix_us()[0])
+        reads.append(state)
+        if state["t_us"] - reads[0]["t_us"] > mount_s * 1e6:
+            return reads
+
+
+def test_after_abort_slew_slewing_stays_true_until_the_mount_holds_the_sky_within_5_arcsec(
+        night, scope):
+    """ASCOM: AbortSlew while tracking stops the slew and tracking goes on where it stopped.
+    Slewing may read false only once RA/Dec hold still: never tens of arcseconds of drift
+    after it (polled through DeviceState for 20 mount seconds, mount time from TimeStamp)."""
+    scope.Tracking = True
+    ra_h, dec = j2000_of(ICRS[0] + 60.0, 20.0)
+    with night.paced(1.0):  # the slew takes many wall seconds: the abort comes on the way
+        scope.SlewToCoordinatesAsync(ra_h, dec)
+        mount_sleep(night, 3.0)
+        assert scope.Slewing
+        scope.AbortSlew()
+    with night.paced(4.0):  # fine steps of mount time between the reads
+        reads = _device_states(scope, 20.0)
+    assert reads[0]["Tracking"]  # ASCOM: tracking as before the slew
+    settled = [k for k, r in enumerate(reads) if not r["Slewing"]]
+    assert settled, "Slewing never went false within 20 mount seconds of the abort"
+    first = settled[0]
+    assert all(not r["Slewing"] for r in reads[first:])  # and stays false
+    final = reads[-1]
+    for r in reads[first:]:
+        d_ra = ((r["RightAscension"] - final["RightAscension"] + 12) % 24 - 12) * 15 * 3600
+        d_dec = (r["Declination"] - final["Declination"]) * 3600
+        assert math.hypot(d_ra * math.cos(math.radians(final["Declination"])), d_dec) < 5.0, (
+            (r["t_us"] - reads[0]["t_us"]) / 1e6, d_ra, d_dec)
+    assert abs(final["RightAscension"] - ra_h) * 15 > 1.0  # stopped on the way
 
 
 def test_abort_slew_with_nothing_slewing_changes_nothing(night, scope):
@@ -280,3 +324,27 @@ def test_a_place_below_the_horizon_limit_is_refused_with_the_servers_reason(nigh
         scope.SlewToAltAzAsync(200.0, 2.0)
     assert "elevation" in str(exc.value) and "5" in str(exc.value)
     assert not scope.Slewing
+
+
+def test_offset_action_moves_the_track_on_the_sky_and_reports_the_offsets(night, scope):
+    scope.Tracking = True
+    scope.SlewToCoordinatesAsync(*j2000_of(*ICRS))
+    wait_for(lambda: not scope.Slewing, what="the slew")
+    mount_sleep(night, 3.0)
+    assert "Offset" in scope.SupportedActions
+    answer = json.loads(scope.Action("Offset", "dec add 12"))
+    assert answer["lead_ms"] == pytest.approx(20.0) and answer["sent"] == "replace_from"
+    mount_sleep(night, 2.0)
+    az, el, t = encoders(night)
+    shifted = truth(ICRS[0], ICRS[1] + 12.0 / 3600.0, t, night.site)
+    assert sky_sep_arcsec(az, el, *shifted).max() < 0.3
+    json.loads(scope.Action("Offset", '{"axis": "all", "op": "reset"}'))
+    mount_sleep(night, 2.0)
+    az, el, t = encoders(night)
+    assert sky_sep_arcsec(az, el, *truth(*ICRS, t, night.site)).max() < 0.3
+    for bad in ("dec add twelve", "", "dec add 1 2 3", '{"axis": "dec", "by": 1}'):
+        with pytest.raises(InvalidValueException):
+            scope.Action("Offset", bad)
+    scope.Tracking = False
+    with pytest.raises(InvalidOperationException):  # nothing tracked: nothing to offset
+        scope.Action("Offset", "ra add 1")

@@ -56,8 +56,19 @@ def c_toolchain_missing() -> str | None:
     return None
 
 
+_BUILT: set[str] = set()
+
+
 def build_device(*targets: str) -> None:
-    """Build the C device once per run (make is incremental; a lock serialises workers)."""
+    """Build the C device's `targets` once per process (make is incremental; a lock
+    serialises pytest-xdist workers).
+
+    Call it from a fixture or a setup hook, never inside a test's timed asyncio run: under
+    load a build (or the wait for another worker's build) takes longer than a test's whole
+    budget, and the blocked event loop then times out at its first await.
+    """
+    if _BUILT.issuperset(targets):
+        return
     missing = c_toolchain_missing()
     if missing:
         pytest.fail(f"the C device cannot be built: {missing}")
@@ -68,6 +79,14 @@ def build_device(*targets: str) -> None:
                               capture_output=True, text=True, timeout=600)
     if done.returncode:
         pytest.fail(f"building astcom_device failed:\n{done.stdout}\n{done.stderr}")
+    _BUILT.update(targets)
+
+
+def require_built(build: str) -> None:
+    """Fail clearly when a test starts a C device its setup did not build."""
+    if build not in _BUILT:
+        raise RuntimeError(f"the C device's {build!r} build was not made in this test's setup: "
+                           f"build it in a fixture (build_device) or take the `impl` parameter")
 
 
 def device_args(*, passwords: dict[str, str] | None = PASSWORDS, loop_rate_hz: float = 1000.0,
@@ -83,7 +102,9 @@ def device_args(*, passwords: dict[str, str] | None = PASSWORDS, loop_rate_hz: f
              "auth_timeout_s": "--auth-timeout", "max_frame_bytes": "--max-frame-bytes",
              "max_depth": "--max-depth", "max_array_len": "--max-array-len",
              "max_str_bytes": "--max-str-bytes", "max_messages": "--max-messages",
-             "max_names_per_message": "--max-names", "max_streams_per_client": "--max-streams"}
+             "max_names_per_message": "--max-names", "max_streams_per_client": "--max-streams",
+             "max_pending_frame_bytes": "--max-pending-frame-bytes",
+             "max_pending_frames": "--max-pending-frames"}
     for key, value in config.items():
         if key not in names:
             raise TypeError(f"the C device has no option for {key}")
@@ -230,7 +251,7 @@ async def serve_impl(impl: str, *, scheme: str | None = None, realtime: bool = F
             finally:
                 await dut.aclose()
         return
-    build_device("asan")
+    require_built("asan")
     if impl == "c":
         proc = DeviceProcess(["--tcp", "127.0.0.1:0", *device_args(**config)])
         try:
@@ -260,7 +281,7 @@ async def relayed_device(args: list[str], build: str = "asan",
     """A C device on a pty pair (socat), the Relay on the other end; yield the Relay's URL."""
     if shutil.which("socat") is None:
         pytest.fail("socat is not installed (run: bash setup/50-device.sh)")
-    build_device(build)
+    require_built(build)
     with pty_pair() as (dev_end, relay_end):
         proc = DeviceProcess(["--serial", dev_end, *args], build=build)
         relay = subprocess.Popen([sys.executable, "-m", "astcom_client.cli", "relay", "--serial",

@@ -177,3 +177,37 @@ def test_ping_gives_the_host_wall_clock_and_the_mount_time_of_the_last_tick() ->
             assert isinstance(reply["t_us"], TimestampUs)
             assert before_us <= reply["t_us"].t_us <= after_us  # the host's clock, not the mount's
     run(main())
+
+
+def test_a_refusal_that_arrives_before_the_hello_is_sent_is_reported_as_the_refusal() -> None:
+    """An endpoint (or a Relay) at its limit says ERR 429 and closes at once; when its
+    handshake reply, the ERR and the close arrive in one read, the client's HELLO finds
+    the WebSocket closing. The caller must still get TooMany with the endpoint's reason."""
+    import msgpack
+    from websockets.server import ServerProtocol
+
+    async def refuse(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        ws = ServerProtocol()
+        events: list = []
+        while not events:
+            ws.receive_data(await reader.read(4096))
+            events = ws.events_received()
+        ws.send_response(ws.accept(events[0]))
+        ws.send_binary(msgpack.packb(["ERR", None, {"code": 429, "message":
+                                      "too many clients: this endpoint accepts at most 2"}]))
+        ws.send_close(1008, "too many clients")
+        writer.write(b"".join(ws.data_to_send()))  # all in one segment
+        await writer.drain()
+        await reader.read(4096)
+        writer.close()
+
+    async def main() -> None:
+        server = await asyncio.start_server(refuse, "127.0.0.1", 0)
+        port = server.sockets[0].getsockname()[1]
+        try:
+            for _ in range(5):
+                with pytest.raises(TooMany, match="at most 2"):
+                    await Client.connect(f"ws://127.0.0.1:{port}", password=PASSWORDS["operator"])
+        finally:
+            server.close()
+    run(main())

@@ -48,10 +48,10 @@ def test_peers_waiting_to_authenticate_do_not_take_the_slots_of_clients(impl: st
 @impls
 def test_peers_beyond_the_pending_limit_are_refused_with_a_clear_error(impl: str) -> None:
     async def main() -> None:
-        async with serve_impl(impl, max_clients=4, max_pending=2, auth_timeout_s=0.3) as dut:
+        # the idle peers' auth timeout must outlast the next steps even on a starved host
+        async with serve_impl(impl, max_clients=4, max_pending=2, auth_timeout_s=1.0) as dut:
             client = await dut.client()
-            await idle_peer(dut)
-            await idle_peer(dut)
+            idle = [await idle_peer(dut), await idle_peer(dut)]
             refused = RawPeer(await dut.connect())
             frame = await refused.recv()
             assert frame[0] == "ERR" and frame[1] is None and frame[2]["code"] == TooMany.code
@@ -61,8 +61,10 @@ def test_peers_beyond_the_pending_limit_are_refused_with_a_clear_error(impl: str
             with pytest.raises(TooMany, match="waiting to authenticate"):
                 await dut.client()
             assert "counter" in await client.read(["counter"])  # the authenticated one is unaffected
-            # once the idle peers time out, their pending slots are free again
-            await asyncio.sleep(0.5)
+            # once the idle peers time out (each is told so), their pending slots are free again
+            for peer in idle:
+                frame = await peer.recv(timeout_s=10.0)
+                assert frame[0] == "ERR" and frame[2]["code"] == 408
             again = await dut.client()
             assert (await again.stats())["pending"] == 0
             await again.close()
@@ -98,3 +100,28 @@ def test_without_authentication_hello_admits_at_most_max_clients(impl: str) -> N
             assert await b.recv() is None
     run(main())
 
+
+
+@impls
+def test_a_peer_gets_a_few_small_frames_before_authenticating(impl: str) -> None:
+    """§8: before AUTH at most max_pending_frames frames, each of max_pending_frame_bytes."""
+    async def main() -> None:
+        async with serve_impl(impl, scheme="tcp" if impl == "python" else None) as dut:
+            chatty = RawPeer(await dut.connect())
+            hello = await chatty.request("HELLO", {"version": "1.0"})
+            limits = hello[2]["limits"]
+            assert limits["max_pending_frames"] == 16 and limits["max_pending_frame_bytes"] == 4096
+            for _ in range(15):  # 16 frames in all are answered
+                assert (await chatty.request("PING"))[0] == "OK"
+            frame = await chatty.request("PING")
+            assert frame[0] == "ERR" and frame[1] is None and frame[2]["code"] == TooMany.code
+            assert "16 frames before authenticating" in frame[2]["message"]
+            assert await chatty.recv() is None
+            big = RawPeer(await dut.connect())
+            await big.send(["HELLO", 1, {"version": "1.0", "client": "x" * 5000}])
+            frame = await big.recv()
+            assert frame[0] == "ERR" and frame[2]["code"] in (413, 400)
+            assert await big.recv() is None
+            async with await dut.client() as client:  # after AUTH the full limits apply
+                assert await client.invoke("math.sum", [1.0] * 1000) == 1000.0
+    run(main())

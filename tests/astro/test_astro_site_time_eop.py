@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import warnings
 
 import numpy as np
@@ -129,3 +130,37 @@ def test_a_table_warns_once_per_kind_however_often_it_is_asked(eop):
     kinds = [str(w.message).split(":")[0] for w in caught
              if issubclass(w.category, EarthOrientationWarning)]
     assert len(kinds) == 2 and len(set(kinds)) == 2
+
+
+def test_the_iers_table_is_cached_as_arrays_and_read_back_without_astropy(tmp_path,
+                                                                         monkeypatch):
+    import subprocess
+    import sys
+
+    from virtualstar.astro import earth_orientation as eo
+
+    monkeypatch.setenv(eo.CACHE_ENV_VAR, str(tmp_path))
+    truth = eo._read_astropy_table()  # astropy's own reading of astropy-iers-data
+    path = eo.eop_cache_path()
+    assert path is not None and path.parent == tmp_path
+    eo._write_cache(path, truth)
+    again = eo._read_cache(path)
+    for name in ("mjd", "ut1_utc_s", "xp_arcsec", "yp_arcsec"):
+        assert np.array_equal(getattr(again, name), getattr(truth, name))
+    assert again.measured_until_mjd == truth.measured_until_mjd
+    # a later process takes the table from the cache and never imports astropy
+    code = ("import sys\nfrom virtualstar.astro import EarthOrientation\n"
+            "e = EarthOrientation.from_astropy_iers_data()\n"
+            "print(len(e.mjd), any(m.startswith('astropy.') for m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, eo.CACHE_ENV_VAR: str(tmp_path)}, timeout=120)
+    assert out.stdout.split() == [str(len(truth.mjd)), "False"], out.stderr
+    # an empty cache is filled by a child process: this one never imports astropy either
+    fresh = tmp_path / "fresh"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, eo.CACHE_ENV_VAR: str(fresh)}, timeout=300)
+    assert out.stdout.split() == [str(len(truth.mjd)), "False"], out.stderr
+    assert (fresh / path.name).is_file()
+    # a damaged cache is read around: astropy's table again
+    path.write_bytes(b"not an npz")
+    assert eo._read_cache(path) is None

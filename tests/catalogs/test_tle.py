@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from datetime import timedelta
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -248,3 +250,29 @@ def test_a_short_celestrak_name_finds_the_station_s_oldest_object(query, name):
     if query.strip().lower() in ("iss", "css"):
         modules = [r for r in records if r.name.startswith(query.upper() + " (")]
         assert len(modules) >= 2 and chosen.satnum == min(r.satnum for r in modules)
+
+
+def test_an_element_file_that_is_no_file_says_what_it_is(tmp_path, monkeypatch):
+    import os
+
+    import catalogs.tle
+    from catalogs import ElementFileError, read_element_text
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)  # nobody writes: opening it must not block
+    binary = tmp_path / "bin.tle"
+    binary.write_bytes(b"1 25544U \xff\xfe\x00")
+    for path, words in ((Path("/dev/zero"), "is a character device, not a regular file"),
+                        (fifo, "is a FIFO, not a regular file"),
+                        (tmp_path, "is a directory, not a regular file"),
+                        (tmp_path / "none.tle", "none.tle: no such file"),
+                        (binary, "is not text (byte 9 is 0xFF)")):
+        with pytest.raises(ElementFileError, match=re.escape(words)):
+            read_element_text(path)
+        with pytest.raises(ElementFileError, match=re.escape(words)):
+            load_tle_file(path)
+    big = tmp_path / "big.tle"
+    big.write_text("x" * 200)
+    monkeypatch.setattr(catalogs.tle, "MAX_ELEMENT_FILE_BYTES", 100)
+    with pytest.raises(ElementFileError, match="holds 200 bytes, more than the 100"):
+        read_element_text(big)

@@ -145,3 +145,18 @@ def test_braking_energy_goes_to_the_chopper_when_the_bus_is_high():
     m.run(ticks(0.5))
     assert m.state[L.G_REGEN_J] > 0.0
     assert m.state[L.G_BUS_V] < m.param("power.supply_voltage")
+
+
+def test_the_write_range_keeps_every_parameter_the_step_divides_by_above_zero():
+    """layout.param_range knows the positive-parameter bound itself (the range LIST shows
+    and WRITE checks), not only the registry's setter."""
+    from mount_emulator import layout as L
+
+    positive = [s for s in L.PARAM_SLOTS if s.name.rsplit(".", 1)[-1] in L.POSITIVE_PARAMS]
+    assert len(positive) >= len(L.POSITIVE_PARAMS)  # every name is a real parameter
+    for slot in positive:
+        lo, hi = L.param_range(slot)
+        assert 0.0 < lo <= slot.default <= hi, (slot.name, lo, slot.default, hi)
+    for slot in L.PARAM_SLOTS:
+        if slot.name.rsplit(".", 1)[-1] in L.NONNEGATIVE_PARAMS:
+            assert L.param_range(slot)[0] >= 0.0, slot.name

@@ -178,6 +178,13 @@ def test_vs_log_filters_a_store_by_level_source_kind_text_and_time(night_store):
     assert table.exit_code == 0 and "el axis faulted: encoder" in table.stdout
 
 
+def test_vs_log_help_names_the_levels_astcom_defines():
+    from astcom_client.events import LEVELS
+    from virtualstar.cli.log import LEVEL_NAMES
+
+    assert LEVEL_NAMES == LEVELS  # named twice so that `vs log --help` imports no ASTCom
+
+
 def test_the_event_filter_keeps_what_each_option_says():
     e = Event(START_US, "vss", "warning", "safety", "safety: Sun → park", {"reason": "Sun"})
     assert EventFilter(min_level="warning").matches(e)
@@ -213,6 +220,28 @@ def test_vs_log_follows_a_running_vss():
         assert any(d["kind"] == "mode" and d["message"] == "mode passive" for d in lines)
     finally:
         rig.close()
+
+
+def test_vs_log_without_follow_prints_the_whole_vss_log_once_and_ends():
+    rig = Rig(start_us=START_US + 22 * 3_600_000_000).start()
+    try:
+        async def toggle() -> None:
+            for i in range(600):  # more than one page (1000 events) of the server's log
+                await rig.server.call("set_mode", {"mode": "passive" if i % 2 else "active"})
+
+        rig.run(toggle())
+        held = rig.server.telescope.log.since(0)
+        assert len(held) > 1000
+        result = CliRunner().invoke(app, ["log", rig.url, "--json"])
+        table = CliRunner().invoke(app, ["log", rig.url, "--kind", "mode"])
+    finally:
+        rig.close()
+    assert result.exit_code == 0, result.output
+    shown = json.loads(result.stdout)  # one JSON list: read once, then the command ended
+    assert [d["seq"] for d in shown][: len(held)] == [e.seq for e in held]
+    assert table.exit_code == 0
+    modes = [x for x in table.stdout.splitlines() if "mode passive" in x or "mode active" in x]
+    assert len(modes) == sum(e.kind == "mode" for e in held)
 
 
 def test_a_command_the_server_refuses_is_logged_as_a_warning_with_its_code():

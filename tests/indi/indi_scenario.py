@@ -257,6 +257,18 @@ def main() -> None:
         put("TELESCOPE_TIMED_GUIDE_NS.TIMED_GUIDE_N;TIMED_GUIDE_S=2000;0")
         log.wait("TELESCOPE_TIMED_GUIDE_NS", "Ok", mark, 60, after="Busy")
         seen["guide_states"] = log.from_first("TELESCOPE_TIMED_GUIDE_NS", "Busy", mark)
+        # an offset through VirtualStar's VS_OFFSET vector: sets the dec total on the track
+        put("VS_OFFSET.DEC=12")
+        seen["offset_state"] = wait_state("VS_OFFSET", ("Ok", "Alert"), 30)
+        time.sleep(2.5)  # the offset has run; two status polls
+        seen["offset_dec"] = float(get("VS_OFFSET.DEC"))
+        seen["offset_status"] = status()["corrections"]["offsets"]["axes"]["dec"]["total_arcsec"]
+        put("VS_OFFSET.PATH=900")  # beyond the vector's range: refused whole
+        seen["offset_beyond"] = wait_state("VS_OFFSET", ("Alert",), 30)
+        put("VS_OFFSET_RESET.RESET=On")
+        seen["offset_reset_state"] = wait_state("VS_OFFSET_RESET", ("Ok", "Alert"), 30)
+        time.sleep(2.5)
+        seen["offset_after_reset"] = float(get("VS_OFFSET.DEC"))
         # a second goto while the first is Busy: the first's end is not reported as Alert
         mark = log.mark()
         put("HORIZONTAL_COORD.AZ;ALT=200;40")

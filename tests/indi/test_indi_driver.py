@@ -134,3 +134,11 @@ def test_a_python_indi_client_moves_the_hand_pad_and_tracks_a_satellite(seen):
     start, end = seen["sat_window"]
     assert start.startswith("2024-05-1") and end > start
     assert seen["sat_after_abort"]
+
+
+def test_the_vs_offset_vector_sets_the_tracks_offsets_and_reset_takes_them_back(seen):
+    assert seen["offset_state"] == "Ok"
+    assert seen["offset_dec"] == pytest.approx(12.0, abs=1e-3)
+    assert seen["offset_status"] == pytest.approx(12.0, abs=1e-3)
+    assert seen["offset_beyond"] == "Alert"
+    assert seen["offset_reset_state"] == "Ok" and seen["offset_after_reset"] == pytest.approx(0.0)

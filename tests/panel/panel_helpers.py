@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import re
 import shutil
+import socket
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -120,19 +122,55 @@ def ensure_panel_built() -> None:
         subprocess.run(["npm", "run", "build"], cwd=PANEL_DIR, check=True, capture_output=True)
 
 
-@contextmanager
-def vss_and_panel(*server_args: str) -> Iterator[dict[str, str]]:
-    """Run `vs server --emulator SERVER_ARGS` (tests/vss/vss_rig.py) and `vs panel` proposing
-    it; yield the URLs {"vss", "emulator" (its ASTCom endpoint), "panel"}."""
+def ensure_browser_ready() -> None:
+    """The bundle built and Debian's chromium present, or the test fails saying what to run."""
     import pytest
-    from vss_rig import vs_server_process
-
-    from virtualstar.panel import PanelConfig, PanelServer
 
     ensure_panel_built()
     if not CHROMIUM.is_file():
         pytest.fail(f"{CHROMIUM} is missing: run `bash setup/30-panel.sh` (installs Debian's chromium)")
+
+
+@contextmanager
+def vss_and_panel(*server_args: str) -> Iterator[dict[str, str]]:
+    """Run `vs server --emulator SERVER_ARGS` (tests/vss/vss_rig.py) and `vs panel` proposing
+    it; yield the URLs {"vss", "emulator" (its ASTCom endpoint), "panel"}."""
+    from vss_rig import vs_server_process
+
+    from virtualstar.panel import PanelConfig, PanelServer
+
+    ensure_browser_ready()
     with vs_server_process("--emulator", *server_args) as server:
         emulator_url = re.search(r"other clients: (ws://\S+?)\)", server.line).group(1)
         with PanelServer(PanelConfig(port=0, endpoint=emulator_url, vss=server.url)) as panel:
             yield {"vss": server.url, "emulator": emulator_url, "panel": panel.start()}
+
+
+def free_port() -> int:
+    """A loopback port free right now (for a process restarted on the same port)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+async def run_asking_script(script: str, env: dict[str, str], actions: dict[str, Callable],
+                            *, line_timeout_s: float = 240.0) -> tuple[list[str], str]:
+    """Run the node page script `script` (in panel/) that prints "ASK <action>" and waits for
+    "done [json]" on stdin: do each action (in a thread; its return value, if any, goes back
+    as JSON). Return (the actions done in order, the script's output)."""
+    proc = await asyncio.create_subprocess_exec(
+        node(), script, cwd=PANEL_DIR, stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT, env=env)
+    done: list[str] = []
+    out: list[str] = []
+    assert proc.stdout is not None and proc.stdin is not None
+    while line := (await asyncio.wait_for(proc.stdout.readline(), line_timeout_s)).decode():
+        out.append(line)
+        if line.startswith("ASK "):
+            action = line.split()[1]
+            answer = await asyncio.to_thread(actions[action])
+            done.append(action)
+            proc.stdin.write(f"done {json.dumps(answer) if answer else ''}\n".encode())
+            await proc.stdin.drain()
+    await proc.wait()
+    return done, "".join(out)

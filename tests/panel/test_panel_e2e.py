@@ -20,6 +20,7 @@ from panel_helpers import (
     CHROMIUM,
     PANEL_DIR,
     PASSWORD,
+    ensure_browser_ready,
     ensure_panel_built,
     node,
     start_emulator,
@@ -123,8 +124,7 @@ async def _run(emulator_url: str, panel_url: str, result_path) -> tuple[dict, di
 
 @pytest.fixture(scope="module")
 def e2e(emulator, panel_url, tmp_path_factory):
-    if not CHROMIUM.is_file():
-        pytest.fail(f"{CHROMIUM} is missing: run `bash setup/30-panel.sh` (installs Debian's chromium)")
+    ensure_browser_ready()
     result_path = tmp_path_factory.mktemp("e2e") / "result.json"
     result, got = asyncio.run(_run(emulator.url, panel_url, result_path))
     assert result.get("ok"), result.get("error", "") + "\n" + result["log"]
@@ -179,6 +179,19 @@ def test_every_y_axis_has_several_ticks_labelled_alike_and_the_unit_from_list(e2
         assert len(labels) >= 4 and len(set(labels)) == len(labels), labels
         assert len({_decimals(x) for x in labels}) == 1, labels
         assert all(len(x) <= 10 for x in labels), labels  # no "-0.008274955"
+
+
+def test_an_angle_can_be_plotted_in_arcseconds_on_its_own_axis(e2e):
+    result, _ = e2e
+    chosen = result["unitChosen"]
+    # stacked: the first plot's axis (axis.az.error, LIST says rad) now reads arcsec
+    assert "0:arcsec" in chosen["axes"] and "0:rad" not in chosen["axes"]
+    drawn = chosen["drawn"]["axis.az.error"]
+    assert drawn["unit"] == "arcsec" and drawn["points"] > 50
+    assert drawn["factor"] == pytest.approx(180 / math.pi * 3600, rel=1e-12)
+    assert drawn["departure"] == 0
+    other = chosen["drawn"]["axis.az.position_deg"]
+    assert (other["unit"], other["factor"], other["departure"]) == ("deg", 1, 0)
 
 
 def test_csv_export_holds_every_sample_of_the_visible_window_with_units(e2e):
@@ -260,7 +273,8 @@ def test_every_tab_saves_its_state_and_loads_it_back(e2e):
     assert states["Compute"]["state"]["expressions"][0]["name"] == "az_err_arcsec"
     assert states["Compute"]["state"]["expressions"][0]["unit"] == "arcsec"
     assert states["Log"]["state"] == {"filters": {"from": "", "to": "", "level": "debug", "source": "",
-                                                  "kind": "", "text": ""}, "following": True}
+                                                  "kind": "", "text": ""}, "following": True,
+                                      "show_routine": False, "wrap_fields": False}
 
 
 def test_an_injected_fault_turns_its_diagnostics_card_and_board_row_red(e2e):

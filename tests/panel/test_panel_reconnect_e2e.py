@@ -12,30 +12,23 @@ from __future__ import annotations
 
 import asyncio
 import json
-import socket
 import sys
 
 import pytest
 from panel_helpers import (
     ARTIFACTS,
     CHROMIUM,
-    PANEL_DIR,
     PASSWORD,
     LiveProcess,
-    ensure_panel_built,
-    node,
+    ensure_browser_ready,
+    free_port,
+    run_asking_script,
     wait_ready,
 )
 
 from virtualstar.panel import PanelConfig, PanelServer
 
 OPERATOR_PASSWORD = "reconnect-operator"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Processes:
@@ -77,26 +70,13 @@ async def _drive(procs: Processes, panel_url: str, result_path) -> tuple[list[st
                "restart-mount": procs.start_emulator,
                "kill-vss": lambda: procs.kill(procs.vss),
                "restart-vss": procs.start_vss}
-    proc = await asyncio.create_subprocess_exec(
-        node(), "test/e2e/reconnect.e2e.mjs", cwd=PANEL_DIR, stdin=asyncio.subprocess.PIPE,
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
-        env={"PATH": "/usr/bin:/bin:/usr/local/bin", "HOME": str(result_path.parent),
-             "PANEL_URL": panel_url, "ASTCOM_URL": procs.emulator_url, "ASTCOM_PASSWORD": PASSWORD,
-             "VSS_URL": procs.vss_url, "VSS_PASSWORD": OPERATOR_PASSWORD,
-             "ARTIFACTS": str(ARTIFACTS), "RESULT": str(result_path), "CHROMIUM_PATH": str(CHROMIUM)})
-    done: list[str] = []
-    out: list[str] = []
-    assert proc.stdout is not None and proc.stdin is not None
-    while line := (await asyncio.wait_for(proc.stdout.readline(), 240)).decode():
-        out.append(line)
-        if line.startswith("ASK "):
-            action = line.split()[1]
-            await asyncio.to_thread(actions[action])
-            done.append(action)
-            proc.stdin.write(b"done\n")
-            await proc.stdin.drain()
-    await proc.wait()
-    return done, "".join(out)
+    return await run_asking_script(
+        "test/e2e/reconnect.e2e.mjs",
+        {"PATH": "/usr/bin:/bin:/usr/local/bin", "HOME": str(result_path.parent),
+         "PANEL_URL": panel_url, "ASTCOM_URL": procs.emulator_url, "ASTCOM_PASSWORD": PASSWORD,
+         "VSS_URL": procs.vss_url, "VSS_PASSWORD": OPERATOR_PASSWORD,
+         "ARTIFACTS": str(ARTIFACTS), "RESULT": str(result_path), "CHROMIUM_PATH": str(CHROMIUM)},
+        actions)
 
 
 async def _logs(procs: Processes) -> dict[str, list[dict]]:
@@ -113,9 +93,7 @@ async def _logs(procs: Processes) -> dict[str, list[dict]]:
 
 @pytest.fixture(scope="module")
 def reconnect(tmp_path_factory):
-    ensure_panel_built()
-    if not CHROMIUM.is_file():
-        pytest.fail(f"{CHROMIUM} is missing: run `bash setup/30-panel.sh` (installs Debian's chromium)")
+    ensure_browser_ready()
     procs = Processes()
     try:
         procs.start_emulator()
@@ -146,8 +124,11 @@ def test_a_killed_endpoint_leaves_its_values_marked_stale_while_the_panel_retrie
     assert killed["astcom"] == "reconnecting" and "ASTCom: reconnecting" in killed["headerAstcom"]
     assert killed["astcomStaleClass"] and killed["astcomStaleNote"].startswith("stale: last update")
     assert "connection lost" in killed["log"]
-    # the VSS is still up and says it has lost its mount
+    # the VSS is still up and says it has lost its mount; the last known place stays, marked
     assert killed["vss"] == "connected" and killed["mountLink"] == "disconnected"
+    assert killed["encoderAz"] not in ("", "—") and killed["encoderAzKept"]
+    assert killed["encoderAzColor"] == "rgb(138, 143, 153)"  # the stale grey
+    assert killed["placeKept"].startswith("mount away: last known place")
 
 
 def test_the_restarted_endpoint_is_found_again_and_its_stream_resumes(reconnect):
@@ -157,6 +138,7 @@ def test_the_restarted_endpoint_is_found_again_and_its_stream_resumes(reconnect)
     assert back["samples"] > 20  # counted on the new stream
     assert "reconnected to mount-emulator" in back["log"]
     assert back["mountLink"] == "connected"  # the VSS found its mount again too
+    assert not back["encoderAzKept"] and back["placeKept"] == ""
 
 
 def test_a_killed_vss_leaves_the_telescope_board_stale_then_fresh_after_restart(reconnect):

@@ -38,6 +38,10 @@ def test_server_serves_the_built_page_its_assets_and_the_endpoint_and_vss_config
         assert status == 200 and "javascript" in ctype and len(js) > 10_000
         status, cfg, _ = _get(server.url + "config.json")
         assert json.loads(cfg) == {"endpoint": "ws://127.0.0.1:9999", "vss": "ws://127.0.0.1:9998"}
+        # the page names its icon, and it is served (no 404 in the browser's console)
+        icon = body.split(b'rel="icon"', 1)[1].split(b'href="./', 1)[1].split(b'"', 1)[0].decode()
+        status, svg, ctype = _get(server.url + icon)
+        assert status == 200 and ctype.startswith("image/svg+xml") and svg.startswith(b"<svg")
 
 
 def test_server_refuses_directory_listings_and_unknown_paths():

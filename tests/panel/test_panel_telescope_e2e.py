@@ -146,8 +146,20 @@ def test_board_shows_vega_tracked_where_the_catalogue_puts_it(track_stop):
     assert abs(deg(board["observed-el"]) - deg(board["encoder-el"])) <= DISPLAY_DEG
     assert 30 < deg(board["encoder-el"]) < 60
     assert 0 <= float(board["rms-1s"]) < 1 and 0 <= float(board["on-sky-rms-1s"]) < 1
+    assert 0 <= float(board["on-target-rms-1s"]) < 1 and float(board["planned-1s"]) < 0.01
     assert re.fullmatch(r"-?\d+", board["clock-offset"])
-    assert board["mount-time"].startswith("2024-05-18T21:")
+    assert re.fullmatch(r"2024-05-18 21:\d\d:\d\d\.\d{3}", board["mount-time"])  # the one time format
+
+
+def test_the_hand_pad_offsets_the_track_by_a_key_and_a_button_in_steps(track_stop):
+    pad = track_stop["handPad"]
+    assert pad["labels"] == ["N", "E", "0", "W", "S"]
+    assert pad["dec"] == "5.000″" and pad["ra"] == "5.000″"  # ArrowUp north, the E button
+    assert pad["mode"] == "replace_from"
+    changes = pad["corrections"]["offsets"]["last_changes"]
+    assert [c["what"] for c in changes[-2:]] == ["offset dec add", "offset ra add"]
+    assert all(c["lead_ms"] >= 20 and c["sent"] == "replace_from" for c in changes[-2:])
+    assert "VSS offset" in track_stop["log"]
 
 
 def test_header_stop_stops_the_mount_and_ends_the_vss_operation(track_stop):
@@ -161,7 +173,7 @@ def test_header_stop_stops_the_mount_and_ends_the_vss_operation(track_stop):
     vss = track_stop["truth_vss"]
     tracked = track_stop["trackingOperation"]
     assert vss["operation"]["id"] == tracked["id"] and vss["operation"]["phase"] == "aborted"
-    assert track_stop["afterStop"]["phase"] == "aborted"
+    assert track_stop["afterStop"]["phase"] == "stopped"  # aborted by the stop, as asked
     assert "VSS stop sent" in track_stop["log"]
 
 

@@ -16,7 +16,7 @@ import pytest
 from astropy.utils import iers
 from sky_truth import iss_truth, sky_sep_arcsec, star_truth
 from typer.testing import CliRunner
-from vss_rig import STARS_PROGRAM, read_emulator, run_lockstep_scenario, vs_server_process
+from vss_rig import STARS_PROGRAM, run_lockstep_scenario, sample_encoders, vs_server_process
 
 from virtualstar.astro import UtcTimes, load_site
 from virtualstar.cli.main import app
@@ -25,7 +25,6 @@ from virtualstar.planning import PlanRequest, load_program, plan_program
 iers.conf.auto_download = False
 iers.conf.auto_max_age = None
 
-ENCODERS = ["axis.az.position", "axis.el.position"]
 PROGRAM = """
 [defaults]
 duration_s = 120
@@ -78,15 +77,14 @@ def stars_file(stars, tmp_path):
     return plan
 
 
-async def _sample(vss, clock, every_s: float, until):
-    """Read the encoders straight from the emulator every `every_s` mount seconds."""
-    reads = []
-    while not until.done():
-        values, t_us = await read_emulator(vss, ENCODERS)
-        reads.append((t_us, np.degrees(values["axis.az.position"]) % 360.0,
-                      np.degrees(values["axis.el.position"])))
-        await clock.sleep(every_s)
-    return reads
+@pytest.fixture
+def short_stars_file(tmp_path):
+    """The same stars for 30 s each: for the runs that cross process boundaries, where the
+    mount time simulated (10 kHz) is what the test costs."""
+    plan = tmp_path / "short-plan.json"
+    plan.write_text(json.dumps(_plan(tmp_path, STARS_PROGRAM.replace(
+        "duration_s = 120", "duration_s = 30"), "2024-05-18T21:22:00Z", "2024-05-18T21:30:00Z")))
+    return plan
 
 
 def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
@@ -95,7 +93,7 @@ def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
     async def scenario(vss, clock):
         events = vss.server.subscribe(maxsize=10_000)
         run = asyncio.ensure_future(vss.server.call("run_plan", {"plan": night, "wait": True}))
-        reads = await _sample(vss, clock, 5.0, run)
+        reads = await sample_encoders(vss, clock, 5.0, until=run)
         program = await vss.server.call("program")
         status = await vss.server.call("status")
         seen = []
@@ -114,7 +112,7 @@ def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
     assert [(r["target"], r["planned_start_us"], r["planned_end_us"]) for r in records] == planned
     assert all(r["outcome"] == "done" for r in records), records
     assert {r["target"] for r in records} == {"Vega", "Arcturus", "Deneb", "ISS"}
-    t, az, el = (np.array(c) for c in zip(*reads, strict=True))
+    t, az, el = reads.t_us, reads.az_deg, reads.el_deg
     for r in records:
         assert r["start_us"] == r["planned_start_us"] and r["end_us"] == r["planned_end_us"]
         assert r["samples"] > 0 and r["encoder_rms_arcsec"] < r["encoder_peak_arcsec"] < 1.0
@@ -157,6 +155,29 @@ def test_a_mount_fault_mid_block_makes_the_run_reset_replan_and_go_on(stars):
     assert result["state"] == "done"
 
 
+def test_a_block_that_begins_late_is_late_with_its_delay_and_the_night_is_planned_again(stars):
+    """The run starts 5 s before the first block: its slew from the park position takes
+    longer, so tracking begins late (beyond LATE_S) but within GIVE_UP_S."""
+    from virtualstar.planning.runner import GIVE_UP_S, LATE_S
+
+    first = stars["blocks"][0]
+    start = UtcTimes.from_unix_us(first["start_us"] - 5_000_000).iso(3)[0]
+
+    async def scenario(vss, clock):
+        return await vss.client().request("run_plan", {"plan": stars, "wait": True})
+
+    result = run_lockstep_scenario(start, scenario, site=load_site())
+    late = result["records"][0]
+    assert late["target"] == first["target"] and late["outcome"] == "late", late
+    began_us = late["start_us"]  # tracking began then (the block starts no earlier)
+    assert late["delay_s"] == pytest.approx((began_us - first["start_us"]) / 1e6)
+    assert LATE_S < late["delay_s"] < GIVE_UP_S
+    assert late["on_target_rms_arcsec"] < 0.1  # late, but on target once there
+    assert result["replans"][0]["reason"].startswith(f"{first['target']} #1 late")
+    assert result["summary"]["late"] == 1 and result["state"] == "done"
+    assert all(r["outcome"] == "done" for r in result["records"][1:]), result["records"]
+
+
 def test_a_stop_ends_the_run_nothing_moves_after_and_resume_skips_what_was_done(stars):
     site = load_site()
     first = stars["blocks"][0]
@@ -167,11 +188,7 @@ def test_a_stop_ends_the_run_nothing_moves_after_and_resume_skips_what_was_done(
         await clock.sleep((first["end_us"] + 20_000_000 - clock.now_us) / 1e6)
         await vs.request("stop")
         stopped = await run
-        still = []
-        for _ in range(6):
-            values, t_us = await read_emulator(vss, ENCODERS)
-            still.append((values["axis.az.position"], values["axis.el.position"]))
-            await clock.sleep(10.0)
+        still = await sample_encoders(vss, clock, 10.0, reads=6)
         again = await vs.request("run_plan", {"plan": stars, "done": stopped["records"],
                                               "wait": True})
         return stopped, still, again
@@ -180,7 +197,7 @@ def test_a_stop_ends_the_run_nothing_moves_after_and_resume_skips_what_was_done(
     assert stopped["state"] == "stopped"
     assert [r["outcome"] for r in stopped["records"]] == ["done", "stopped"]
     assert stopped["error"]["message"] == "ended by a client's stop"
-    az, el = np.array(still).T
+    az, el = still.az_rad, still.el_rad
     assert np.ptp(az) < 1e-6 and np.ptp(el) < 1e-6  # stop is final: at rest, for a minute
     assert again["state"] == "done"
     redone = {r["target"] for r in again["records"]}
@@ -221,23 +238,25 @@ def test_a_wrong_plan_is_refused_and_the_server_keeps_serving(plan, expected):
     assert pong == {"pong": True}
 
 
-def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(stars, stars_file, tmp_path):
+def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(short_stars_file,
+                                                                         tmp_path):
     out, png = tmp_path / "run.json", tmp_path / "run.png"
-    result = CliRunner().invoke(app, ["run", str(stars_file), "--emulator", "--speed", "max",
+    result = CliRunner().invoke(app, ["run", str(short_stars_file), "--emulator", "--speed", "max",
                                       "-o", str(out), "--png", str(png)])
     assert result.exit_code == 0, result.output
     doc = json.loads(out.read_text())
-    assert doc["state"] == "done" and doc["summary"]["done"] == len(stars["blocks"])
+    planned = json.loads(short_stars_file.read_text())["blocks"]
+    assert doc["state"] == "done" and doc["summary"]["done"] == len(planned) == 3
     assert all(r["target"] in result.stdout for r in doc["records"])
     assert png.read_bytes()[:4] == b"\x89PNG"
 
 
-def test_vs_run_records_the_chosen_signals_for_every_block(stars_file, tmp_path):
+def test_vs_run_records_the_chosen_signals_for_every_block(short_stars_file, tmp_path):
     from virtualstar.recorder import ParquetStoreReader
 
     out, store = tmp_path / "run.json", tmp_path / "store"
     signals = ["axis.az.position_deg", "axis.el.position_deg", "axis.az.error_arcsec"]
-    args = ["run", str(stars_file), "--emulator", "-o", str(out), "--record-rate", "10",
+    args = ["run", str(short_stars_file), "--emulator", "-o", str(out), "--record-rate", "10",
             "--store", f"parquet:{store}"]
     for name in signals:
         args += ["--record", name]
@@ -259,7 +278,7 @@ def test_vs_run_records_the_chosen_signals_for_every_block(stars_file, tmp_path)
         assert np.abs(w.columns["axis.az.error_arcsec"]).max() <= r["encoder_peak_arcsec"] + 0.05
 
 
-def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars_file, tmp_path):
+def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(short_stars_file, tmp_path):
     """The server path end to end: `vs server --emulator` in its own process (lockstep paced
     at ×50), `vs run --server` following it, the recorder on the emulator's ASTCom URL."""
     import re
@@ -268,11 +287,11 @@ def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars_file, 
 
     out, store = tmp_path / "run.json", tmp_path / "store"
     with vs_server_process("--emulator", "--speed", "50", "--start",
-                           "2024-05-18T21:12:00Z") as server:
+                           "2024-05-18T21:21:30Z") as server:
         mount = re.search(r"endpoint for other clients: (\S+)\)", server.line)
         assert mount, server.line
         result = CliRunner().invoke(app, [
-            "run", str(stars_file), "--server", server.url, "-o", str(out), "--record",
+            "run", str(short_stars_file), "--server", server.url, "-o", str(out), "--record",
             "axis.az.error_arcsec", "--record-rate", "10", "--mount", mount.group(1),
             "--store", f"parquet:{store}"])
     assert result.exit_code == 0, result.output

@@ -108,3 +108,63 @@ def test_bad_arguments_and_files_exit_non_zero_with_a_message(tmp_path, args, co
     result = runner.invoke(app, [a.format(**paths) for a in args])
     assert result.exit_code == code, result.output
     assert fragment in result.output
+
+
+def test_fit_substitute_fits_a_tpoint_term_as_ours_and_names_it_back(tmp_path):
+    """TX10 is TPOINT's, not ours: --substitute TX10=TX fits TX (the message that suggests
+    it now holds for fit too) and the .mod written names the term TX10 again."""
+    run_path, mod = tmp_path / "run.dat", tmp_path / "m.mod"
+    runner.invoke(app, ["simulate", "--model", "IA=-120,IE=40,TX=12", "--stars", "60",
+                        "--noise", "0.5", "--seed", "5", "-o", str(run_path)])
+    refused = runner.invoke(app, ["fit", str(run_path), "--terms", "IA,IE,TX10"])
+    assert refused.exit_code == 2 and "--substitute TX10=TX" in refused.output
+    result = runner.invoke(app, ["fit", str(run_path), "--terms", "IA,IE,TX10", "--substitute",
+                                 "TX10=TX", "-o", str(mod), "--json"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    lib = fit_run(load_tpoint(run_path), "IA,IE,TX")
+    assert doc["terms"]["TX"]["value_arcsec"] == pytest.approx(lib.values_arcsec[2], rel=1e-12)
+    assert abs(doc["terms"]["TX"]["value_arcsec"] - 12.0) < 3 * doc["terms"]["TX"]["sigma_arcsec"]
+    assert doc["substituted"] == {"TX": "TX10"}
+    assert any(line.split()[:1] == ["TX10"] for line in mod.read_text().splitlines())
+    again = load_model(mod, substitute={"TX10": "TX"})
+    assert again.terms == ("IA", "IE", "TX")
+    assert again.values_arcsec[2] == pytest.approx(lib.values_arcsec[2], abs=1e-4)
+    text = runner.invoke(app, ["fit", str(run_path), "--terms", "IA,IE,TX10", "--substitute",
+                               "TX10=TX"])
+    assert "TX10 fitted as TX" in text.stdout
+    stray = runner.invoke(app, ["fit", str(run_path), "--terms", "IA,IE", "--substitute",
+                                "TX10=TX"])
+    assert stray.exit_code == 2 and "not among --terms" in stray.output
+
+
+def test_fit_substitute_on_the_auxtel_run_gives_tpoints_tx10(auxtel_path, auxtel_fauto_path):
+    """TPOINT's own fit of the run names TX10 11.92″; ours, with TX for TX10 and the other
+    terms it chose, lands within its σ."""
+    theirs = load_model(auxtel_fauto_path, substitute={"TX10": "TX"})
+    free = [t for t in theirs.terms if t not in theirs.fit_info.get("fixed", ())]
+    named = ",".join("TX10" if t == "TX" else t for t in free)
+    result = runner.invoke(app, ["fit", str(auxtel_path), "--terms", named, "--substitute",
+                                 "TX10=TX", "--json"])
+    assert result.exit_code == 0, result.output
+    tx = json.loads(result.stdout)["terms"]["TX"]
+    assert abs(tx["value_arcsec"] - 11.9248) < tx["sigma_arcsec"]
+
+
+def test_simulate_writes_the_bundled_sites_latitude_unless_told(tmp_path, monkeypatch):
+    from virtualstar.astro import load_site
+
+    monkeypatch.delenv("VIRTUALSTAR_SITE", raising=False)
+    args = ["simulate", "--model", "IA=10", "--stars", "3", "--noise", "1", "--seed", "1"]
+    for extra, expected in (([], load_site().lat_deg), (["--latitude-deg", "-30.2446"],
+                                                       -30.2446)):
+        out = tmp_path / "r.dat"
+        assert runner.invoke(app, [*args, *extra, "-o", str(out)]).exit_code == 0
+        assert load_tpoint(out).parameters.latitude_deg == pytest.approx(expected, abs=1e-3)
+    site = tmp_path / "site.toml"
+    site.write_text("[site]\nname = 'La Silla'\nlat_deg = -29.2567\nlon_deg = -70.73\n"
+                    "height_m = 2400\n")
+    monkeypatch.setenv("VIRTUALSTAR_SITE", str(site))
+    out = tmp_path / "r2.dat"
+    assert runner.invoke(app, [*args, "-o", str(out)]).exit_code == 0
+    assert load_tpoint(out).parameters.latitude_deg == pytest.approx(-29.2567, abs=1e-3)

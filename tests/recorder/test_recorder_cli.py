@@ -99,6 +99,22 @@ def test_vs_data_rejects_a_missing_store_and_bad_bounds(recorded, tmp_path):
     assert res.exit_code == 2 and "unknown signal(s) bogus" in res.stderr
 
 
+def test_a_window_past_the_end_of_the_store_exits_1_with_the_stores_span(recorded):
+    store, _ = recorded
+    info = json.loads(runner.invoke(app, ["data", "info", str(store), "--json"]).stdout)
+    for args in (["--from", "+3600"], ["--from", "+3600", "--to", "+3700"],
+                 ["--to", "1000000"], ["--from", "+3600", "--decimate", "10", "--json"]):
+        res = runner.invoke(app, ["data", "query", str(store), *args])
+        assert res.exit_code == 1, (args, res.output)
+        assert res.stdout == ""  # no empty arrays that look like an answer
+        assert "lies after the store's last sample" in res.stderr or \
+            "before its first sample" in res.stderr
+        assert f"the store spans {info['first_utc']} to {info['last_utc']}" in res.stderr
+    for command in (["anomalies"], ["export", "--csv", "/dev/null"]):
+        res = runner.invoke(app, ["data", *command, str(store), "--from", "+3600"])
+        assert res.exit_code == 1 and "the store spans" in res.stderr
+
+
 def test_vs_experiment_sine_runs_a_short_night_and_reports_json(tmp_path):
     res = runner.invoke(app, ["experiment", "sine", "--axis", "az", "--hours", "0.005",
                               "--record-hz", "1000", "--out", str(tmp_path / "x"), "--json"])

@@ -41,6 +41,23 @@ def star_truth(name: str, t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarra
     return aa.az.deg, aa.alt.deg
 
 
+def radec_truth(ra_deg: float, dec_deg: float, t_us, site, step_us: int = 10_000):
+    """Return astropy's observed az, el (deg) of an ICRS RA/Dec at mount times (UTC µs).
+
+    Computed on a 10-ms grid and interpolated linearly: a star moves at most 15″/s, so
+    the interpolation error stays below a microarcsecond, and 10 kHz samples cost little.
+    """
+    import astropy.units as u
+    from astropy.coordinates import SkyCoord
+
+    t_us = np.atleast_1d(np.asarray(t_us, np.int64))
+    grid = np.arange(t_us.min() - step_us, t_us.max() + 2 * step_us, step_us)
+    aa = SkyCoord(ra=ra_deg * u.deg, dec=dec_deg * u.deg, frame="icrs").transform_to(
+        observed_frame(grid, site))
+    az = np.degrees(np.unwrap(np.radians(aa.az.deg)))
+    return np.interp(t_us, grid, az) % 360.0, np.interp(t_us, grid, aa.alt.deg)
+
+
 def vega_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
     """Return astropy's observed az, el (deg) of Vega at mount times (UTC µs)."""
     return star_truth("Vega", t_us, site)
@@ -60,18 +77,29 @@ def skyfield_iss():
 
 
 def iss_truth(t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
-    """Return skyfield's observed az, el (deg) of the ISS at mount times (UTC µs).
+    """Return skyfield's observed az, el (deg) of the ISS at mount times (UTC µs)."""
+    sat, _ = skyfield_iss()
+    return satellite_truth(sat, t_us, site)
 
-    The apparent direction (light time, aberration), as a telescope sees it, lifted by
-    ERFA's refraction constants for the site's air (skyfield's own formula ignores
-    humidity and wavelength: arcseconds at 20°); a site without air gets none.
+
+def satellite_truth(sat, t_us: np.ndarray, site) -> tuple[np.ndarray, np.ndarray]:
+    """Return skyfield's observed az, el (deg) of a satellite at mount times (UTC µs).
+
+    `sat`: a skyfield EarthSatellite, (line1, line2) of its elements, or an sgp4 Satrec. The apparent
+    direction (light time, aberration), as a telescope sees it, lifted by ERFA's
+    refraction constants for the site's air (skyfield's own formula ignores humidity
+    and wavelength: arcseconds at 20°); a site without air gets none.
     """
     from datetime import UTC, datetime
 
     import erfa
-    from skyfield.api import wgs84
+    from skyfield.api import EarthSatellite, wgs84
 
-    sat, sf = skyfield_iss()
+    _, sf = skyfield_iss()
+    if isinstance(sat, tuple):
+        sat = EarthSatellite(sat[0], sat[1], "truth", sf.ts)
+    elif not isinstance(sat, EarthSatellite):
+        sat = EarthSatellite.from_satrec(sat, sf.ts)
     earth = sf.ephemeris["earth"]
     observer = earth + wgs84.latlon(site.lat_deg, site.lon_deg, site.height_m)
     ts = sf.ts.from_datetimes([datetime.fromtimestamp(t / 1e6, tz=UTC) for t in t_us])

@@ -76,6 +76,7 @@ def test_a_passive_server_refuses_motion_but_still_reports_status(rig):
     (["slew", "--radec", "25h61m +99d"], 2, "--radec: bad RA"),
     (["track", "--radec", "12h00m +95d"], 2, "--radec"),
     (["track", "--tle", "/nonexistent/file.tle"], 2, "cannot read TLE file"),
+    (["track", "--tle", "/dev/zero"], 2, "/dev/zero: a character device, not a regular file"),
     (["track", "--sat", "ISS", "--star", "Vega"], 2, "--tle"),
     (["track", "--star", "Vega", "--duration", "0"], 2, "positive"),
 ])

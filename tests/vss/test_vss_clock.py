@@ -142,3 +142,29 @@ def test_the_on_sky_error_adds_the_clock_offset_times_the_target_rate(drifting):
     assert info["tracking_rms_arcsec"] < 0.1
     assert info["on_sky_rms_arcsec"] == pytest.approx(expected, rel=0.05)
     assert info["on_sky_peak_arcsec"] >= info["on_sky_rms_arcsec"]
+
+
+def test_a_lockstep_clock_with_an_idle_pace_runs_ahead_only_while_a_client_waits():
+    """Idle: never faster than the idle pace (an upper bound, whatever the host's load);
+    inside `awaited()`: as fast as the CPU allows, so an hour passes within the timeout."""
+    import asyncio
+    import time
+
+    from virtualstar.lockstep import LockstepClock, run_lockstep
+
+    clock = LockstepClock(1_716_061_200_000_000, idle_pace=1.0)
+
+    async def main():
+        assert clock.pace == 1.0
+        wall0, t0 = time.monotonic(), clock.now_us
+        await clock.sleep(0.3)
+        idle_wall = time.monotonic() - wall0
+        idle_mount = (clock.now_us - t0) / 1e6
+        with clock.awaited():
+            assert clock.pace is None
+            await asyncio.wait_for(clock.sleep(3600.0), timeout=60.0)
+        assert clock.pace == 1.0  # idle again
+        return idle_mount, idle_wall
+
+    idle_mount, idle_wall = run_lockstep(main(), clock)
+    assert 0.3 <= idle_mount <= idle_wall * 1.0 + 0.01

@@ -47,6 +47,38 @@ def test_vs_server_with_the_embedded_emulator_serves_clients_until_terminated():
     assert "stopped" in server.out
 
 
+def test_vs_server_speed_max_keeps_idle_time_real_and_runs_ahead_while_a_client_waits():
+    """The README's session: typing a command takes wall seconds, and the sky must still be
+    where it was. Idle, mount time runs at most at real time (an upper bound, whatever the
+    host's load); a client waiting for ten mount minutes is answered in seconds."""
+    with vs_server_process("--emulator", "--speed", "max", "--start",
+                           "2024-05-18T19:40:00Z") as server:
+        url = server.url
+        assert "real time otherwise" in server.line
+        st = None
+        for _ in range(100):
+            res = runner.invoke(app, ["status", "--server", url, "--json"])
+            if res.exit_code == 0 and json.loads(res.stdout)["connected"]:
+                st = json.loads(res.stdout)
+                break
+            time.sleep(0.05)
+        assert st is not None and st["time_mode"] == "lockstep" and st["speed"] == 1.0
+        # the wall interval spans both reads (sent after wall0, answered before wall1)
+        wall0 = time.monotonic()
+        t0 = json.loads(runner.invoke(app, ["status", "--server", url, "--json"]).stdout)
+        time.sleep(2.0)
+        st = json.loads(runner.invoke(app, ["status", "--server", url, "--json"]).stdout)
+        wall1 = time.monotonic()
+        idle_s = (st["mount_time_us"] - t0["mount_time_us"]) / 1e6
+        assert 0.0 < idle_s <= (wall1 - wall0) * 1.0 + 0.5, (idle_s, wall1 - wall0)
+        res = runner.invoke(app, ["track", "--star", "Vega", "--duration", "600", "--wait",
+                                  "--server", url, "--json"], )
+        assert res.exit_code == 0, res.output
+        info = json.loads(res.stdout)["info"]
+        assert info["tracking_to_us"] - info["tracking_from_us"] == 600_000_000
+    assert server.returncode == 0, server.err
+
+
 def test_vs_server_refuses_contradictory_options():
     res = runner.invoke(app, ["server", "--emulator", "--mount", "ws://127.0.0.1:1"])
     assert res.exit_code == 2 and "either --emulator or --mount" in res.stderr

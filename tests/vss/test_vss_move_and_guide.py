@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from sky_truth import observed_frame, sky_sep_arcsec
+from sky_truth import observed_frame, radec_truth, sky_sep_arcsec
 from vss_rig import read_emulator, run_lockstep_scenario
 
 from virtualstar.astro import load_site
@@ -20,15 +20,6 @@ from virtualstar.vss_client import VssRequestError
 START = "2024-05-18T21:00:00Z"  # night at Poznań: the Sun far below
 AXES = ["axis.az.position", "axis.el.position"]
 RA_DEG, DEC_DEG = 250.0, 36.5  # near M13: high in the east-south-east at START
-
-
-def radec_truth(ra_deg: float, dec_deg: float, t_us, site) -> tuple[np.ndarray, np.ndarray]:
-    import astropy.units as u
-    from astropy.coordinates import SkyCoord
-
-    aa = SkyCoord(ra=ra_deg * u.deg, dec=dec_deg * u.deg, frame="icrs").transform_to(
-        observed_frame(np.asarray(t_us), site))
-    return aa.az.deg, aa.alt.deg
 
 
 async def encoders(vss) -> tuple[float, float, int]:
@@ -103,9 +94,12 @@ def test_a_guide_pulse_moves_the_track_by_the_offset_on_the_sky(north, east):
         await clock.sleep((pulse["end_us"] - await vss.server.telescope.motion.mount_time_us())
                           / 1e6 + 3.0)
         reads = [await encoders(vss) for _ in range(4)]
-        return pulse, reads
+        return pulse, reads, await c.request("status")
 
-    pulse, reads = run_lockstep_scenario(START, scenario)
+    pulse, reads, status = run_lockstep_scenario(START, scenario)
+    # on target is the place the guider moved the star to: the offset is not an error
+    assert status["on_target"]["error_arcsec"] < 0.3
+    assert status["tracking_error"]["10s"]["off_target_s"] == 0.0
     assert pulse["end_us"] - pulse["start_us"] == pytest.approx(
         math.hypot(north, east) / 7.5205 * 1e6, rel=1e-3)
     assert pulse["offset_arcsec"]["north"] == pytest.approx(north)
@@ -147,7 +141,12 @@ def test_guide_refuses_a_rate_or_a_step_that_is_a_slew_not_a_guide_pulse():
                                               or "slew instead" in err.message)
 
 
-def test_a_pulse_given_while_the_track_is_still_slewing_is_part_of_the_place_it_joins():
+@pytest.mark.parametrize(("command", "params", "north", "east"), [
+    ("guide", {"north_arcsec": 30.0}, 30.0, 0.0),
+    ("offset", {"axis": "ra", "op": "set", "arcsec": -12.0}, 0.0, -12.0),
+], ids=["guide-pulse", "offset"])
+def test_a_correction_given_while_the_track_is_still_slewing_is_part_of_the_place_it_joins(
+        command, params, north, east):
     site = load_site()
 
     async def scenario(vss, clock):
@@ -155,35 +154,41 @@ def test_a_pulse_given_while_the_track_is_still_slewing_is_part_of_the_place_it_
         op = await c.request("track", {"ra_deg": RA_DEG, "dec_deg": DEC_DEG,
                                        "answer_on_accept": True})
         assert op["phase"] in ("starting", "preparing")
-        await c.request("guide", {"north_arcsec": 30.0})
+        await c.request(command, params)
         while (await c.request("status"))["operation"]["phase"] != "tracking":
             await clock.sleep(1.0)
         await clock.sleep(5.0)
         return [await encoders(vss) for _ in range(3)]
 
     az, el, t_us = (np.array(x) for x in zip(*run_lockstep_scenario(START, scenario), strict=True))
-    shifted = radec_truth(RA_DEG, DEC_DEG + 30 / 3600, t_us, site)
+    cos_dec = math.cos(math.radians(DEC_DEG))
+    shifted = radec_truth(RA_DEG + east / 3600 / cos_dec, DEC_DEG + north / 3600, t_us, site)
     assert sky_sep_arcsec(az, el, *shifted).max() < 0.3
 
 
-def test_finished_pulses_fold_into_one_offset_without_moving_the_path():
-    from virtualstar.server.guiding import FOLD_AFTER_US, GuideOffsets
+def test_a_night_of_pulses_keeps_a_bounded_history_without_moving_the_path(monkeypatch):
+    from virtualstar.server import offsets as offsets_module
+    from virtualstar.server.guiding import pulse_change
 
     rng = np.random.default_rng(3)
-    offsets, reference = GuideOffsets(), GuideOffsets()
-    t0 = 1_700_000_000_000_000
-    for k in range(500):
-        n, e = rng.normal(0, 2, 2)
-        for g in (offsets, reference):
-            g.add(float(n), float(e), 7.52, t0 + k * 2_000_000, 50_000)
-    later = np.array([t0 + 500 * 2_000_000 + FOLD_AFTER_US * 2], np.int64)
-    zeros = np.zeros(1)
-    offsets.apply(later, zeros + 1.0, zeros + 0.7, zeros, zeros, 0.9)  # samples: folds
-    assert len(offsets.pulses) < 20 < len(reference.pulses)
-    folded = offsets.sky_offsets(later)
-    full = reference.sky_offsets(later)
-    assert np.allclose(folded, full, rtol=0, atol=1e-15)
-    assert offsets.total_arcsec() == pytest.approx(reference.total_arcsec(), abs=1e-9)
+    kept = offsets_module.Offsets()
+    with monkeypatch.context() as m:
+        m.setattr(offsets_module, "KEEP_HISTORY_US", 10**15)  # the reference keeps everything
+        reference = offsets_module.Offsets()
+        t0 = 1_700_000_000_000_000
+        pulses = [(t0 + k * 2_000_000, *rng.normal(0, 2, 2)) for k in range(500)]
+        for t, n, e in pulses:
+            pulse_change(float(n), float(e), 7.52)(reference, t, None)
+    for t, n, e in pulses:
+        pulse_change(float(n), float(e), 7.52)(kept, t, None)
+    assert len(kept.axes["dec"].t_us) < 400 < len(reference.axes["dec"].t_us)
+    # the history kept (30 s before the newest change) and the future are the same
+    later = np.arange(pulses[-1][0] - 25_000_000, pulses[-1][0] + 5_000_000, 1_000_000)
+    for axis in ("ra", "dec"):
+        assert np.allclose(kept.axes[axis].sample(later), reference.axes[axis].sample(later),
+                           rtol=0, atol=1e-9)
+    north = sum(n for _, n, _ in pulses)
+    assert kept.axes["dec"].at(pulses[-1][0] + 10_000_000)[0] == pytest.approx(north, abs=1e-6)
 
 
 def test_move_toward_the_sun_comes_to_rest_outside_its_zone():

@@ -21,7 +21,7 @@ from astropy.coordinates import EarthLocation, SkyCoord, get_body
 from astropy.time import Time
 from astropy.utils import iers
 from sky_truth import observed_frame
-from vss_rig import read_emulator, run_lockstep_scenario
+from vss_rig import run_lockstep_scenario, sample_encoders
 
 from catalogs import bright_stars, load_tle_file, sample_tle_path
 from virtualstar.astro import AvoidanceZones, Horizon, UtcTimes, load_site
@@ -32,7 +32,6 @@ iers.conf.auto_download = False
 NOON = "2024-06-21T11:00:00Z"  # Poznań: the Sun at el 61°, Elnath 9.3° and Venus 4.6° from it
 SITE = load_site()
 LOC = EarthLocation.from_geodetic(SITE.lon_deg * u.deg, SITE.lat_deg * u.deg, SITE.height_m * u.m)
-ENCODERS = ["axis.az.position", "axis.el.position", "mount.state_name"]
 
 
 def sun_altaz_rad(t_us) -> tuple[np.ndarray, np.ndarray]:
@@ -114,17 +113,13 @@ def test_a_slew_whose_straight_path_crosses_the_sun_goes_around_it():
         vs = vss.client()
         await vs.request("slew", {"altaz": east})
         slew = asyncio.ensure_future(vs.request("slew", {"altaz": west}))
-        samples = []
-        while not slew.done():
-            values, t_us = await read_emulator(vss, ENCODERS)
-            samples.append((t_us, values["axis.az.position"], values["axis.el.position"]))
-            await clock.sleep(0.5)
+        samples = await sample_encoders(vss, clock, 0.5, until=slew)
         return await slew, samples
 
     op, samples = run_lockstep_scenario(NOON, scenario)
     assert op["phase"] == "done" and op["info"]["landing_error_arcsec"] < 1.0
     assert len(op["info"]["detour_deg"]) >= 1
-    t, az, el = (np.array(c) for c in zip(*samples, strict=True))
+    t, az, el = samples.t_us, samples.az_rad, samples.el_rad
     assert len(t) > 20
     sep = sun_separation_deg(az, el, t)
     assert sep.min() >= 30.0, sep.min()
@@ -185,14 +180,8 @@ def test_a_satellite_pass_is_tracked_only_outside_the_sun_zone():
 
     async def scenario(vss, clock):
         op = await vss.server.call("track", {"tle": tle, "sat": "ISS"})
-        samples = []
-        for _ in range(1800):  # the pass is over within half an hour of mount time
-            await clock.sleep(1.0)
-            values, t_us = await read_emulator(vss, ENCODERS)
-            if values["mount.state_name"] == "TRACKING":
-                samples.append((t_us, values["axis.az.position"], values["axis.el.position"]))
-            elif samples:
-                break
+        # the pass is over within half an hour of mount time
+        samples = await sample_encoders(vss, clock, 1.0, reads=1800, tracking_only=True)
         return op, samples, await vss.server.call("wait")
 
     start_iso = UtcTimes.from_unix_us(start_us - 120_000_000).iso(3)[0]
@@ -202,7 +191,7 @@ def test_a_satellite_pass_is_tracked_only_outside_the_sun_zone():
     tracked = (done["info"]["tracking_to_us"] - done["info"]["tracking_from_us"]) / 1e6
     assert tracked >= 30.0
     assert "zone_stop" in op["info"] or op["info"]["pass_in_progress"]  # trimmed at one end
-    t, az, el = (np.array(c) for c in zip(*samples, strict=True))
+    t, az, el = samples.t_us, samples.az_rad, samples.el_rad
     # the Sun from skyfield (an independent ephemeris path from the VSS's)
     from datetime import UTC, datetime
 
@@ -256,20 +245,13 @@ def test_a_satellite_pass_is_joined_only_once_it_is_above_the_horizon_profile():
 
     async def scenario(vss, clock):
         op = await vss.server.call("track", {"tle": tle, "sat": "ISS"})
-        samples = []
-        for _ in range(1800):
-            await clock.sleep(1.0)
-            values, t_us = await read_emulator(vss, ENCODERS)
-            if values["mount.state_name"] == "TRACKING":
-                samples.append((values["axis.az.position"], values["axis.el.position"]))
-            elif samples:
-                break
+        samples = await sample_encoders(vss, clock, 1.0, reads=1800, tracking_only=True)
         return op, samples, await vss.server.call("wait")
 
     op, samples, done = run_lockstep_scenario("2024-05-18T19:45:00Z", scenario,
                                               zones=AvoidanceZones(horizon=wall))
     assert done["phase"] == "done"
-    az, el = (np.degrees(np.array(c)) for c in zip(*samples, strict=True))
+    az, el = samples.az_deg, samples.el_deg
     floor = np.interp(az % 360.0, wall.az_deg, wall.el_deg, period=360.0)
     assert (el >= floor - 0.01).all(), (el - floor).min()
     assert (el < 35.0).any() and (az % 360.0 < 200.0).any()  # it did track low in the east
@@ -319,16 +301,14 @@ def test_a_hold_the_sun_is_about_to_reach_is_left_for_the_park_position():
     async def scenario(vss, clock):
         vs = vss.client()
         held = await vs.request("slew", {"altaz": place})
-        samples = []
-        for _ in range(30):  # 15 minutes: the Sun closes in at ~0.25°/min
-            await clock.sleep(30.0)
-            values, t_us = await read_emulator(vss, ENCODERS)
-            samples.append((t_us, values["axis.az.position"], values["axis.el.position"]))
+        await clock.sleep(30.0)
+        # 15 minutes: the Sun closes in at ~0.25°/min
+        samples = await sample_encoders(vss, clock, 30.0, reads=30)
         return held, samples, await vs.request("status")
 
     held, samples, status = run_lockstep_scenario(NOON, scenario, hold_lookahead_s=0.0)
     assert held["phase"] == "done"
     assert status["operation"]["kind"] == "evade" and status["operation"]["phase"] == "done"
-    t, az, el = (np.array(c) for c in zip(*samples, strict=True))
+    t, az, el = samples.t_us, samples.az_rad, samples.el_rad
     assert sun_separation_deg(az, el, t).min() >= 30.0
     assert abs(math.degrees(el[-1]) - 85.0) < 0.01  # parked (the stow position)

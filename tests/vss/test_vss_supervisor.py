@@ -106,7 +106,7 @@ def test_a_buffer_underrun_is_followed_by_reacquiring_the_star_from_where_the_mo
         vs = vss.client()
         op = await vs.request("track", {"star": "Vega"})
         await clock.sleep(10.0)
-        stall_s = vss.server.telescope.config.feed_lead_s + 8.0
+        stall_s = vss.server.telescope.margins.feed_lead_s + 8.0
         async with vss.server.telescope.link._lock:  # the feeder cannot push: a frozen host
             await clock.sleep(stall_s)
         resumed = await vs.next_event("resumed", 60.0)

@@ -25,6 +25,8 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from astcom_client import Client
 from virtualstar.astro import Site
 from virtualstar.launcher import start_emulator
@@ -165,6 +167,72 @@ async def read_emulator(vss, names: list[str]) -> tuple[dict[str, Any], int]:
     return values, int(t_us)
 
 
+ENCODERS = ["axis.az.position", "axis.el.position"]
+
+
+@dataclass
+class EncoderSamples:
+    """Encoder readings straight from the emulator: mount times (µs) and angles (rad)."""
+
+    t_us: np.ndarray
+    az_rad: np.ndarray
+    el_rad: np.ndarray
+
+    @property
+    def az_deg(self) -> np.ndarray:
+        return np.degrees(self.az_rad) % 360.0
+
+    @property
+    def el_deg(self) -> np.ndarray:
+        return np.degrees(self.el_rad)
+
+
+async def sample_encoders(vss, clock, every_s: float, *, until=None, reads: int | None = None,
+                          tracking_only: bool = False) -> EncoderSamples:
+    """Read the encoders straight from the emulator every `every_s` mount seconds.
+
+    Until the future `until` is done, or for `reads` reads; `tracking_only` keeps only
+    readings with the mount TRACKING and stops at the first other state after them.
+    """
+    rows: list[tuple[int, float, float]] = []
+    names = [*ENCODERS, "mount.state_name"]
+    k = 0
+    while (until is None or not until.done()) and (reads is None or k < reads):
+        k += 1
+        values, t_us = await read_emulator(vss, names)
+        if not tracking_only or values["mount.state_name"] == "TRACKING":
+            rows.append((t_us, values[ENCODERS[0]], values[ENCODERS[1]]))
+        elif rows:
+            break
+        await clock.sleep(every_s)
+    t, az, el = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 3
+    return EncoderSamples(np.asarray(t, np.int64), np.asarray(az, float), np.asarray(el, float))
+
+
+@contextlib.asynccontextmanager
+async def encoder_stream(vss, rate_hz: float):
+    """Stream the encoders from the emulator at `rate_hz` over a connection of the test's
+    own for the duration of the block; yields a list that `.result()` makes samples of."""
+    client = await vss.emulator.connect_in_memory(name="test-encoders")
+    packets: list[Any] = []
+    stream = await client.stream(ENCODERS, rate_hz)
+    stream.on_packet(packets.append)
+
+    class Recording(list):
+        def result(self) -> EncoderSamples:
+            if not packets:
+                return EncoderSamples(np.array([], np.int64), np.array([]), np.array([]))
+            return EncoderSamples(np.concatenate([p.t_us for p in packets]),
+                                  np.concatenate([p.column(ENCODERS[0]) for p in packets]),
+                                  np.concatenate([p.column(ENCODERS[1]) for p in packets]))
+
+    try:
+        yield Recording()
+    finally:
+        await stream.stop()
+        await client.close()
+
+
 @dataclass
 class ServerProcess:
     """A `vs server` in its own process: its URL, the line it printed once listening, and
@@ -188,6 +256,8 @@ def vs_server_process(*args: str):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         url = f"ws://127.0.0.1:{s.getsockname()[1]}"
+    if "--emulator" in args and "--endpoint-port" not in args:
+        args = (*args, "--endpoint-port", "0")  # its ASTCom endpoint on a free port too
     proc = subprocess.Popen(
         [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
          *args, "--listen", url],

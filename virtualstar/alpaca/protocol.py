@@ -9,6 +9,10 @@
 * A parameter that is missing or cannot be read as its type is HTTP 400 with a text body;
   a value that reads but is out of range is an ASCOM error (HTTP 200, InvalidValue).
 * Device errors travel in `ErrorNumber` / `ErrorMessage` of an HTTP 200 reply.
+* A PUT's body is a form (application/x-www-form-urlencoded, or multipart/form-data); a
+  body that is not one — bytes that are not its charset's text, a %-escape that is not
+  UTF-8, more than MAX_FORM_FIELDS fields, a multipart part without a name or holding a
+  file, another content type — is HTTP 400 with a text body that says which, never 500.
 """
 
 from __future__ import annotations
@@ -18,11 +22,12 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
+from urllib.parse import parse_qsl
 
 __all__ = ["ACTION_NOT_IMPLEMENTED", "DRIVER_ERROR", "INVALID_OPERATION", "INVALID_VALUE",
            "INVALID_WHILE_PARKED", "INVALID_WHILE_SLAVED", "NOT_CONNECTED", "NOT_IMPLEMENTED",
-           "VALUE_NOT_SET", "AlpacaError", "BadParameter", "Params", "TransactionCounter",
-           "reply"]
+           "VALUE_NOT_SET", "AlpacaError", "BadParameter", "MAX_FORM_FIELDS", "Params",
+           "TransactionCounter", "form_pairs", "reply"]
 
 # ASCOM error numbers (ASCOM.ErrorCodes), as Alpaca carries them
 NOT_IMPLEMENTED = 0x400
@@ -36,6 +41,8 @@ ACTION_NOT_IMPLEMENTED = 0x40C
 DRIVER_ERROR = 0x500  # 0x500..0xFFF: the driver's own errors
 
 _UINT32_MAX = 2**32 - 1
+#: Fields a PUT's form may hold: no member takes more than a handful.
+MAX_FORM_FIELDS = 64
 
 
 class AlpacaError(Exception):
@@ -49,6 +56,30 @@ class AlpacaError(Exception):
 
 class BadParameter(ValueError):
     """A request the device cannot read (HTTP 400, the message as the text body)."""
+
+
+def form_pairs(body: bytes, charset: str | None = None) -> list[tuple[str, str]]:
+    """Return the (name, value) pairs of an application/x-www-form-urlencoded body.
+
+    Raises BadParameter (HTTP 400) naming what is wrong when the body is not such a form.
+    """
+    encoding = charset or "utf-8"
+    try:
+        text = body.decode(encoding)
+    except LookupError:
+        raise BadParameter(f"the form body's charset {charset!r} is unknown; send UTF-8 "
+                           "(application/x-www-form-urlencoded)") from None
+    except UnicodeDecodeError as exc:
+        raise BadParameter(f"the form body is not {encoding} text (byte {exc.start} of "
+                           f"{len(body)} is 0x{body[exc.start]:02X}); send "
+                           "application/x-www-form-urlencoded UTF-8") from None
+    try:
+        return parse_qsl(text, keep_blank_values=True, encoding=encoding, errors="strict",
+                         max_num_fields=MAX_FORM_FIELDS)
+    except UnicodeDecodeError:
+        raise BadParameter(f"a %-escape in the form body is not {encoding} text") from None
+    except ValueError:
+        raise BadParameter(f"the form body has more than {MAX_FORM_FIELDS} fields") from None
 
 
 @dataclass(frozen=True)

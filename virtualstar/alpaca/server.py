@@ -23,7 +23,15 @@ from aiohttp import web
 from astcom_client.origins import check_allowed_origins, is_loopback_host, origin_refusal
 
 from .discovery import DiscoveryResponder, start_discovery
-from .protocol import AlpacaError, BadParameter, Params, TransactionCounter, reply
+from .protocol import (
+    MAX_FORM_FIELDS,
+    AlpacaError,
+    BadParameter,
+    Params,
+    TransactionCounter,
+    form_pairs,
+    reply,
+)
 from .telescope import AlpacaTelescope, TelescopeOptions
 
 __all__ = ["AlpacaService", "build_app", "serve_alpaca"]
@@ -47,8 +55,7 @@ def build_app(device: AlpacaTelescope, *, allowed_origins: tuple[str, ...] | Non
 
     async def params_of(request: web.Request) -> Params:
         if request.method == "PUT":
-            form = await request.post()
-            return Params.from_pairs(((k, str(v)) for k, v in form.items()), exact=True)
+            return Params.from_pairs(await _put_pairs(request), exact=True)
         return Params.from_pairs(request.query.items())
 
     @web.middleware
@@ -121,6 +128,33 @@ def build_app(device: AlpacaTelescope, *, allowed_origins: tuple[str, ...] | Non
     app.router.add_get("/setup", setup)
     app.router.add_get("/setup/v1/{device_type}/{number}/setup", setup)
     return app
+
+
+#: What a PUT without a Content-Type header is read as (aiohttp says octet-stream).
+_FORM_TYPES = ("application/x-www-form-urlencoded", "application/octet-stream", "text/plain")
+
+
+async def _put_pairs(request: web.Request) -> list[tuple[str, str]]:
+    """Return a PUT's form fields; BadParameter (HTTP 400) for a body that is not a form."""
+    kind = request.content_type
+    if kind in _FORM_TYPES:
+        return form_pairs(await request.read(), request.charset)  # read() keeps to the size cap
+    if kind != "multipart/form-data":
+        raise BadParameter(f"a PUT's parameters are a form (application/x-www-form-urlencoded "
+                           f"or multipart/form-data), not {kind[:80]}")
+    try:
+        form = await request.post()
+    except (ValueError, LookupError, AssertionError) as exc:  # UnicodeDecodeError included
+        raise BadParameter(f"the multipart body cannot be read: {str(exc)[:200]}") from None
+    if len(form) > MAX_FORM_FIELDS:
+        raise BadParameter(f"the form body has more than {MAX_FORM_FIELDS} fields")
+    pairs = []
+    for name, value in form.items():
+        if not isinstance(value, str):
+            raise BadParameter(f"the multipart part {name[:80]!r} is a file upload; Alpaca "
+                               "parameters are plain form fields")
+        pairs.append((name, value))
+    return pairs
 
 
 @dataclass

@@ -28,6 +28,7 @@ from virtualstar.astro.equatorial import icrs_to_j2000, j2000_to_icrs, local_sid
 from virtualstar.vss_client import ServerUnavailable, VssRequestError
 from virtualstar.vss_operations import hand_pad_rates, is_moving, is_parked, is_tracking
 
+from .actions import offset_params, track_satellite_params
 from .protocol import (
     ACTION_NOT_IMPLEMENTED,
     DRIVER_ERROR,
@@ -46,14 +47,14 @@ __all__ = ["AlpacaTelescope", "TelescopeOptions"]
 log = logging.getLogger("virtualstar.alpaca")
 
 SIDEREAL_DEG_S = SIDEREAL_RATE_ARCSEC_S / 3600.0  # ASCOM's guide rates are in degrees/s
-ACTIONS = ("TrackSatellite", "OperationStatus")
+ACTIONS = ("TrackSatellite", "OperationStatus", "Offset")
 
 # VSS error codes → ASCOM error numbers (the VSS message goes along)
 _VSS_ERRORS = {"bad_request": INVALID_VALUE, "unreachable": INVALID_VALUE,
                "exclusion_zone": INVALID_VALUE, "stale_tle": INVALID_VALUE,
                "passive": INVALID_OPERATION, "not_tracking": INVALID_OPERATION,
                "mount_offline": NOT_CONNECTED, "forbidden": INVALID_OPERATION,
-               "unauthorized": NOT_CONNECTED}
+               "unauthorized": NOT_CONNECTED, "no_camera": INVALID_OPERATION}
 
 
 @dataclass(frozen=True)
@@ -151,10 +152,15 @@ class AlpacaTelescope:
             self.quiet_ops.add(int(op["id"]))
         return op
 
-    async def track_here(self, st: dict[str, Any]) -> None:
-        """Track the sky where the telescope points (Tracking on; after an abort or a move)."""
+    async def track_here(self, st: dict[str, Any], *, quiet: bool = True) -> None:
+        """Track the sky where the telescope points (Tracking on; after an abort or a move).
+
+        `quiet`: not a slew (Tracking set on: ASCOM does not count it as one). After an
+        abort the track *is* part of stopping: until it has joined the sky and settled,
+        RA/Dec still drift, so Slewing stays true (quiet=False).
+        """
         await self.begin("track", {"ra_deg": st["radec"]["ra_deg"],
-                                   "dec_deg": st["radec"]["dec_deg"]}, quiet=True)
+                                   "dec_deg": st["radec"]["dec_deg"]}, quiet=quiet)
 
     async def status(self) -> dict[str, Any]:
         st = await self.call("status")
@@ -291,11 +297,11 @@ async def _action(dev: AlpacaTelescope, p: Params) -> Any:
     name = p.text("Action")
     params = p.get("Parameters") or ""
     if name.lower() == "tracksatellite":
-        if not params.strip():
-            raise AlpacaError(INVALID_VALUE, "TrackSatellite: Parameters must hold the TLE "
-                              "(name line and the two element lines)")
+        track = track_satellite_params(params)
         await dev.refuse_if_parked("TrackSatellite")
-        return json.dumps(await dev.begin("track", {"tle": params}))
+        return json.dumps(await dev.begin("track", track))
+    if name.lower() == "offset":
+        return json.dumps(await dev.call("offset", offset_params(params)))
     if name.lower() == "operationstatus":
         return json.dumps(dev._op(await dev.status()))
     raise AlpacaError(ACTION_NOT_IMPLEMENTED, f"action {name!r} is not supported; supported: "
@@ -587,7 +593,12 @@ async def _slew_altaz_async(dev: AlpacaTelescope, p: Params) -> Any:
 
 @member("PUT", "abortslew")
 async def _abort(dev: AlpacaTelescope, p: Params) -> Any:
-    """Stop a slew or a hand-pad move; tracking returns to what it was before (ASCOM)."""
+    """Stop a slew or a hand-pad move; tracking returns to what it was before (ASCOM).
+
+    With tracking, the mount comes to rest and then tracks the sky where it stopped;
+    Slewing stays true until that track has joined the sky and settled (the VSS's
+    arrival check: within 5″), so RA/Dec hold still once Slewing reads false.
+    """
     st = await dev.refuse_if_parked("AbortSlew")
     if not dev.is_slewing(st):
         return  # nothing moves: nothing to abort (tracking goes on)
@@ -596,7 +607,7 @@ async def _abort(dev: AlpacaTelescope, p: Params) -> Any:
               else dev.is_tracking(st))  # an equatorial slew needed Tracking on
     await dev.call("stop")
     if resume:
-        await dev.track_here(await dev.status())
+        await dev.track_here(await dev.status(), quiet=False)
 
 
 @member("PUT", "park")

@@ -10,11 +10,14 @@ nanoseconds per point instead of astropy's fixed ~2 s per call.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
+import os
 import warnings
 import weakref
 from dataclasses import dataclass
+from pathlib import Path
 
 import erfa
 import numpy as np
@@ -108,8 +111,81 @@ def _mjd_date(mjd: float) -> str:
     return f"{int(y):04d}-{int(m):02d}-{int(d):02d}"
 
 
+#: Where the table read from astropy-iers-data is kept as arrays, so that later processes
+#: need not import astropy (~1 s and ~100 MB at its peak): $VIRTUALSTAR_CACHE_DIR, else
+#: $XDG_CACHE_HOME/virtualstar, else ~/.cache/virtualstar. One file per astropy and
+#: astropy-iers-data version: a new table is read again.
+CACHE_ENV_VAR = "VIRTUALSTAR_CACHE_DIR"
+_FIELDS = ("mjd", "ut1_utc_s", "xp_arcsec", "yp_arcsec")
+
+
+def eop_cache_path() -> Path | None:
+    """Return the cache file of the astropy-iers-data table, None when no version is known."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        key = f"astropy-{version('astropy')}-iers-{version('astropy-iers-data')}"
+    except PackageNotFoundError:
+        return None
+    root = os.environ.get(CACHE_ENV_VAR) or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "virtualstar")
+    return Path(root) / f"eop-{key}.npz"
+
+
 @functools.cache
 def _default_table() -> EarthOrientation:
+    path = eop_cache_path()
+    if path is not None:
+        cached = _read_cache(path)
+        if cached is None:
+            # astropy reads the table in a child process: its import and its reading (about
+            # 100 MB at their peak, and what it keeps) stay out of this one
+            _fill_cache_in_a_child(path)
+            cached = _read_cache(path)
+        if cached is not None:
+            return cached
+    return _read_astropy_table()  # no cache to be had: read it here
+
+
+def _fill_cache_in_a_child(path: Path) -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom pathlib import Path\n"
+            "from virtualstar.astro.earth_orientation import _read_astropy_table, _write_cache\n"
+            "_write_cache(Path(sys.argv[1]), _read_astropy_table())\n")
+    with contextlib.suppress(OSError, subprocess.SubprocessError):  # then we read it here
+        subprocess.run([sys.executable, "-c", code, str(path)], stdin=subprocess.DEVNULL,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=600,
+                       check=False)
+
+
+def _read_cache(path: Path) -> EarthOrientation | None:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {name: np.array(z[name], dtype=float) for name in _FIELDS}
+            measured = float(z["measured_until_mjd"])
+    except (OSError, KeyError, ValueError, EOFError):
+        return None  # none yet, or not one we wrote: read astropy's again
+    n = len(arrays["mjd"])
+    if n < 2 or any(a.shape != (n,) for a in arrays.values()):
+        return None
+    return EarthOrientation(**arrays, measured_until_mjd=measured)
+
+
+def _write_cache(path: Path, table: EarthOrientation) -> None:
+    """Keep the arrays for later processes; a cache that cannot be written is no error."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+        np.savez(tmp, **{name: getattr(table, name) for name in _FIELDS},
+                 measured_until_mjd=table.measured_until_mjd)
+        os.replace(tmp, path)  # whole or absent, whoever else writes it at the same time
+    except OSError:
+        pass
+
+
+def _read_astropy_table() -> EarthOrientation:
     from astropy.utils import iers
 
     iers.conf.auto_download = False

@@ -37,7 +37,7 @@ from .earth_orientation import EarthOrientation
 from .exceptions import SatelliteError
 from .observed import Observation, observe_enu
 from .site import Site
-from .timescales import UtcTimes
+from .timescales import UtcTimes, day_length_s
 
 #: Rate of the Earth rotation angle, rad per UT1 second (IERS 2010, eq. 5.15 via ERA).
 ERA_RATE_RAD_S = 2.0 * math.pi * 1.00273781191135448 / DAY_S
@@ -137,13 +137,17 @@ def teme_to_topocentric(r_km: np.ndarray, v_km_s: np.ndarray, times: UtcTimes, s
     # Earth orientation on hourly nodes aligned to UTC hours: UT1-UTC and polar motion
     # are linear between the daily IERS values, so GMST (linear in UT1 to 1e-15 rad over
     # an hour) and the polar-motion matrix are linear between the nodes too.
+    # Nodes and times are placed in elapsed SI seconds: the Earth turns through a leap
+    # second too, so the last hour of 2016-12-31 is 3 601 s of rotation (POSIX seconds
+    # put 23:30 half a second, 23:59 a whole second of rotation off).
     days, sec_of_day = times[0].posix_days()
-    ref = UtcTimes.from_posix_days(days, np.floor(sec_of_day / 3600.0) * 3600.0)  # a UTC hour
-    sec = times.seconds_since(float(ref.jd1[0]), float(ref.jd2[0]))  # POSIX seconds
+    hour_s = np.floor(np.minimum(sec_of_day, DAY_S - 1.0) / 3600.0) * 3600.0
+    ref = UtcTimes.from_posix_days(days, hour_s)  # a UTC hour
+    sec = times.si_seconds_since(float(ref.jd1[0]), float(ref.jd2[0]))
     k1 = max(math.ceil(float(sec.max()) / _NODE_S), 1)
     k0 = min(math.floor(float(sec.min()) / _NODE_S), k1 - 1)
     node_s = np.arange(k0, k1 + 1) * _NODE_S
-    nodes = ref.shifted(node_s)
+    nodes = ref.si_shifted(node_s)
     dut1, xp, yp = eop.interpolate(nodes.jd1, nodes.jd2)
     # ERFA's utcut1 keeps UT1 right on a day that ends in a leap second
     node_theta = np.unwrap(erfa.gmst82(*nodes.ut1(dut1)))
@@ -158,15 +162,46 @@ def teme_to_topocentric(r_km: np.ndarray, v_km_s: np.ndarray, times: UtcTimes, s
     minus_omega_enu = -(enu_m @ omega_itrs)
     unit, rate, dist = _topocentric_kernel(
         np.ascontiguousarray(r_km), np.ascontiguousarray(v_km_s), sec, float(node_s[0]),
-        _NODE_S, node_theta, node_mats, site_enu, minus_omega_enu, C_M_S)
+        _NODE_S, node_theta, node_mats, site_enu, minus_omega_enu, C_M_S,
+        _since_leap_second_s(times))
     beta = site_vel / C_M_S
     apparent = erfa.ab(unit, beta, 1.0, math.sqrt(1.0 - beta @ beta))
     return SatelliteState(enu=apparent, enu_rate=rate, range_m=dist)
 
 
+#: `_since_leap_second_s` for an instant with no leap second within a day of it.
+_NO_LEAP_S = -1e9
+
+
+def _since_leap_second_s(times: UtcTimes) -> np.ndarray:
+    """Return SI seconds since the start of the leap second of the instant's day or the
+    day before (negative before it), or _NO_LEAP_S when neither day ends in one.
+
+    SGP4's count holds through a leap second (UtcTimes.posix_jd), so the satellite's
+    motion during the light time is the held count's motion, not the real seconds'.
+    """
+    days, sec = times.posix_days()
+    jd = UNIX_EPOCH_JD + days.astype(float)
+    if np.ndim(day_length_s(np.concatenate([jd - 1.0, jd]))) == 0:
+        return np.full(len(times), _NO_LEAP_S)  # no leap second near: the fast path
+    today = np.asarray(day_length_s(jd)) > DAY_S
+    yesterday = np.asarray(day_length_s(jd - 1.0)) > DAY_S
+    return np.where(today, sec - DAY_S, np.where(yesterday, sec + 1.0, _NO_LEAP_S))
+
+
+@numba.njit(cache=True, fastmath=False, nogil=True)
+def _held_s(u, tau):  # pragma: no cover - compiled
+    """SGP4's count between u - tau and u (u: SI seconds since a leap second began):
+    the count stands still for the leap second's one SI second."""
+    a = u if u < 0.0 else (0.0 if u < 1.0 else u - 1.0)
+    b = u - tau
+    b = b if b < 0.0 else (0.0 if b < 1.0 else b - 1.0)
+    return a - b
+
+
 @numba.njit(cache=True, fastmath=False, nogil=True)
 def _topocentric_kernel(r_km, v_km_s, sec, node0_s, node_step_s, node_theta, node_mats,
-                        site_enu, omega_enu, c_m_s):  # pragma: no cover - compiled
+                        site_enu, omega_enu, c_m_s, leap_u):  # pragma: no cover - compiled
     """Rotate TEME by GMST and apply polar motion (both linear between the hourly nodes),
     move to site ENU axes, correct light time; return unit vectors, their Earth-fixed
     rates (1/s) and distances (m)."""
@@ -210,13 +245,15 @@ def _topocentric_kernel(r_km, v_km_s, sec, node0_s, node_step_s, node_theta, nod
         r2 = p2 - site_enu[2]
         tau = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) / c_m_s
         for _ in range(2):
-            a0 = r0 - w0 * tau
-            a1 = r1 - w1 * tau
-            a2 = r2 - w2 * tau
+            dt = _held_s(leap_u[i], tau)
+            a0 = r0 - w0 * dt
+            a1 = r1 - w1 * dt
+            a2 = r2 - w2 * dt
             tau = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2) / c_m_s
-        r0 -= w0 * tau
-        r1 -= w1 * tau
-        r2 -= w2 * tau
+        dt = _held_s(leap_u[i], tau)
+        r0 -= w0 * dt
+        r1 -= w1 * dt
+        r2 -= w2 * dt
         d = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
         dist[i] = d
         unit[i, 0] = r0 / d

@@ -24,7 +24,7 @@ import erfa
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from .constants import DAY_S, HIPPARCOS_EPOCH_JYEAR, J2000_JD, MAS_PER_RAD
+from .constants import HIPPARCOS_EPOCH_JYEAR, J2000_JD, MAS_PER_RAD
 from .earth_orientation import EarthOrientation
 from .observed import Observation, observe_enu
 from .site import Site
@@ -99,18 +99,17 @@ def spline_or_exact(exact, times: UtcTimes, grid_step_s: float) -> tuple[np.ndar
     the grid nodes their span needs) are computed exactly, rates by a central
     difference.
     """
-    ref1, ref2 = float(times.jd1[0]), float(times.jd2[0])
-    s = times.seconds_since(ref1, ref2)
+    # the spline runs in elapsed SI seconds: a leap second is a second of the sky too
+    s = times.si_seconds_since(float(times.jd1[0]), float(times.jd2[0]))
     k0 = math.floor(float(s.min()) / grid_step_s) - 2
     k1 = math.ceil(float(s.max()) / grid_step_s) + 2
     if (k1 - k0 + 1) > 3 * len(times):
         half = _SPARSE_RATE_STEP_S
         v = exact(times)
-        rate = (exact(times.shifted(half)) - exact(times.shifted(-half))) / (2 * half)
+        rate = (exact(times.si_shifted(half)) - exact(times.si_shifted(-half))) / (2 * half)
         return v, rate
     s_grid = np.arange(k0, k1 + 1) * grid_step_s
-    grid = UtcTimes.from_jd(np.full_like(s_grid, ref1), ref2 + s_grid / DAY_S)
-    spline = CubicSpline(s_grid, exact(grid), axis=0)
+    spline = CubicSpline(s_grid, exact(times[0].si_shifted(s_grid)), axis=0)
     return spline(s), spline(s, 1)
 
 
@@ -138,27 +137,15 @@ def observe_stars(stars: list[IcrsStar], times: UtcTimes, site: Site, eop: Earth
     every `grid_step_s`, one cubic spline through all the stars' unit vectors, refraction
     per the site. A star's direction is smooth: 600-s nodes give milliarcseconds.
     """
-    ref1, ref2 = float(times.jd1[0]), float(times.jd2[0])
-    s = times.seconds_since(ref1, ref2)
+    s = times.si_seconds_since(float(times.jd1[0]), float(times.jd2[0]))
     k1 = math.ceil(float(s.max()) / grid_step_s) + 2
     s_nodes = np.arange(-2, k1 + 1) * grid_step_s
-    nodes = UtcTimes.from_jd(np.full_like(s_nodes, ref1), ref2 + s_nodes / DAY_S)
+    nodes = times[0].si_shifted(s_nodes)
     astrom = _astrometry_context(nodes, site, eop)
-    col = np.newaxis
-    ra = np.radians([st.ra_deg for st in stars])[:, col]
-    dec = np.radians([st.dec_deg for st in stars])[:, col]
-    px = np.array([st.parallax_mas / 1000.0 for st in stars])[:, col]
-    pmr = np.array([st.pm_ra_cosdec_mas_yr for st in stars])[:, col] / MAS_PER_RAD / np.cos(dec)
-    pmd = np.array([st.pm_dec_mas_yr for st in stars])[:, col] / MAS_PER_RAD
-    rv = np.array([st.rv_km_s or 0.0 for st in stars])[:, col]
-    ep1 = J2000_JD + (np.array([st.epoch_jyear for st in stars])[:, col] - 2000.0) \
-        * _DAYS_PER_JULIAN_YEAR
-    tt1, tt2 = nodes.tt()
+    ra, dec, px = _stars_at_dates(stars, nodes)  # (n_stars, n_nodes)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", erfa.ErfaWarning)
-        ra2, dec2, _, _, px2, _ = erfa.pmsafe(ra, dec, pmr, pmd, px, rv, ep1, 0.0, tt1, tt2)
-        px2 = np.where(px > 0, px2, 0.0)  # as _star_at_dates: no parallax, no distance
-        ri, di = erfa.atciq(ra2, dec2, 0.0, 0.0, px2, 0.0, astrom)
+        ri, di = erfa.atciq(ra, dec, 0.0, 0.0, px, 0.0, astrom)
     aob, zob, *_ = erfa.atioq(ri, di, astrom)
     sz = np.sin(zob)
     enu = np.stack([sz * np.cos(aob), sz * np.sin(aob), np.cos(zob)], axis=-1)  # (n, k, 3)
@@ -199,17 +186,27 @@ def _astrometry_context(times: UtcTimes, site: Site, eop: EarthOrientation) -> A
 
 def _star_at_dates(star: IcrsStar, times: UtcTimes) -> tuple[Any, Any, Any]:
     """Return ICRS RA, Dec (rad) and parallax (arcsec) moved to the epoch of each time."""
-    ra = math.radians(star.ra_deg)
-    dec = math.radians(star.dec_deg)
-    px_arcsec = star.parallax_mas / 1000.0
     if not star.has_space_motion:
-        return ra, dec, 0.0
-    pmr = star.pm_ra_cosdec_mas_yr / MAS_PER_RAD / math.cos(dec)  # ERFA wants dRA/dt
-    pmd = star.pm_dec_mas_yr / MAS_PER_RAD
-    ep1 = J2000_JD + (star.epoch_jyear - 2000.0) * _DAYS_PER_JULIAN_YEAR
+        return math.radians(star.ra_deg), math.radians(star.dec_deg), 0.0
+    ra, dec, px = _stars_at_dates([star], times)
+    return ra[0], dec[0], px[0]
+
+
+def _stars_at_dates(stars: list[IcrsStar], times: UtcTimes
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ICRS RA, Dec (rad) and parallax (arcsec) of each star moved to the epoch of
+    each time, each (n_stars, n_times); a star without a parallax keeps none."""
+    col = np.newaxis
+    ra = np.radians([st.ra_deg for st in stars])[:, col]
+    dec = np.radians([st.dec_deg for st in stars])[:, col]
+    px = np.array([st.parallax_mas / 1000.0 for st in stars])[:, col]
+    pmr = np.array([st.pm_ra_cosdec_mas_yr for st in stars])[:, col] / MAS_PER_RAD / np.cos(dec)
+    pmd = np.array([st.pm_dec_mas_yr for st in stars])[:, col] / MAS_PER_RAD
+    rv = np.array([st.rv_km_s or 0.0 for st in stars])[:, col]
+    ep1 = J2000_JD + (np.array([st.epoch_jyear for st in stars])[:, col] - 2000.0) \
+        * _DAYS_PER_JULIAN_YEAR
     tt1, tt2 = times.tt()  # TT stands in for TDB: 1.7 ms is nothing for space motion
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", erfa.ErfaWarning)  # px = 0: ERFA assumes a distance
-        ra2, dec2, _, _, px2, _ = erfa.pmsafe(ra, dec, pmr, pmd, px_arcsec, star.rv_km_s,
-                                              ep1, 0.0, tt1, tt2)
-    return ra2, dec2, (px2 if star.parallax_mas > 0 else 0.0)
+        ra2, dec2, _, _, px2, _ = erfa.pmsafe(ra, dec, pmr, pmd, px, rv, ep1, 0.0, tt1, tt2)
+    return ra2, dec2, np.where(px > 0, px2, 0.0)

@@ -11,6 +11,12 @@ Mount time is integer microseconds since 1970-01-01 UTC counted the POSIX way:
 real length, so an instant on a leap-second day is the same instant in both;
 `seconds_since` and `shifted` count POSIX seconds (the continuous UTC count that
 SGP4, skyfield and the mount use).
+
+Anything interpolated in time (a spline of a star's direction, the Earth's rotation
+between two nodes) must use *elapsed* seconds instead: `si_seconds_since` and
+`si_shifted` count SI seconds (TAI), so the last hour of a leap-second day lasts
+3 601 s there, as the Earth's rotation sees it. POSIX seconds would squeeze 3 601 s
+of rotation into 3 600 and be up to a whole second (15″ of the sky) off at 23:59:59.
 """
 
 from __future__ import annotations
@@ -106,9 +112,20 @@ class UtcTimes:
         return days, day.jd2 * day_length_s(day.jd1)
 
     def posix_jd(self) -> tuple[np.ndarray, np.ndarray]:
-        """Return UTC as a continuous count, (JD of the day, POSIX seconds/86 400): SGP4's time."""
+        """Return UTC as a continuous count, (JD of the day, POSIX seconds/86 400): SGP4's time.
+
+        The count holds at the day's end through a leap second (23:59:60.x reads as
+        24:00:00.0): SGP4 counts UTC in 86 400-s days, so it cannot place an instant
+        inside the leap second; holding keeps the count continuous and never running
+        backwards (POSIX would read 00:00:00.x twice). See docs/astronomy.md.
+        """
         days, sec = self.posix_days()
-        return UNIX_EPOCH_JD + days.astype(float), sec / DAY_S
+        return UNIX_EPOCH_JD + days.astype(float), np.minimum(sec, DAY_S) / DAY_S
+
+    def in_leap_second(self) -> np.ndarray:
+        """Return whether each instant lies inside a leap second (23:59:60.x), bool (N,)."""
+        _, sec = self.posix_days()
+        return sec >= DAY_S
 
     def seconds_since(self, ref_jd1: float, ref_jd2: float = 0.0) -> np.ndarray:
         """Return POSIX seconds elapsed since a reference UTC two-part JD (float64)."""
@@ -120,6 +137,30 @@ class UtcTimes:
         """Return these times moved by `seconds` (POSIX seconds, no leap seconds)."""
         days, sec = self.posix_days()
         return UtcTimes.from_posix_days(days, sec + np.asarray(seconds, dtype=float))
+
+    def si_seconds_since(self, ref_jd1: float, ref_jd2: float = 0.0) -> np.ndarray:
+        """Return SI seconds (TAI) elapsed since a reference UTC two-part JD (float64).
+
+        Equal to `seconds_since` except across a leap second, which is counted here.
+        """
+        days, sec = self.posix_days()
+        ref_days, ref_sec = UtcTimes.from_jd(ref_jd1, ref_jd2).posix_days()
+        out = (days - ref_days[0]).astype(float) * DAY_S + (sec - ref_sec[0])
+        first_jd = UNIX_EPOCH_JD + float(min(int(days.min()), int(ref_days[0])))
+        last_jd = UNIX_EPOCH_JD + float(max(int(days.max()), int(ref_days[0])))
+        if _tai_minus_utc(first_jd) == _tai_minus_utc(last_jd):
+            return out  # no leap second between them: the POSIX count is the SI count
+        day_jd, index = np.unique(UNIX_EPOCH_JD + days.astype(float), return_inverse=True)
+        dat = np.array([_tai_minus_utc(float(d)) for d in day_jd])[index].reshape(days.shape)
+        return out + (dat - _tai_minus_utc(UNIX_EPOCH_JD + float(ref_days[0])))
+
+    def si_shifted(self, seconds: np.ndarray | float) -> UtcTimes:
+        """Return these times moved by `seconds` SI seconds (TAI): a leap second counts."""
+        tai1, tai2 = self.tai()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", erfa.ErfaWarning)  # "dubious year", as in tai()
+            utc1, utc2 = erfa.taiutc(tai1, tai2 + np.asarray(seconds, dtype=float) / DAY_S)
+        return UtcTimes.from_jd(utc1, utc2)
 
     def tai(self) -> tuple[np.ndarray, np.ndarray]:
         """Return TAI as two-part Julian dates (leap seconds from ERFA's table).

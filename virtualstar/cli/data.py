@@ -7,14 +7,13 @@ import sys
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
-from virtualstar.recorder import RecorderError
-from virtualstar.recorder.export import write_csv, write_mat
-from virtualstar.recorder.parquet_store import ParquetStoreReader, utc_text
-from virtualstar.recorder.stores import open_reader
-from virtualstar.recorder.timeparse import parse_time_bound
+from virtualstar.cli.store_warnings import reports_damage
+from virtualstar.recorder.exceptions import RecorderError
+from virtualstar.recorder.timeparse import parse_time_bound, utc_text
+
+# The stores (numpy, pyarrow) are imported when a command runs: --help stays fast.
 
 app = typer.Typer(help="Query, plot and export recorded signals.", no_args_is_help=True,
                   add_completion=False)
@@ -34,8 +33,19 @@ def _fail(message: str, code: int = 2) -> typer.Exit:
     return typer.Exit(code)
 
 
+class OutsideStore(RecorderError):
+    """The asked window holds no time of the store at all (exit 1, with the store's span)."""
+
+
+def _error(exc: Exception) -> typer.Exit:
+    """Return the Exit for a store or query error: 1 for a window outside the store."""
+    return _fail(str(exc), 1 if isinstance(exc, OutsideStore) else 2)
+
+
 def _open(store: str):
     """Open a store's reader; say on stderr when it recovered a recording whose recorder died."""
+    from virtualstar.recorder.stores import open_reader
+
     reader = open_reader(store)
     recovered = getattr(reader, "recovered", None)
     if recovered is not None:
@@ -50,22 +60,37 @@ def _names(names: list[str] | None) -> list[str] | None:
 
 
 def _window(reader, t_from: str, t_to: str) -> tuple[int, int]:
+    """Return the [from, to) window asked for; raise OutsideStore when it holds none of the
+    store's time, QueryError when it is empty."""
     start, end = reader.time_range()
     a = parse_time_bound(t_from, start, end, option="--from")
     b = parse_time_bound(t_to, start, end, option="--to")
+    span = (f"the store spans {utc_text(start)} to {utc_text(end)} ({start}..{end} µs, "
+            f"{(end - start) / 1e6:g} s)")
+    if a > end or b <= start:
+        where = "after the store's last sample" if a > end else "before its first sample"
+        raise OutsideStore(f"the window --from {t_from!r} ({utc_text(a)}) --to {t_to!r} "
+                           f"({utc_text(b)}) lies {where}; {span}")
     if b <= a:
         raise RecorderError(f"empty window: --to {t_to!r} ({b} µs) is not after --from "
-                            f"{t_from!r} ({a} µs); the store spans {start}..{end} µs")
+                            f"{t_from!r} ({a} µs); {span}")
     return a, b
 
 
-def _plain(v: np.ndarray) -> list:
+def _warn_if_no_samples(n: int, a: int, b: int) -> None:
+    if n == 0:
+        typer.echo(f"vs data: warning: no samples from {utc_text(a)} to {utc_text(b)} (a gap "
+                   "in the recording; `vs data info` lists the gaps)", err=True)
+
+
+def _plain(v) -> list:
     if v.dtype.kind == "f":
         return [None if x != x else x for x in v.tolist()]  # NaN is not JSON
     return v.tolist()
 
 
 @app.command()
+@reports_damage("vs data")
 def query(
     store: StoreArg,
     t_from: FromOpt = "start",
@@ -104,11 +129,14 @@ def query(
                                                      for x in (env.mins[k][i], env.maxs[k][i])]
                     typer.echo(",".join(repr(x.item()) if hasattr(x, "item") else str(x) for x in row))
                 return
+            _warn_if_no_samples(int(env.n.sum()), a, b)
             if json_out:
                 typer.echo(json.dumps(doc))
                 return
             typer.echo(f"{len(env)} buckets of {env.bucket_us / 1e6:g} s from {utc_text(a)} "
                        f"to {utc_text(b)}")
+            import numpy as np
+
             for k in env.names:
                 lo = float(np.nanmin(env.mins[k])) if len(env) else float("nan")
                 hi = float(np.nanmax(env.maxs[k])) if len(env) else float("nan")
@@ -116,8 +144,11 @@ def query(
             return
         block = reader.window(a, b, wanted)
     except (RecorderError, OSError) as exc:
-        raise _fail(str(exc)) from None
+        raise _error(exc) from None
+    _warn_if_no_samples(len(block), a, b)
     if csv_out:
+        from virtualstar.recorder.export import write_csv
+
         write_csv([block], block.names, sys.stdout)
         return
     if json_out:
@@ -133,9 +164,16 @@ def query(
 
 
 @app.command()
+@reports_damage("vs data")
 def info(store: StoreArg,
          json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False) -> None:
-    """Print the signals, time span, sample count and gaps of a store."""
+    """Print the signals, time span, sample count and gaps of a store.
+
+    Damaged files are named on stderr and skipped; each is a gap whose reason starts with
+    "damaged" (`vs data recover DIR` sets them aside).
+    """
+    from virtualstar.recorder.parquet_store import ParquetStoreReader
+
     try:
         reader = _open(store)
         start, end = reader.time_range()
@@ -147,7 +185,7 @@ def info(store: StoreArg,
             doc["bytes"] = sum(f.stat().st_size for f in reader.path.rglob("*") if f.is_file())
             doc["writer_pid"] = reader.writer_pid  # a live recorder writing it now, or None
     except (RecorderError, OSError) as exc:
-        raise _fail(str(exc)) from None
+        raise _error(exc) from None
     if json_out:
         typer.echo(json.dumps(doc))
         return
@@ -156,9 +194,13 @@ def info(store: StoreArg,
         typer.echo(f"  {s['name']} [{s['unit']}] {s['dtype']}")
     typer.echo(f"  {len(doc['gaps'])} gap(s), {sum(max(0, g['lost_samples']) for g in doc['gaps'])} "
                "samples known lost")
+    for g in doc["gaps"]:
+        if g["reason"].startswith("damaged"):
+            typer.echo(f"  {g['reason']}")
 
 
 @app.command()
+@reports_damage("vs data")
 def plot(
     store: StoreArg,
     out: Annotated[Path, typer.Option("-o", "--out", help="Directory for the PNG files (created).")],
@@ -193,11 +235,12 @@ def plot(
         p7 = plot_window(block, signals, out / f"fig7_first_{window:g}s.png",
                          title=f"{store}: first {window:g} s at full rate")
     except (RecorderError, OSError) as exc:
-        raise _fail(str(exc)) from None
+        raise _error(exc) from None
     typer.echo(f"wrote {p6} and {p7}")
 
 
 @app.command()
+@reports_damage("vs data")
 def export(
     store: StoreArg,
     csv_path: Annotated[Path | None, typer.Option("--csv", help="Write a CSV file here.")] = None,
@@ -209,6 +252,9 @@ def export(
     """Export a window (default: everything) to CSV and/or MATLAB .mat."""
     if csv_path is None and mat_path is None:
         raise _fail("give --csv FILE and/or --mat FILE")
+    from virtualstar.recorder.export import write_csv, write_mat
+    from virtualstar.recorder.parquet_store import ParquetStoreReader
+
     try:
         reader = _open(store)
         a, b = _window(reader, t_from, t_to)
@@ -230,22 +276,33 @@ def export(
             rows = write_mat(block, signals, mat_path)
             typer.echo(f"wrote {rows} rows to {mat_path}")
     except (RecorderError, OSError) as exc:
-        raise _fail(str(exc)) from None
+        raise _error(exc) from None
 
 
 @app.command()
+@reports_damage("vs data")
 def recover(
     directory: Annotated[Path, typer.Argument(help="Parquet store directory (parquet:DIR).")],
     json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
-    """Finish a Parquet store whose recorder died: keep its journalled samples, record the gap.
+    """Finish a Parquet store whose recorder died, and set its damaged files aside.
 
-    Any `vs data` command and a new `vs record` into the store do this by themselves; this
-    command only does it, and says what it found. A store a live recorder is writing is left
-    alone (exit 1).
+    A recorder that died left its hour in progress as a journal: its samples are kept and
+    the crash is recorded as a gap (any `vs data` command and a new `vs record` into the
+    store do this by themselves). Then every finished hour file is read whole: a damaged
+    file (or journal) keeps every batch or row group that still reads, is moved aside as
+    NAME.damaged (never deleted) and its loss is recorded in gaps.csv. A store a live
+    recorder is writing is left alone (exit 1). --json: {"store", "recovered", "journals",
+    "samples", "last_t_us", "unreadable", "damaged": [{"file", "moved_to", "problem"}]}.
     """
     from virtualstar.recorder.parquet_journal import live_writer_pid
-    from virtualstar.recorder.parquet_store import recover_store
+    from virtualstar.recorder.parquet_store import (
+        DEFAULT_ROW_GROUP_ROWS,
+        DEFAULT_ZSTD_LEVEL,
+        OVERVIEW_BUCKET_US,
+        recover_store,
+    )
+    from virtualstar.recorder.repair import repair_finished_hours
 
     if not directory.is_dir():
         raise _fail(f"{directory} is not a directory; expected a Parquet store (parquet:DIR)")
@@ -254,20 +311,29 @@ def recover(
         raise _fail(f"a live recorder (PID {pid}) is writing {directory}; nothing to recover", 1)
     try:
         report = recover_store(directory)
+        repaired = repair_finished_hours(directory, row_group_rows=DEFAULT_ROW_GROUP_ROWS,
+                                         zstd_level=DEFAULT_ZSTD_LEVEL,
+                                         overview_bucket_us=OVERVIEW_BUCKET_US)
     except (RecorderError, OSError) as exc:
         raise _fail(str(exc), 1) from None
-    doc = {"store": str(directory), "recovered": report is not None,
+    moved = (report.damaged if report else []) + repaired.moved
+    doc = {"store": str(directory), "recovered": report is not None or bool(moved),
            "journals": [p.name for p in report.journals] if report else [],
            "samples": report.rows if report else 0,
            "last_t_us": report.last_t_us if report else None,
-           "unreadable": [p.name for p in report.unreadable] if report else []}
+           "unreadable": [p.name for p in report.unreadable] if report else [],
+           "damaged": [{"file": p.name.removesuffix(".damaged"), "moved_to": p.name,
+                        "problem": problem} for p, problem in moved]}
     if json_out:
         typer.echo(json.dumps(doc))
-    else:
-        typer.echo(str(report) if report else f"{directory}: nothing to recover")
+        return
+    lines = [str(report)] if report else []
+    lines += [str(repaired)] if repaired.moved else []
+    typer.echo("; ".join(lines) if lines else f"{directory}: nothing to recover")
 
 
 @app.command()
+@reports_damage("vs data")
 def anomalies(
     store: StoreArg,
     t_from: FromOpt = "start",
@@ -346,7 +412,7 @@ def anomalies(
 
             plot_report(report, plot_path, title=f"{store}: {len(report.anomalies)} anomalies")
     except (RecorderError, OSError) as exc:
-        raise _fail(str(exc)) from None
+        raise _error(exc) from None
     if json_out:
         typer.echo(json.dumps(report.as_dict()))
         return

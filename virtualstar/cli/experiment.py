@@ -10,8 +10,9 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, Progress, TextColumn
 
-from virtualstar.recorder import RecorderError
-from virtualstar.recorder.experiment import DRIFT_RAD_PER_MIN, SineExperiment, run_sine_experiment
+from virtualstar.recorder.exceptions import RecorderError
+
+# The experiment (the emulator, the recorder, matplotlib) is imported when it runs.
 
 app = typer.Typer(help="Reproduce the paper's experiments on the mount emulator.",
                   no_args_is_help=True, add_completion=False)
@@ -34,7 +35,9 @@ def sine(
     record_hz: Annotated[float, typer.Option("--record-hz", help="Recording rate, Hz (≤ 10000).")] = 1000.0,
     out: Annotated[Path, typer.Option("--out", help="Directory for the store and the plots.")] = Path("sine-experiment"),
     period_s: Annotated[float, typer.Option("--period-s", help="Period of the speed's sinusoid, s.")] = 600.0,
-    drift: Annotated[float, typer.Option("--drift-rad-min", help="Average axis speed, rad/min.")] = DRIFT_RAD_PER_MIN,
+    drift: Annotated[float | None, typer.Option(
+        "--drift-rad-min", help="Average axis speed, rad/min (default: the paper's, "
+                                "0.0095).")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the result as JSON.")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="Hide the progress bar.")] = False,
 ) -> None:
@@ -45,9 +48,15 @@ def sine(
     The emulator runs in this process as fast as the recorder keeps up; the trajectory
     is pushed through ASTCom (traj.push_rates) directly, not through the VirtualStar Server.
     """
+    from virtualstar.recorder.experiment import (
+        DRIFT_RAD_PER_MIN,
+        SineExperiment,
+        run_sine_experiment,
+    )
+
     try:
         exp = SineExperiment(axis=axis, hours=hours, record_hz=record_hz, period_s=period_s,
-                             drift_rad_per_min=drift)
+                             drift_rad_per_min=DRIFT_RAD_PER_MIN if drift is None else drift)
     except ValueError as exc:
         raise _fail(str(exc)) from None
     if out.exists() and (out / "store").exists() and any((out / "store").iterdir()):

@@ -8,7 +8,11 @@ from typing import Annotated
 
 import typer
 
-from astcom_client.events import LEVELS
+from virtualstar.cli.store_warnings import reports_damage
+
+#: astcom_client.events.LEVELS, named here so that --help does not import ASTCom (numpy);
+#: tests/events checks that they agree.
+LEVEL_NAMES = ("debug", "info", "warning", "error")
 
 __all__ = ["log"]
 
@@ -22,6 +26,24 @@ def _split(values: list[str] | None) -> tuple[str, ...]:
     return tuple(v.strip() for item in values or [] for v in item.split(",") if v.strip())
 
 
+def _store_events(source: str) -> list:
+    """Return a store's events; a Parquet store's are read even when it has no sample file."""
+    from virtualstar.eventlog import store_events
+    from virtualstar.recorder import EmptyStore
+    from virtualstar.recorder.event_store import read_events
+    from virtualstar.recorder.stores import open_reader
+    from virtualstar.recorder.storespec import parse_store_spec
+
+    spec = parse_store_spec(source)
+    if spec.kind != "parquet":
+        return store_events(open_reader(spec))
+    assert spec.path is not None
+    if not spec.path.is_dir():
+        raise EmptyStore(f"store directory {spec.path} does not exist")
+    return read_events(spec.path)
+
+
+@reports_damage("vs log")
 def log(
     source: Annotated[str, typer.Argument(
         help="A store (parquet:DIR or DIR) or a VSS URL (ws://HOST:PORT) to read or follow.")],
@@ -30,12 +52,12 @@ def log(
                        "its first/last event).")] = "start",
     t_to: Annotated[str, typer.Option("--to", help="End (excluded), same forms.")] = "end",
     level: Annotated[str, typer.Option(
-        "--level", help=f"Lowest level shown: {', '.join(LEVELS)}.")] = "debug",
+        "--level", help=f"Lowest level shown: {', '.join(LEVEL_NAMES)}.")] = "debug",
     sources: Annotated[list[str] | None, typer.Option(
         "--source", help="Only these sources (emulator, vss, recorder); comma-separated or "
                          "repeated.")] = None,
     kinds: Annotated[list[str] | None, typer.Option(
-        "--kind", help="Only these kinds (fault, state, param, command, phase, connection, "
+        "--kind", help="Only these kinds (fault, state, param, command, phase, connection, auth, "
                        "clock_sync, gap, session, anomaly ...).")] = None,
     text: Annotated[str, typer.Option(
         "--grep", help="Only events whose message or fields contain this text "
@@ -56,7 +78,8 @@ def log(
     Table by default; --json gives {"seq", "t_us", "utc", "source", "level", "kind",
     "message", "fields"} per event.
     """
-    from virtualstar.eventlog import EventFilter, follow_vss, format_event, store_events
+    from astcom_client.events import LEVELS
+    from virtualstar.eventlog import EventFilter, follow_vss, format_event
     from virtualstar.recorder import RecorderError
     from virtualstar.recorder.timeparse import parse_time_bound
 
@@ -72,9 +95,7 @@ def log(
             lo = parse_time_bound(t_from, 0, 2**62, option="--from") if t_from != "start" else None
             hi = parse_time_bound(t_to, 0, 2**62, option="--to") if t_to != "end" else None
         else:
-            from virtualstar.recorder.stores import open_reader
-
-            events = store_events(open_reader(source))
+            events = _store_events(source)
             first = events[0].t_us if events else 0
             last = events[-1].t_us if events else 0
             lo = parse_time_bound(t_from, first, last, option="--from")
@@ -98,7 +119,7 @@ def log(
 
         try:
             asyncio.run(follow_vss(source, flt, show, password=api_password(),
-                                   duration_s=duration if follow else 0.0))
+                                   follow=follow, duration_s=duration))
         except KeyboardInterrupt:
             pass
         except VssRequestError as exc:

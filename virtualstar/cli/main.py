@@ -45,6 +45,9 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "track": ("virtualstar.cli.track", "track",
         "Track a target; returns once tracking has begun (satellite: once the pass is "
         "planned)."),
+    "offset": ("virtualstar.cli.offset", "offset",
+        "Offset the running track (PWI4-style) on ra, dec, az, el, path or transverse: add, "
+        "set, rate or reset; applied gradually from 20 ms after the server accepts it."),
     "stop": ("virtualstar.cli.stop", "stop",
         "Stop the running operation; the mount ramps to rest and holds."),
     "park": ("virtualstar.cli.park", "park",
@@ -55,13 +58,13 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
         "Plan a night: satellite passes become fixed blocks, sidereal targets fill the gaps "
         "by priority, slews included; every target left out is listed with the reason."),
     "run": ("virtualstar.cli.run", "run",
-        "Run a plan block by block through the VSS API: each block's start and end, slew time "
-        "and tracking error (encoder and on sky, RMS and peak); the rest of the night is "
-        "planned again after a missed, late or faulted block. Ctrl-C (or `vs stop`) ends it; "
-        "--resume goes on."),
+        "Run a plan block by block through the VSS API: each block's start, delay and slew, "
+        "the error on target (boresight vs the target's true place) with the planned "
+        "deviation apart, and the outcome (done, degraded, late, missed, faulted); the rest "
+        "of the night is planned again after a missed, late or faulted block. Ctrl-C (or "
+        "`vs stop`) ends it; --resume goes on."),
     "demo": ("virtualstar.cli.demo", "demo",
-        "Run the demo in one process (well under a minute) and print slew times and "
-        "tracking errors."),
+        "Run the demo in one process (well under a minute) and print slew times and errors."),
     "pointing-run": ("virtualstar.cli.pointing_run", "pointing_run",
         "Slew to N stars, measure each with the guide camera, write a TPOINT data file."),
     "mode": ("virtualstar.cli.mode", "mode",
@@ -98,7 +101,9 @@ class LazyGroup(TyperGroup):
             command = typer.main.get_group(target)  # a group even with one subcommand
         else:
             single = typer.Typer(add_completion=False)
-            single.command(cmd_name)(target)
+            # a command may ask for click settings, e.g. negative numbers as arguments
+            single.command(cmd_name, context_settings=getattr(target, "context_settings",
+                                                              None))(target)
             command = typer.main.get_command(single)
         command.name = cmd_name
         return command

@@ -6,13 +6,8 @@ import json
 from pathlib import Path
 from typing import Annotated
 
-import erfa
-import numpy as np
 import typer
 
-from virtualstar.astro import AstroError, EarthOrientation, avoidance_from_options, satellite_passes
-from virtualstar.astro.avoidance import body_places
-from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
 from virtualstar.cli.where import (
     HumidityOpt,
     JsonOpt,
@@ -28,6 +23,7 @@ from virtualstar.cli.where import (
     parse_times,
     run_collecting_warnings,
 )
+from virtualstar.display import safe_text
 
 
 def passes(
@@ -51,6 +47,13 @@ def passes(
 ) -> None:
     """List satellite passes: rise, culmination (time, elevation) and set; the closest the pass
     comes to the Sun; with a horizon profile, when it is above that profile."""
+    from virtualstar.astro import (
+        AstroError,
+        EarthOrientation,
+        avoidance_from_options,
+        satellite_passes,
+    )
+
     the_site = build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction)
     t0, t1 = parse_times([start]), parse_times([end])
     if not -90.0 < min_el < 90.0:
@@ -77,7 +80,7 @@ def passes(
     if as_json:
         typer.echo(json.dumps(rows, indent=1))
         return
-    typer.echo(f"{satellite.name}: {len(rows)} passes above {min_el:g} deg from {the_site.name}")
+    typer.echo(f"{safe_text(satellite.name)}: {len(rows)} passes above {min_el:g} deg from {the_site.name}")
     typer.echo(f"{'rise UTC':24} {'az':>6}   {'culmination UTC':24} {'el':>5} {'az':>6}   "
                f"{'set UTC':24} {'az':>6}  {'sun_sep_min':>11}  {'visible':7}"
                + (f"  {'above the horizon profile (UTC)':45}" if zones.horizon else ""))
@@ -109,6 +112,12 @@ def _pass_sky(satellite, p, site, zones, eop, t0, t1) -> dict:
     A pass already up at the search's start (no rise) or still up at its end (no set) is
     sampled from that start or to that end: the part inside the window counts whole.
     """
+    import erfa
+    import numpy as np
+
+    from virtualstar.astro.avoidance import body_places
+    from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
+
     lo = p.rise.utc if p.rise is not None else t0
     hi = p.set.utc if p.set is not None else t1
     span = float(hi.seconds_since(lo.jd1[0], lo.jd2[0])[0])

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from virtualstar.cli.status import fail as status_fail
+from virtualstar.cli.status import shown
+from virtualstar.display import safe_text
 
 __all__ = ["plan"]
 
@@ -19,7 +22,8 @@ def plan(
              "example is catalogs/data/program-example.toml.", show_default=False)],
     night: Annotated[str | None, typer.Option(
         "--night", help="The night that begins on this date (site's local evening), e.g. "
-                        "2024-05-18: from sunset to sunrise.")] = None,
+                        "2024-05-18: from sunset to sunrise as almanacs give them (the Sun's upper limb "
+                        "on a sea-level horizon with standard refraction: its centre 50' below).")] = None,
     start: Annotated[str | None, typer.Option(
         "--from", help="Start of the planning window, UTC ISO 8601 (instead of --night).")] = None,
     end: Annotated[str | None, typer.Option(
@@ -94,7 +98,7 @@ def _print(doc: dict, result) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    t = Table(title=f"{doc['program']}: {doc['start_utc']} .. {doc['end_utc']} — "
+    t = Table(title=f"{shown(doc['program'])}: {doc['start_utc']} .. {doc['end_utc']} — "
                     f"{doc['priority_weighted_hours']:.2f} priority-weighted hours "
                     f"(planned in {getattr(result, 'timing_s', 0.0):.1f} s)",
               title_justify="left")
@@ -102,10 +106,37 @@ def _print(doc: dict, result) -> None:
         t.add_column(col, justify="left" if col in ("target", "start UTC", "end UTC")
                      else "right")
     for b in doc["blocks"]:
-        t.add_row(b["start_utc"][11:19], b["end_utc"][11:19], b["target"], str(b["repeat"]),
+        t.add_row(b["start_utc"][11:19], b["end_utc"][11:19], shown(b["target"]), str(b["repeat"]),
                   f"{b['priority']:g}", f"{b['start_az_deg']:.1f}°", f"{b['start_el_deg']:.1f}°",
                   f"{b['slew_s']:.0f} s")
     console = Console()
     console.print(t)
-    for left in doc["left_out"]:
-        console.print(f"left out: {left['target']}: {left['reason']}", markup=False)
+    left_out = doc["left_out"]
+    lines = (left_out_summary(left_out) if console.is_terminal and len(left_out) > LIST_LEFT_OUT
+             else [f"left out: {x['target']}: {x['reason']}" for x in left_out])
+    for line in lines:
+        console.print(safe_text(line), markup=False, highlight=False)
+
+
+#: At a terminal, more left-out targets than this are summarised by reason (all of them
+#: when the output goes to a file or a pipe, and in --json).
+LIST_LEFT_OUT = 20
+_NAMES_PER_REASON = 4
+
+
+def left_out_summary(left_out: list[dict]) -> list[str]:
+    """Return a few lines for many left-out targets: how many for each kind of reason, and
+    the first few names of each (the reason without its target-specific details)."""
+    groups: dict[str, list[str]] = {}
+    for x in left_out:
+        key = re.split(r" \(|: ", x["reason"])[0]
+        key = re.sub(r"\d{4}-\d\d-\d\dT[\d:.]+Z", "…", key)
+        groups.setdefault(key, []).append(x["target"])
+    out = [f"left out: {len(left_out)} targets (each with its reason: vs plan --json, or "
+           "vs plan ... | cat):"]
+    for key, names in sorted(groups.items(), key=lambda kv: -len(kv[1])):
+        shown = ", ".join(names[:_NAMES_PER_REASON])
+        more = f" and {len(names) - _NAMES_PER_REASON} more" if len(names) > _NAMES_PER_REASON \
+            else ""
+        out.append(f"  {len(names):>6} {key}: {shown}{more}")
+    return out

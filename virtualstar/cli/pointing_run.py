@@ -13,12 +13,12 @@ by the offset — a second-order error of ~0.1–0.5″ with offsets of a few ar
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -44,7 +44,7 @@ class RunResult:
     def raw_sky_rms_arcsec(self) -> float:
         """RMS of the camera offsets (star − optical axis) on the sky, arcsec."""
         tot = [s["offset_arcsec"]["total"] for s in self.samples]
-        return float(np.sqrt(np.mean(np.square(tot)))) if tot else float("nan")
+        return math.sqrt(math.fsum(x * x for x in tot) / len(tot)) if tot else float("nan")
 
 
 def plan_for_server(status: dict[str, Any], n_stars: int, *, at_utc: str | None,
@@ -74,7 +74,7 @@ def _server_zones(status: dict[str, Any], site: Any):
         return None
     zones = AvoidanceZones.from_dict(doc)
 
-    def exclude(az_deg, el_deg, times) -> np.ndarray:
+    def exclude(az_deg, el_deg, times):
         t_us = np.full(len(az_deg), int(times.to_unix_us()[0]), np.int64)
         return zone_mask(np.radians(az_deg), np.radians(el_deg), t_us, zones, site)
 
@@ -108,6 +108,8 @@ async def measure_stars(client: VssClient, stars: list[Any], *, settle_s: float 
 
 def samples_to_run(result: RunResult, caption: str) -> Any:
     """Return a `PointingRun`: observed = sky place on the optical axis, raw = encoders."""
+    import numpy as np
+
     from pointing_model import PointingRun, RunParameters
 
     s = result.samples

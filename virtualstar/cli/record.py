@@ -12,11 +12,8 @@ from typing import Annotated
 
 import typer
 
-from astcom_client import AstcomError
-from virtualstar.recorder import RecorderError, parse_store_spec
-from virtualstar.recorder.samples import Gap
-from virtualstar.recorder.stores import TeeWriter, open_writer
-from virtualstar.recorder.subscriber import Recorder, client_connector
+# The recorder (pyarrow) and ASTCom (numpy, websockets) are imported when the command
+# runs: --help stays fast (tests/test_import_rules.py).
 
 
 def _fail(message: str, code: int = 2) -> typer.Exit:
@@ -54,6 +51,11 @@ def record(
     tick gaps) and endpoint restarts are reported on stderr and kept in the store's gap
     table; the recorder reconnects by itself.
     """
+    from astcom_client import AstcomError
+    from virtualstar.recorder import RecorderError, parse_store_spec
+    from virtualstar.recorder.stores import TeeWriter, open_writer
+    from virtualstar.recorder.subscriber import Recorder, client_connector
+
     if not rate > 0:
         raise _fail(f"--rate {rate}: expected a positive number of samples per second")
     if duration is not None and not duration > 0:
@@ -65,7 +67,7 @@ def record(
         raise _fail(str(exc)) from None
     writer = writers[0] if len(writers) == 1 else TeeWriter(writers)
 
-    def on_gap(gap: Gap) -> None:
+    def on_gap(gap) -> None:
         lost = "unknown number of" if gap.lost_samples < 0 else str(gap.lost_samples)
         typer.echo(f"vs record: {gap.reason}: {lost} samples missing between t_us "
                    f"{gap.after_t_us} and {gap.before_t_us}", err=True)
@@ -117,7 +119,7 @@ def record(
                f"{len(summary.gaps)} gap(s), {summary.reconnects} reconnect(s)")
 
 
-async def _run(recorder: Recorder, duration: float | None):
+async def _run(recorder, duration: float | None):
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         with contextlib.suppress(NotImplementedError, RuntimeError):

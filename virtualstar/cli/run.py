@@ -9,8 +9,9 @@ from typing import Annotated, Any
 
 import typer
 
-from virtualstar.cli.status import JsonOpt, ServerOpt, ask, print_json
+from virtualstar.cli.status import JsonOpt, ServerOpt, ask, print_json, shown
 from virtualstar.cli.status import fail as status_fail
+from virtualstar.display import safe_text
 
 __all__ = ["run"]
 
@@ -54,20 +55,27 @@ def run(
                          "several.", show_default=False)] = None,
     as_json: JsonOpt = False,
 ) -> None:
-    """Run a plan block by block through the VSS API: each block's start and end, slew time and
-    tracking error (encoder and on sky, RMS and peak); the rest of the night is planned again
-    after a missed, late or faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on.
+    """Run a plan block by block through the VSS API: each block's start, delay and slew, the
+    error on target (boresight vs the target's true place) with the planned deviation apart,
+    and the outcome (done, degraded, late, missed, faulted); the rest of the night is planned
+    again after a missed, late or faulted block. Ctrl-C (or `vs stop`) ends it; --resume goes on.
+
+    Per block: the error on target (RMS, peak, seconds off target), the planned deviation (a
+    keyhole), the encoders' following error and the on-sky error. A block off target for over
+    1 s is `degraded`; one that begins over 10 s late is `late`.
 
     --record NAME records mount signals for the whole run into --store (read with vs data)."""
 
     def fail(message: str, code: int = 2):  # with --json, the error goes to stdout too
         return status_fail(message, code, as_json=as_json)
 
-    try:
-        doc = json.loads(plan.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise fail(f"cannot read plan {plan}: {exc.strerror or exc}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    from virtualstar.files import FileRefused, read_text_file
+
+    try:  # a regular file of at most 64 MiB: a FIFO or /dev/zero would never end
+        doc = json.loads(read_text_file(plan, max_bytes=64 << 20, what="plan"))
+    except FileRefused as exc:
+        raise fail(f"cannot read {exc}") from None
+    except json.JSONDecodeError as exc:
         raise fail(f"{plan}: not JSON ({exc}); write a plan with vs plan PROGRAM --night DATE "
                    "-o PLAN.json") from None
     from virtualstar.planning import PlanningError
@@ -214,13 +222,27 @@ class _Progress:
 
 
 def _block_line(r: dict[str, Any]) -> str:
-    figs = ("" if r.get("encoder_rms_arcsec") is None else
-            f" encoder {r['encoder_rms_arcsec']:.3f}″ RMS / {r['encoder_peak_arcsec']:.3f}″ peak,"
-            f" on sky {r['on_sky_rms_arcsec']:.3f}″ / {r['on_sky_peak_arcsec']:.3f}″")
-    err = f" ({r['error']['message']})" if r.get("error") else ""
+    figs = ""
+    if r.get("encoder_rms_arcsec") is not None:
+        if r.get("on_target_rms_arcsec") is not None:
+            figs += (f" on target {_f(r['on_target_rms_arcsec'], '.3f')}″ RMS / "
+                     f"{_f(r.get('on_target_peak_arcsec'), '.3f')}″ peak"
+                     + (f", {r['off_target_s']:.1f} s off target" if r.get("off_target_s")
+                        else "") + ",")
+        figs += (f" following {_f(r['encoder_rms_arcsec'], '.3f')}″ /"
+                 f" {_f(r['encoder_peak_arcsec'], '.3f')}″")
+        if r.get("planned_deviation"):
+            figs += (f"; planned deviation {_f(r.get('planned_deviation_peak_arcsec'), '.1f')}″ "
+                     f"({', '.join(r['planned_deviation'])})")
+    err = f" ({safe_text(r['error']['message'])})" if r.get("error") else ""
     slew = "" if r.get("slew_s") is None else f" slew {r['slew_s']:.0f} s"
-    return (f"{(r.get('start_utc') or r['planned_start_utc'])[11:19]} {r['target']} "
-            f"#{r['repeat']}: {r['outcome']}{slew}{figs}{err}")
+    delay = f" {r['delay_s']:.0f} s late" if (r.get("delay_s") or 0) >= 1.0 else ""
+    return (f"{(r.get('start_utc') or r['planned_start_utc'])[11:19]} {safe_text(r['target'])} "
+            f"#{r['repeat']}: {r['outcome']}{delay}{slew}{figs}{err}")
+
+
+def _f(value: Any, fmt: str) -> str:
+    return "-" if value is None else f"{value:{fmt}}"
 
 
 def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json: bool,
@@ -240,35 +262,49 @@ def _report(result: dict[str, Any], out: Path | None, png: Path | None, as_json:
     if as_json:
         print_json(result)
         return
-    from rich import box
     from rich.console import Console
     from rich.table import Table
 
     s = result.get("summary", {})
     wall = f", {result['wall_s']:.0f} s wall time" if "wall_s" in result else ""
-    t = Table(title=f"{result.get('program')}: {result.get('state')} — {s.get('done', 0)} done, "
-                    f"{s.get('late', 0)} late, {s.get('missed', 0)} missed, "
-                    f"{s.get('faulted', 0)} faulted, {len(result.get('replans', []))} re-plans; "
-                    f"{s.get('priority_weighted_hours', 0.0):.2f} priority-weighted h{wall}",
-              title_justify="left", box=box.SIMPLE_HEAD)
-    for col in ("start", "min", "block", "outcome", "slew", "enc″ RMS/pk", "sky″ RMS/pk"):
-        t.add_column(col, justify="left" if col in ("start", "block", "outcome") else "right")
+    t = Table(title=f"{shown(result.get('program'))}: {result.get('state')} — {s.get('done', 0)} done, "
+                    f"{s.get('degraded', 0)} degraded, {s.get('late', 0)} late, "
+                    f"{s.get('missed', 0)} missed, {s.get('faulted', 0)} faulted, "
+                    f"{len(result.get('replans', []))} re-plans; "
+                    f"{s.get('priority_weighted_hours', 0.0):.2f} priority-weighted h on "
+                    f"target{wall}", title_justify="left", box=None, header_style="bold underline",
+              padding=(0, 1), pad_edge=False)
+    for col in ("start", "block", "outcome", "late", "slew", "on target″", "off", "plan″",
+                "following″"):
+        t.add_column(col, justify="left" if col in ("start", "block", "outcome") else "right",
+                     no_wrap=True)
 
     def pair(r: dict[str, Any], key: str) -> str:
         if r.get(f"{key}_rms_arcsec") is None:
             return "-"
         return f"{r[f'{key}_rms_arcsec']:.3f}/{r[f'{key}_peak_arcsec']:.3f}"
 
+    def planned(r: dict[str, Any]) -> str:
+        peak = r.get("planned_deviation_peak_arcsec")
+        why = ", ".join(r.get("planned_deviation") or [])
+        return "-" if peak is None else f"{peak:.2f}" + (f" {why}" if why else "")
+
     for r in result.get("records", []):
-        minutes = "-" if r.get("observed_s") is None else f"{r['observed_s'] / 60:.1f}"
-        t.add_row((r.get("start_utc") or r["planned_start_utc"])[11:19], minutes,
-                  f"{r['target']} #{r['repeat']}", r["outcome"],
-                  "-" if r.get("slew_s") is None else f"{r['slew_s']:.0f} s",
-                  pair(r, "encoder"), pair(r, "on_sky"))
+        t.add_row((r.get("start_utc") or r["planned_start_utc"])[11:16],
+                  f"{shown(r['target'])} #{r['repeat']}", r["outcome"],
+                  "-" if r.get("delay_s") is None else f"{r['delay_s']:.0f}",
+                  "-" if r.get("slew_s") is None else f"{r['slew_s']:.0f}",
+                  pair(r, "on_target"),
+                  "-" if r.get("off_target_s") is None else f"{r['off_target_s']:.1f}",
+                  planned(r), pair(r, "encoder"))
     console = Console()
     console.print(t)
+    console.print("start: UTC; late, slew: s; on target: the boresight against the target's "
+                  "true place (RMS/peak), off: seconds beyond the threshold; plan: the planned "
+                  "deviation, the demand against that place (peak), apart; following: the "
+                  "encoders against the demand; -o/--json: every figure", markup=False)
     for rp in result.get("replans", []):
         console.print(f"re-planned at {rp['at_utc'][11:19]}: {rp['reason']} → {rp['blocks']} "
                       "blocks", markup=False)
     if result.get("error"):
-        console.print(f"ended: {result['error']['message']}", markup=False)
+        console.print(f"ended: {safe_text(result['error']['message'])}", markup=False)

@@ -8,7 +8,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from virtualstar.cli.status import JsonOpt, ServerOpt, _f, ask, fail, print_json
+from virtualstar.cli.status import JsonOpt, ServerOpt, _f, ask, fail, print_json, shown
 
 __all__ = ["AllowSunOpt", "RadecOpt", "StarOpt", "op_table", "slew", "target_params"]
 
@@ -67,22 +67,45 @@ def op_table(op: dict[str, Any], title: str) -> Table:
     t = Table(title=title, show_header=False, title_justify="left")
     t.add_column("what", style="bold")
     t.add_column("value")
-    t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
+    t.add_row("operation", f"#{op['id']} {op['kind']} {shown(op['target'])}: {op['phase']}")
     rows = [("slew time", "slew_time_s", ".1f", " s"),
             ("landing error RMS", "landing_rms_arcsec", ".3f", "″"),
             ("landing error peak", "landing_peak_arcsec", ".3f", "″"),
             ("pass start (UTC)", "pass_start_utc", "", ""),
             ("pass end (UTC)", "pass_end_utc", "", ""),
             ("culmination", "culmination_el_deg", ".1f", "°"),
-            ("keyhole error", "keyhole_max_error_arcsec", ".1f", "″"),
-            ("tracking error RMS", "tracking_rms_arcsec", ".3f", "″"),
-            ("tracking error peak", "tracking_peak_arcsec", ".3f", "″"),
+            ("keyhole deviation (planned)", "keyhole_max_error_arcsec", ".1f", "″"),
+            ("error on target RMS", "tracking_rms_arcsec", ".3f", "″"),
+            ("error on target peak", "tracking_peak_arcsec", ".3f", "″"),
+            ("following error RMS / peak", "following_rms_arcsec", "", ""),
+            ("on the sky, with the clock", "on_sky_rms_arcsec", "", ""),
+            ("planned deviation", "planned_deviation_peak_arcsec", "", ""),
+            ("outcome", "outcome", "", ""),
             ("ended", "ended", "", "")]
     for label, key, fmt, unit in rows:
         if key in info:
-            value = info[key]
-            t.add_row(label, _f(value, fmt, unit) if fmt else str(value))
+            t.add_row(label, _f(info[key], fmt, unit) if fmt else _op_value(key, info))
     return t
+
+
+def _op_value(key: str, info: dict[str, Any]) -> str:
+    """The rows that combine several fields of a track's figures (docs/vss-api.md)."""
+    if key == "following_rms_arcsec":  # what the encoders missed of the demand sent
+        return (f"{_f(info[key], '.3f', '″')} / {_f(info.get('following_peak_arcsec'), '.3f')}″ "
+                "(encoders vs demand)")
+    if key == "on_sky_rms_arcsec":
+        return f"RMS {_f(info[key], '.3f', '″')}, peak {_f(info.get('on_sky_peak_arcsec'), '.3f')}″"
+    if key == "planned_deviation_peak_arcsec":
+        why = ", ".join(info.get("planned_deviation") or []) or "none planned"
+        return (f"peak {_f(info[key], '.1f', '″')}, {_f(info.get('planned_deviation_s'), '.1f')} s"
+                f" beyond {_f(info.get('off_target_threshold_arcsec'), 'g')}″ ({why})")
+    if key == "outcome":
+        if info[key] == "degraded":
+            return (f"[red]degraded[/]: {_f(info.get('off_target_s'), '.1f')} s off target "
+                    f"(beyond {_f(info.get('off_target_threshold_arcsec'), 'g')}″), peak "
+                    f"{_f(info.get('tracking_peak_arcsec'), '.1f')}″")
+        return f"{info[key]}: on target (off it {_f(info.get('off_target_s'), '.1f')} s)"
+    return str(info[key])
 
 
 def slew(radec: RadecOpt = None, altaz: AltazOpt = None, star: StarOpt = None,

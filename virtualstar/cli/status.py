@@ -60,6 +60,7 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
     With `quiet` (the command's --json), a failure also prints a JSON error object on
     stdout (`{"error": {"code", "message"}}`), so a script parses the same stream either way.
     """
+    from virtualstar.display import safe_text
     from virtualstar.vss_client import ServerUnavailable, VssRequestError, call_server
 
     url = server or default_server_url()
@@ -71,7 +72,7 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
                     if kind == "operation":
                         info = data.get("info", {})
                         left = info.get("seconds_left")
-                        spinner.update(f"{data.get('kind')} {data.get('target')}: "
+                        spinner.update(f"{data.get('kind')} {shown(data.get('target'))}: "
                                        f"{data.get('phase')}"
                                        + (f" ({left:.0f} s mount time left)" if left else ""))
                     elif kind == "fault":
@@ -83,11 +84,22 @@ def ask(server: str | None, cmd: str, params: dict[str, Any] | None = None, *,
     except VssRequestError as exc:
         if quiet:
             print_json({"error": {"code": exc.code, "message": exc.message}})
-        raise fail(f"the server refused {cmd}: {exc.message} [{exc.code}]", 1) from None
+        raise fail(f"the server refused {cmd}: {safe_text(exc.message)} [{exc.code}]",
+                   1) from None
     except ServerUnavailable as exc:
         if quiet:
             print_json({"error": {"code": "server_unavailable", "message": str(exc)}})
         raise fail(str(exc), 2) from None
+
+
+def shown(text: Any) -> str:
+    """Return outside text (a target or TLE name, a server's message) for a rich cell or
+    line: control and bidirectional characters escaped, rich markup made inert."""
+    from rich.markup import escape
+
+    from virtualstar.display import safe_text
+
+    return escape(safe_text(text))
 
 
 def print_json(doc: Any) -> None:
@@ -138,13 +150,24 @@ def render_status(st: dict[str, Any]) -> Table:
     t.add_row("pointing model", st.get("pointing_model") or "none (encoders = observed)")
     op = st.get("operation")
     if op:
-        t.add_row("operation", f"#{op['id']} {op['kind']} {op['target']}: {op['phase']}")
+        t.add_row("operation", f"#{op['id']} {op['kind']} {shown(op['target'])}: {op['phase']}")
+    now = st.get("on_target")
+    if now:
+        last = now.get("last_sample") or {}
+        planned = ", ".join(now.get("planned") or []) or "none planned"
+        t.add_row("on target", f"{shown(now['target'])}: the boresight is "
+                  f"{_f(now['error_arcsec'], '.3f', '″')} from its true place (az "
+                  f"{now['az_deg']:.5f}°, el {now['el_deg']:.5f}°); planned deviation "
+                  f"{_f(last.get('planned_deviation_arcsec'), '.3f', '″')} ({planned})")
     for window, s in st.get("tracking_error", {}).items():
-        t.add_row(f"tracking error {window}",
-                  f"encoders RMS {_f(s['rms_arcsec'], '.3f', '″')}, peak "
-                  f"{_f(s['peak_arcsec'], '.3f', '″')}; on the sky RMS "
-                  f"{_f(s.get('on_sky_rms_arcsec'), '.3f', '″')}, peak "
-                  f"{_f(s.get('on_sky_peak_arcsec'), '.3f', '″')}")
+        t.add_row(f"errors, last {window}", _window_text(s))
+    corr = st.get("corrections") or {}
+    if corr:
+        axes = (corr.get("offsets") or {}).get("axes") or {}
+        axes_text = ", ".join(f"{a} {d.get('total_s', d.get('total_arcsec', 0.0)):+.3f}"
+                          f"{' s' if 'total_s' in d else '″'}" for a, d in axes.items())
+        t.add_row("offsets", f"{axes_text or 'none'} ({corr.get('mode')}, from "
+                             f"{_f(corr.get('min_lead_ms'), 'g', ' ms')} lead)")
     ts = st.get("time_sync", {})
     t.add_row("clock offset", f"{_f(ts.get('offset_us'), 'd', ' µs')} (mount − UTC, from the "
                               f"{ts.get('offset_source') or '-'}; {ts.get('syncs')} PPS syncs, "
@@ -152,6 +175,24 @@ def render_status(st: dict[str, Any]) -> Table:
     if st.get("last_fault"):
         t.add_row("last fault", f"[red]{st['last_fault']}")
     return t
+
+
+def _window_text(s: dict[str, Any]) -> str:
+    """One window of the status's error figures: on target first (the truth), then the
+    planned deviation, the encoders' following error and the on-sky figure."""
+    if s.get("target_samples"):
+        on = (f"on target RMS {_f(s.get('on_target_rms_arcsec'), '.3f', '″')}, peak "
+              f"{_f(s.get('on_target_peak_arcsec'), '.3f', '″')}"
+              + (f", [red]{s['off_target_s']:.1f} s off target[/]" if s.get("off_target_s")
+                 else "")
+              + f"; planned deviation peak {_f(s.get('planned_deviation_peak_arcsec'), '.3f', '″')}"
+              "; ")
+    else:
+        on = "no target followed; "
+    return (on + f"following RMS {_f(s['rms_arcsec'], '.3f', '″')}, peak "
+            f"{_f(s['peak_arcsec'], '.3f', '″')}; on the sky RMS "
+            f"{_f(s.get('on_sky_rms_arcsec'), '.3f', '″')}, peak "
+            f"{_f(s.get('on_sky_peak_arcsec'), '.3f', '″')}")
 
 
 def _time_mode(st: dict[str, Any]) -> str:

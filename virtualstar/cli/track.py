@@ -27,6 +27,10 @@ def track(
     wait: Annotated[bool, typer.Option(
         "--wait", help="Wait until the track ends and print its tracking-error summary.")] = False,
     allow_sun: AllowSunOpt = False,
+    closed_loop: Annotated[bool, typer.Option(
+        "--closed-loop", help="Guide the track with the server's guide camera: along/across "
+        "offsets for a satellite, RA/Dec for a star (needs vs server --camera or "
+        "--camera-sim).")] = False,
     server: ServerOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
@@ -44,15 +48,17 @@ def track(
     params: dict = {"wait": wait}
     if allow_sun:
         params["allow_sun"] = True
+    if closed_loop:
+        params["closed_loop"] = True
     if duration is not None:
         params["duration_s"] = duration
     if tle is not None:
-        try:
-            params["tle"] = tle.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise fail(f"cannot read TLE file {tle}: {exc.strerror}", as_json=as_json) from None
-        except UnicodeDecodeError:
-            raise fail(f"{tle} is not a text TLE file", as_json=as_json) from None
+        from virtualstar.files import FileRefused, read_text_file
+
+        try:  # the server takes at most 256 KiB of TLE text
+            params["tle"] = read_text_file(tle, max_bytes=256 * 1024, what="TLE file")
+        except FileRefused as exc:
+            raise fail(f"cannot read {exc}", as_json=as_json) from None
         if sat:
             params["sat"] = sat
     elif radec:
@@ -60,8 +66,26 @@ def track(
         params["radec"] = radec
     else:
         params["star"] = star
-    op = ask(server, "track", params, progress=True, quiet=as_json)
+    if wait and not as_json:
+        op = _track_showing_the_wait(server, params)
+    else:
+        op = ask(server, "track", params, progress=True, quiet=as_json)
     if as_json:
         print_json(op)
     else:
         Console().print(op_table(op, "track"))
+
+
+def _track_showing_the_wait(server: str | None, params: dict) -> dict:
+    """Send `track` and show the wait (a live countdown at a terminal, lines when piped)."""
+    import sys
+
+    from virtualstar.cli.status import api_password
+    from virtualstar.cli.wait_display import WaitDisplay
+    from virtualstar.vss_client import default_server_url
+
+    console = Console(stderr=True)
+    url = server or default_server_url()
+    with WaitDisplay(url, password=api_password(), terminal=console.is_terminal,
+                     out=sys.stderr, console=console) as display:
+        return ask(server, "track", params, on_event=display.on_event)

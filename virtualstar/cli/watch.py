@@ -18,6 +18,7 @@ from virtualstar.cli.status import (
     api_password,
     fail,
     render_status,
+    shown,
 )
 from virtualstar.vss_client import ServerUnavailable, VssClient, VssRequestError, default_server_url
 
@@ -108,6 +109,8 @@ def status_line(st: dict) -> str:
     op = st.get("operation") or {}
     clock = st.get("time_sync", {}).get("offset_us")
     return (f"{st['mount_time_utc']} {st['mount_state']} az {enc['az_deg']:.5f} el "
-            f"{enc['el_deg']:.5f} error RMS {_f(err.get('rms_arcsec'), '.3f', '″')} on-sky "
+            f"{enc['el_deg']:.5f} on target RMS {_f(err.get('on_target_rms_arcsec'), '.3f', '″')}"
+            f" following RMS {_f(err.get('rms_arcsec'), '.3f', '″')} on-sky "
             f"{_f(err.get('on_sky_rms_arcsec'), '.3f', '″')} clock {_f(clock, '+d', ' µs')}"
-            + (f" op #{op['id']} {op['kind']} {op['target']}: {op['phase']}" if op else ""))
+            + (f" op #{op['id']} {op['kind']} {shown(op['target'])}: {op['phase']}" if op
+               else ""))

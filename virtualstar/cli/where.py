@@ -8,24 +8,17 @@ import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
-import erfa
-import numpy as np
 import typer
 
-from virtualstar.astro import (
-    AstroError,
-    EarthOrientation,
-    Satellite,
-    Site,
-    UtcTimes,
-    find_events,
-    resolve_target,
-)
-from virtualstar.astro.avoidance import body_places
-from virtualstar.astro.observed import topocentric_apparent_radec
-from virtualstar.astro.site import site_from_options
+from virtualstar.display import safe_text
+
+if TYPE_CHECKING:
+    from virtualstar.astro import Satellite, Site, UtcTimes
+
+# The astronomy (numpy, ERFA, SGP4, numba, scipy) is imported inside the functions that
+# compute: --help stays fast (tests/test_import_rules.py).
 
 SATELLITE_LOOKBACK_S = 1800.0  # a satellite up now rose within the last half hour
 
@@ -61,6 +54,8 @@ class UsageError(Exception):
 
 def run_collecting_warnings(work):
     """Run work(); show its warnings on stderr, then its error (if any) and exit 2."""
+    from virtualstar.astro import AstroError
+
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -74,6 +69,9 @@ def run_collecting_warnings(work):
 
 def build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refraction) -> Site:
     """Return the site from the shared options, or raise typer.Exit with a clear error."""
+    from virtualstar.astro import AstroError
+    from virtualstar.astro.site import site_from_options
+
     try:
         return site_from_options(site_file=site_file, site_text=site, pressure_hpa=pressure_hpa,
                                  temperature_c=temperature_c, humidity=humidity,
@@ -85,6 +83,7 @@ def build_site(site_file, site, pressure_hpa, temperature_c, humidity, no_refrac
 def load_satellite(tle: Path, sat: str | None) -> Satellite:
     """Return the satellite chosen from a TLE/OMM file, or raise UsageError."""
     from catalogs import CatalogError, load_tle_file, select_satellite
+    from virtualstar.astro import AstroError, Satellite
 
     try:
         records = load_tle_file(tle)
@@ -92,14 +91,14 @@ def load_satellite(tle: Path, sat: str | None) -> Satellite:
             raise UsageError(f"{tle}: no element sets found")
         record = select_satellite(records, sat) if sat else records[0]
         return Satellite.from_record(record)
-    except OSError as exc:
-        raise UsageError(f"cannot read {tle}: {exc.strerror}") from None
     except (CatalogError, AstroError, KeyError, ValueError) as exc:
         raise UsageError(str(exc).strip('"')) from None
 
 
 def parse_times(at: list[str] | None) -> UtcTimes:
     """Return the --at times (default: now), or raise typer.Exit."""
+    from virtualstar.astro import AstroError, UtcTimes
+
     try:
         return UtcTimes.from_iso(at) if at else UtcTimes.now()
     except AstroError as exc:
@@ -161,6 +160,8 @@ def where(
 
 
 def _target(target: str | None, tle: Path | None, sat: str | None, times: UtcTimes) -> Any:
+    from virtualstar.astro import resolve_target
+
     if tle is not None:
         obj = load_satellite(tle, sat or target)
         _check_tle_epoch(tle, sat or target, times)
@@ -186,6 +187,13 @@ def _check_tle_epoch(tle: Path, sat: str | None, times: UtcTimes) -> None:
 
 
 def _compute(obj: Any, times: UtcTimes, site: Site) -> tuple[Any, list[_Row], list[dict]]:
+    import erfa
+    import numpy as np
+
+    from virtualstar.astro import EarthOrientation, Satellite, find_events
+    from virtualstar.astro.avoidance import body_places
+    from virtualstar.astro.observed import topocentric_apparent_radec
+
     eop = EarthOrientation.from_astropy_iers_data()
     obs = obj.observe(times, site, eop)
     geometric = obj.observe(times, site.without_refraction(), eop)
@@ -272,7 +280,7 @@ def _hms(deg: float, hours: bool) -> str:
 def _print_table(obj: Any, site: Site, rows: list[_Row], events: list[dict]) -> None:
     refr = (f"refraction on ({site.pressure_hpa:g} hPa, {site.temperature_c:g} C, "
             f"humidity {site.humidity:g})" if site.refraction else "refraction off")
-    typer.echo(f"{obj.name} from {site.name} (lat {site.lat_deg:.4f}, lon {site.lon_deg:.4f}, "
+    typer.echo(f"{safe_text(obj.name)} from {safe_text(site.name)} (lat {site.lat_deg:.4f}, lon {site.lon_deg:.4f}, "
                f"{site.height_m:g} m), {refr}")
     typer.echo(f"{'UTC':24} {'az_deg':>10} {'el_deg':>9} {'az_rate_deg_s':>14} "
                f"{'el_rate_deg_s':>14}  {'RA (apparent)':>13} {'Dec':>12} {'sun_sep_deg':>11}")

@@ -8,7 +8,8 @@ EQUATORIAL_EOD_COORD (JNow) with ON_COORD_SET TRACK/SLEW → `slew` (SLEW then `
 tracking), TELESCOPE_ABORT_MOTION → `stop`, TELESCOPE_PARK → `park`,
 TELESCOPE_TRACK_STATE → `track` of where it points / `stop`, TELESCOPE_MOTION_NS/WE →
 `move`, TELESCOPE_TIMED_GUIDE_NS/WE → `guide`, HORIZONTAL_COORD → `slew` to az/el,
-SAT_TLE_TEXT + SAT_TRACKING_STAT → `track` of the TLE. States stay true to the
+SAT_TLE_TEXT + SAT_TRACKING_STAT → `track` of the TLE, VS_OFFSET / VS_OFFSET_RESET →
+`offset`, VS_CLOSED_LOOP → tracks guided by the guide camera (offsets.py). States stay true to the
 operation: a coordinate property is Busy from the command until the VSS says the
 mount arrived (Ok) or failed (Alert); the periodic status poll updates values but
 never overwrites Busy.
@@ -35,6 +36,7 @@ from virtualstar.vss_client import (
 )
 from virtualstar.vss_operations import hand_pad_rates, is_moving, is_parked, is_tracking
 
+from .offsets import offset_requests, offset_vectors, offsets_from_status
 from .protocol import ALERT, BUSY, IDLE, OK, Element, Reader, Request, Vector
 
 __all__ = ["IndiTelescope", "main"]
@@ -110,6 +112,7 @@ def properties() -> list[Vector]:
                 Element("SAT_PASS_WINDOW_END", "End", "")]),
         Vector(d, "SAT_TRACKING_STAT", "Switch", "Sat tracking", SAT,
                [_s("SAT_TRACK", "Track"), _s("SAT_HALT", "Halt", True)]),
+        *offset_vectors(d),
     ]
 
 
@@ -411,7 +414,7 @@ class IndiTelescope:
         if not tle.strip():
             raise ValueError("set SAT_TLE_TEXT (the TLE: name line and two element lines) first")
         st = await self.refuse_if_parked("satellite tracking")
-        params: dict[str, Any] = {"tle": tle, "wait": True}
+        params: dict[str, Any] = {"tle": tle, "wait": True, **self.closed_loop()}
         if self.window_from_client:
             w = self.props["SAT_PASS_WINDOW"]
             _start_us, end_us = _window_us(str(w["SAT_PASS_WINDOW_START"].value),
@@ -422,6 +425,28 @@ class IndiTelescope:
             # only a pass that begins before the window's end
             params["max_wait_s"] = (end_us - st["mount_time_us"]) / 1e6
         self.begin(prop.name, "track", params)
+
+    def closed_loop(self) -> dict[str, Any]:
+        """{"closed_loop": True} while VS_CLOSED_LOOP is On, else {}."""
+        return {"closed_loop": True} if self.props["VS_CLOSED_LOOP"]["CLOSED_LOOP_ON"].value \
+            else {}
+
+    async def on_vs_offset(self, prop: Vector, members: dict[str, str]) -> None:
+        before = prop.values()
+        self._store(prop, members)  # checks names, numbers and ranges first, all or nothing
+        given = {n: float(prop[n].value) for n in members}
+        for n, v in before.items():
+            prop[n].value = v  # the values shown follow the server's status, not the request
+        for params in offset_requests(given):
+            await self.request("offset", params)
+        self.set_state(prop.name, OK)
+
+    async def on_vs_offset_reset(self, prop: Vector, members: dict[str, str]) -> None:
+        self._store(prop, members)
+        if prop["RESET"].value:
+            prop["RESET"].value = False
+            await self.request("offset", {"axis": "all", "op": "reset"})
+        self.set_state(prop.name, OK)
 
     async def on_geographic_coord(self, prop: Vector, members: dict[str, str]) -> None:
         site = (await self.request("status"))["site"]
@@ -507,6 +532,10 @@ class IndiTelescope:
                 park["PARK"].value, park["UNPARK"].value = parked, not parked
                 park.state = OK
                 self.send("TELESCOPE_PARK")
+        offsets = self.props["VS_OFFSET"]
+        for member, value in offsets_from_status(st).items():
+            offsets[member].value = value
+        self.send("VS_OFFSET")
         window = self.props["SAT_PASS_WINDOW"]
         if kind == "track_satellite" and not self.window_from_client:
             window["SAT_PASS_WINDOW_START"].value = op["info"].get("pass_start_utc", "")

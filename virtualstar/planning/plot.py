@@ -41,7 +41,8 @@ def plot_plan(plan: Plan, program: Program, site: Site, path: str | Path,
     sidereal = [t for t in planned if not t.is_satellite]
     # every sidereal target at once: ERFA's per-time work is shared (observe_stars)
     el_of = {t.name: s.el_deg for t, s in
-             zip(sidereal, target_skies(sidereal, grid, site, eop, _no_zones()), strict=True)}
+             zip(sidereal, target_skies(sidereal, grid, site, eop, _no_zones()), strict=True)
+             if s.el_deg is not None}
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, target in enumerate(planned):
         name = target.name
@@ -54,7 +55,9 @@ def plot_plan(plan: Plan, program: Program, site: Site, path: str | Path,
                 ax.plot((t - grid.t_us[0]) / 3.6e9, el, color=colour, lw=3,
                         label=name if b.repeat == 1 else None)
             continue
-        el = el_of[name]
+        el = el_of.get(name)
+        if el is None:  # never where it may be observed: no curve to draw
+            continue
         ax.plot(hours, el, color=colour, lw=0.8, alpha=0.6)
         for b in (b for b in plan.blocks if b.target == name):
             sel = (grid.t_us >= b.start_us) & (grid.t_us <= b.end_us)
@@ -82,13 +85,18 @@ def _no_zones():
     return AvoidanceZones(sun_radius_deg=0.0)
 
 
-_OUTCOME_COLOURS = {"done": "tab:green", "late": "tab:olive", "missed": "tab:grey",
-                    "faulted": "tab:red", "stopped": "tab:orange"}
+_OUTCOME_COLOURS = {"done": "tab:green", "degraded": "tab:brown", "late": "tab:olive",
+                    "missed": "tab:grey", "faulted": "tab:red", "stopped": "tab:orange"}
+# per block: (figure key, label, colour); on target first: it is what the sky saw
+_ERROR_BARS = (("on_target", "on target (boresight vs target)", "tab:green"),
+               ("encoder", "following (encoders vs demand)", "tab:blue"),
+               ("on_sky", "on the sky (with the clock)", "tab:purple"))
 
 
 def plot_run(run: dict, path: str | Path) -> Path:
     """Write a run's PNG: planned and observed blocks per target against UTC (coloured by
-    outcome, re-plans marked), and each block's encoder and on-sky tracking error."""
+    outcome, re-plans marked), and each block's error on target, following error and
+    on-sky error, with the peak planned deviation apart (a keyhole)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -118,27 +126,34 @@ def plot_run(run: dict, path: str | Path) -> Path:
                    else "hours")
     handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in _OUTCOME_COLOURS.values()]
     top.legend(handles + [plt.Line2D([], [], color="tab:red", ls="--")],
-               [*_OUTCOME_COLOURS, "re-plan"], fontsize=8, ncol=6, loc="upper right")
+               [*_OUTCOME_COLOURS, "re-plan"], fontsize=8, ncol=7, loc="upper right")
     s = run.get("summary", {})
     top.set_title(f"{run.get('program', '')}: {run.get('state', '')} — {s.get('done', 0)} done, "
-                  f"{s.get('late', 0)} late, {s.get('missed', 0)} missed, "
-                  f"{s.get('faulted', 0)} faulted; "
-                  f"{s.get('priority_weighted_hours', 0.0):.2f} priority-weighted hours "
-                  "(outline: planned, filled: observed)", fontsize=10)
+                  f"{s.get('degraded', 0)} degraded, {s.get('late', 0)} late, "
+                  f"{s.get('missed', 0)} missed, {s.get('faulted', 0)} faulted; "
+                  f"{s.get('priority_weighted_hours', 0.0):.2f} priority-weighted hours on "
+                  "target (outline: planned, filled: observed)", fontsize=10)
     observed = [r for r in records if r.get("encoder_rms_arcsec") is not None]
     x = np.arange(len(observed))
-    labels = [f"{r['target']} #{r['repeat']}" for r in observed]
-    for off, key, colour in ((-0.2, "encoder", "tab:blue"), (0.2, "on_sky", "tab:purple")):
-        rms = [r[f"{key}_rms_arcsec"] or np.nan for r in observed]
-        peak = [r[f"{key}_peak_arcsec"] or np.nan for r in observed]
-        bottom.bar(x + off, rms, width=0.4, color=colour, label=f"{key.replace('_', '-')} RMS")
-        bottom.plot(x + off, peak, "v", color=colour, label=f"{key.replace('_', '-')} peak")
+    labels = [f"{r['target']} #{r['repeat']}" + (f"\n{r['outcome']}" if r["outcome"] != "done"
+                                                 else "") for r in observed]
+    width = 0.8 / len(_ERROR_BARS)
+    for k, (key, label, colour) in enumerate(_ERROR_BARS):
+        off = (k - (len(_ERROR_BARS) - 1) / 2) * width
+        rms = [r.get(f"{key}_rms_arcsec") or np.nan for r in observed]
+        peak = [r.get(f"{key}_peak_arcsec") or np.nan for r in observed]
+        bottom.bar(x + off, rms, width=width, color=colour, label=f"{label}: RMS")
+        bottom.plot(x + off, peak, "v", color=colour, label="… peak")
+    planned = [r.get("planned_deviation_peak_arcsec") or np.nan for r in observed]
+    if np.any(np.asarray(planned) > 0.01):
+        bottom.plot(x, planned, "D", mfc="none", color="tab:red",
+                    label="planned deviation peak (a keyhole), apart")
     bottom.set_yscale("log")
-    bottom.set_ylabel("tracking error [arcsec]")
+    bottom.set_ylabel("error [arcsec]")
     bottom.set_xticks(x, labels, rotation=45, ha="right", fontsize=8)
     bottom.grid(True, axis="y", alpha=0.3)
     if observed:
-        bottom.legend(fontsize=8, ncol=4)
+        bottom.legend(fontsize=7, ncol=4)
     return _save(fig, path)
 
 

@@ -22,6 +22,7 @@ and may set, overriding `[defaults]`:
 | `moon_min_sep_deg` | at least this far from the Moon |
 | `window` | `["start UTC", "end UTC"]`: only within these times |
 | `sunlit_while_dark` | satellites: only while the satellite is sunlit and the site dark |
+| `closed_loop` | `true`: track guided by the server's guide camera (`vs server --camera`) |
 
 Errors name the file, the target (its index and name) and the key, with what is expected.
 """
@@ -46,7 +47,7 @@ _DEFAULTS = {"priority": 1.0, "duration_s": 600.0, "repeats": 1, "cadence_s": 0.
 _TARGET_KEYS = {"name", "star", "radec", "tle_file", "sat", "priority", "duration_s",
                 "exposures", "exposure_s", "overhead_s", "repeats", "cadence_s", "min_el_deg",
                 "az_windows_deg", "sun_max_el_deg", "moon_min_sep_deg", "window",
-                "sunlit_while_dark"}
+                "sunlit_while_dark", "closed_loop"}
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,7 @@ class ProgramTarget:
     tle_file: Path | None = None
     tle_text: str = ""  # the TLE file's text, read once: a plan carries it to the server
     sunlit_while_dark: bool = False
+    closed_loop: bool = False  # guided by the server's guide camera (docs/vss.md)
     index: int = 0  # its place in the file (ties are broken by it: a plan is deterministic)
 
     def as_dict(self) -> dict[str, Any]:
@@ -190,16 +192,15 @@ def _target(path: Path, index: int, t: dict[str, Any]) -> ProgramTarget:
     spec = str(t[kind]) if kind != "tle_file" else str(t.get("sat", ""))
     tle_file, tle_text = None, ""
     if kind == "tle_file":
+        from catalogs import ElementFileError, read_element_text
+
         tle_file = (path.parent / str(t["tle_file"])).resolve()
-        if not tle_file.is_file():
-            raise ProgramError(f"{where}: tle_file {t['tle_file']!r}: no such file "
-                               f"(looked for {tle_file})")
         if not spec:
             raise ProgramError(f"{where}: a tle_file needs sat = \"NAME\" (the satellite in it)")
         try:
-            tle_text = tle_file.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ProgramError(f"{where}: cannot read tle_file {tle_file}: {exc}") from None
+            tle_text = read_element_text(tle_file)
+        except ElementFileError as exc:
+            raise ProgramError(f"{where}: tle_file {t['tle_file']!r}: {exc}") from None
     elif kind == "radec":
         from virtualstar.astro import AstroError, parse_radec
 
@@ -226,6 +227,9 @@ def _target(path: Path, index: int, t: dict[str, Any]) -> ProgramTarget:
         if b <= a:
             raise ProgramError(f"{where}: window ends before it starts")
         window_us = (a, b)
+    closed_loop = t.get("closed_loop", False)
+    if not isinstance(closed_loop, bool):
+        raise ProgramError(f"{where}: closed_loop = {closed_loop!r}: expected true or false")
     repeats = t["repeats"]
     if isinstance(repeats, bool) or not isinstance(repeats, int) or not 1 <= repeats <= 1000:
         raise ProgramError(f"{where}: repeats = {repeats!r}: expected a whole number 1..1000")
@@ -237,5 +241,6 @@ def _target(path: Path, index: int, t: dict[str, Any]) -> ProgramTarget:
         sun_max_el_deg=number("sun_max_el_deg", -90.0, 90.0),
         moon_min_sep_deg=number("moon_min_sep_deg", 0.0, 180.0),
         az_windows_deg=tuple(windows), window_us=window_us, tle_file=tle_file, tle_text=tle_text,
-        sunlit_while_dark=bool(t.get("sunlit_while_dark", False)), index=index)
+        sunlit_while_dark=bool(t.get("sunlit_while_dark", False)), closed_loop=closed_loop,
+        index=index)
     return replace(target, name=target.name.strip() or f"target {index + 1}")

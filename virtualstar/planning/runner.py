@@ -10,14 +10,19 @@ in tests. Per block:
   waits for the pass at its pre-position);
 * then wait until the block's end, or until the operation ends first (a fault, the
   target leaving the limits, a stop);
-* record what happened: when tracking began and ended, the slew, the encoder and on-sky
-  tracking error over the block (RMS, peak), and the outcome (`done`, `late`, `missed`,
-  `faulted`, `stopped`).
+* record what happened: when tracking began and ended and how late (`delay_s`), the
+  slew, and over the block the error on target (the boresight against the target's true
+  place: RMS, peak, time off target), the deviation the VSS planned (a keyhole, guide
+  offsets: shown apart), the mount's following error and the on-sky error; and the
+  outcome: `done`; `degraded` (off target for longer than `degraded_s`); `late`
+  (tracking began more than `late_s` after the block's start); `missed` (it could not
+  begin within `give_up_s`), `faulted` or `stopped`. A satellite block ends at its planned
+  end (the track is stopped there, where the plan put the mount for the next block).
 
-After a `late` (tracking began more than `late_s` after the block's start), `missed`
-(the block could not begin in time) or `faulted` block, the rest of the night is planned
-again from the mount's place and the current time, without the blocks already done;
-after a mount fault the faults are reset first. A target that faults twice is given up.
+After a late, missed or faulted block, the rest of the night is planned again from the
+mount's place and the current time, without the blocks already done; after a mount
+fault the faults are reset first. A target that faults twice is given up. A degraded
+block keeps its place in the plan (its time is spent; the next blocks are not moved).
 A stop (the runner cancelled: `stop`, another client's motion command, a shutdown)
 ends the run at once; `resume` starts a new run that counts the blocks a previous run
 finished.
@@ -40,7 +45,9 @@ from .scheduler import Block, Plan
 
 __all__ = ["BlockRecord", "ProgramRunner", "RunApi", "run_summary"]
 
-LATE_S = 60.0  # tracking that begins later than this after a block's start makes it late
+LATE_S = 10.0  # tracking that begins later than this after a block's start makes it late
+GIVE_UP_S = 60.0  # a block that cannot begin within this of its start is missed
+DEGRADED_S = 1.0  # a block off target for longer than this (mount seconds) is degraded
 MAX_FAULTS_PER_TARGET = 2
 RESET_TRIES, RESET_PAUSE_S = 3, 5.0  # after a mount fault: reset, and again if it persists
 REPLAN_LEAD_S = 60.0  # a new plan starts this long after now (time to plan and to slew)
@@ -76,13 +83,19 @@ class BlockRecord:
     priority: float
     planned_start_us: int
     planned_end_us: int
-    outcome: str = "pending"  # done, late, missed, faulted, stopped
+    outcome: str = "pending"  # done, degraded, late, missed, faulted, stopped
     start_us: int | None = None  # tracking began
     end_us: int | None = None
     slew_s: float | None = None
-    encoder_rms_arcsec: float | None = None
+    delay_s: float | None = None  # tracking began this long after the planned start
+    on_target_rms_arcsec: float | None = None  # the boresight against the target's true place
+    on_target_peak_arcsec: float | None = None
+    off_target_s: float | None = None  # mount seconds farther than the threshold from it
+    planned_deviation_peak_arcsec: float | None = None  # the demand against the true place
+    planned_deviation: list[str] = field(default_factory=list)  # what it was planned for
+    encoder_rms_arcsec: float | None = None  # the mount's following error (encoders vs demand)
     encoder_peak_arcsec: float | None = None
-    on_sky_rms_arcsec: float | None = None
+    on_sky_rms_arcsec: float | None = None  # on target with the clock term
     on_sky_peak_arcsec: float | None = None
     samples: int = 0
     operation_id: int | None = None
@@ -90,8 +103,15 @@ class BlockRecord:
 
     @property
     def counts(self) -> bool:
-        """Whether the block was observed (done, or done late)."""
-        return self.outcome in ("done", "late")
+        """Whether the block was observed (done, late or degraded: its time was spent on it)."""
+        return self.outcome in ("done", "late", "degraded")
+
+    @property
+    def on_target_s(self) -> float:
+        """Mount seconds observed on target (observed time less the time off target)."""
+        if self.start_us is None or self.end_us is None:
+            return 0.0
+        return max(0.0, (self.end_us - self.start_us) / 1e6 - (self.off_target_s or 0.0))
 
     def as_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -117,6 +137,8 @@ class ProgramRunner:
     on_change: Callable[[dict[str, Any]], None] = lambda doc: None  # a progress() each change
     done_before: list[BlockRecord] = field(default_factory=list)  # a resumed run's history
     late_s: float = LATE_S
+    give_up_s: float = GIVE_UP_S
+    degraded_s: float = DEGRADED_S
     state: str = "starting"  # running, done, stopped, failed
     records: list[BlockRecord] = field(default_factory=list)
     replans: list[dict[str, Any]] = field(default_factory=list)
@@ -143,7 +165,7 @@ class ProgramRunner:
                 self.records.append(record)
                 self.current = None
                 self._changed()
-                if record.outcome != "done":
+                if record.outcome not in ("done", "degraded"):
                     if record.error and record.error.get("code") == "mount_fault":
                         await self._reset_faults()
                     await self._replan(f"{block.target} #{block.repeat} {record.outcome}"
@@ -188,11 +210,11 @@ class ProgramRunner:
             if await self.api.now_us() < go_us:
                 await self.api.sleep_until(go_us)
         now = await self.api.now_us()
-        if now > block.start_us + int(self.late_s * 1e6) or now >= block.end_us:
+        if now > block.start_us + int(self.give_up_s * 1e6) or now >= block.end_us:
             rec.outcome = "missed"
             rec.error = {"code": "late", "message": f"could not begin before "
-                         f"{iso_utc(block.start_us + int(self.late_s * 1e6))}: the mount was busy "
-                         f"until {iso_utc(now)}"}
+                         f"{iso_utc(block.start_us + int(self.give_up_s * 1e6))}: the mount was "
+                         f"busy until {iso_utc(now)}"}
             return rec
         params = self._track_params(block, target, now)
         try:
@@ -206,13 +228,15 @@ class ProgramRunner:
         return await self._finish(rec, block, ended)
 
     def _track_params(self, block: Block, target, now_us: int) -> dict[str, Any]:
+        loop = {"closed_loop": True} if target.closed_loop else {}
         if block.kind == "satellite":
             from .sky import target_tle_text
 
             wait_s = max(0.0, (block.start_us - now_us) / 1e6) + 300.0
-            return {"tle": target_tle_text(target), "sat": target.spec, "max_wait_s": wait_s}
+            return {"tle": target_tle_text(target), "sat": target.spec, "max_wait_s": wait_s,
+                    **loop}
         key = "radec" if block.kind == "radec" else "star"
-        return {key: target.spec}
+        return {key: target.spec, **loop}
 
     async def _until(self, end_us: int, op_id: int | None) -> Exception | None:
         """Wait until mount time `end_us`; return the error if the operation ended first."""
@@ -240,24 +264,42 @@ class ProgramRunner:
         now = await self.api.now_us()
         rec.end_us = min(now, block.end_us) if ended is None else min(
             info.get("tracking_to_us") or now, block.end_us)
+        if (isinstance(ended, _EndedEarly) and op.get("phase") == "done"
+                and block.end_us - rec.end_us <= self.late_s * 1e6):
+            ended = None  # it ended by itself at the block's end (a pass setting, a zone)
         if began is not None:
             rec.start_us = max(int(began), block.start_us)
+            rec.delay_s = max(0.0, (int(began) - block.start_us) / 1e6)
+        rec.planned_deviation = list(info.get("planned_deviation") or [])
+        if ended is None and block.kind == "satellite" and op.get("id") == rec.operation_id:
+            # the block ends here (its constraints do): the next block was planned from here
+            await self.api.call("stop", {})
         if rec.start_us is not None and rec.end_us > rec.start_us:
             errors = await self.api.call("errors", {"from_us": rec.start_us,
                                                     "to_us": rec.end_us})
-            s = errors["stats"]
-            rec.samples = int(s.get("n") or 0)
-            rec.encoder_rms_arcsec, rec.encoder_peak_arcsec = s.get("rms_arcsec"), \
-                s.get("peak_arcsec")
-            rec.on_sky_rms_arcsec, rec.on_sky_peak_arcsec = s.get("on_sky_rms_arcsec"), \
-                s.get("on_sky_peak_arcsec")
+            self._figures(rec, errors["stats"])
         if ended is not None:
             if getattr(ended, "code", "") == "aborted":
                 raise asyncio.CancelledError  # another client's command took the mount
             return self._faulted(rec, ended)
         late = (rec.start_us or block.end_us) - block.start_us
-        rec.outcome = "late" if late > self.late_s * 1e6 else "done"
+        if (rec.off_target_s or 0.0) > self.degraded_s:
+            rec.outcome = "degraded"
+        else:
+            rec.outcome = "late" if late > self.late_s * 1e6 else "done"
         return rec
+
+    @staticmethod
+    def _figures(rec: BlockRecord, s: dict[str, Any]) -> None:
+        """The block's error figures from the server's statistics over its window."""
+        rec.samples = int(s.get("n") or 0)
+        rec.on_target_rms_arcsec = s.get("on_target_rms_arcsec")
+        rec.on_target_peak_arcsec = s.get("on_target_peak_arcsec")
+        rec.off_target_s = s.get("off_target_s")
+        rec.planned_deviation_peak_arcsec = s.get("planned_deviation_peak_arcsec")
+        rec.encoder_rms_arcsec, rec.encoder_peak_arcsec = s.get("rms_arcsec"), s.get("peak_arcsec")
+        rec.on_sky_rms_arcsec = s.get("on_sky_rms_arcsec")
+        rec.on_sky_peak_arcsec = s.get("on_sky_peak_arcsec")
 
     async def _reset_faults(self) -> None:
         """Clear the mount's latched faults; a fault that is still there is tried again
@@ -336,19 +378,24 @@ class _EndedEarly(RuntimeError):
 
 
 def run_summary(records: list[BlockRecord]) -> dict[str, Any]:
-    """Counts per outcome, observed hours, priority-weighted hours, worst tracking figures."""
+    """Counts per outcome, hours observed and on target, priority-weighted hours on target,
+    worst tracking figures."""
     by = Counter(r.outcome for r in records)
     observed = [r for r in records if r.counts and r.start_us is not None and r.end_us]
     hours = sum((r.end_us - r.start_us) / 3.6e9 for r in observed)
-    weighted = sum(r.priority * (r.end_us - r.start_us) / 3.6e9 for r in observed)
+    on_target = sum(r.on_target_s / 3600.0 for r in observed)
+    weighted = sum(r.priority * r.on_target_s / 3600.0 for r in observed)
 
     def worst(key: str) -> float | None:
         values = [getattr(r, key) for r in observed if getattr(r, key) is not None]
         return max(values) if values else None
 
-    return {"blocks": len(records), **{k: by.get(k, 0) for k in
-                                        ("done", "late", "missed", "faulted", "stopped")},
-            "observed_hours": hours, "priority_weighted_hours": weighted,
+    return {"blocks": len(records),
+            **{k: by.get(k, 0) for k in ("done", "degraded", "late", "missed", "faulted",
+                                         "stopped")},
+            "observed_hours": hours, "on_target_hours": on_target,
+            "priority_weighted_hours": weighted,
+            "worst_on_target_rms_arcsec": worst("on_target_rms_arcsec"),
             "worst_encoder_rms_arcsec": worst("encoder_rms_arcsec"),
             "worst_on_sky_rms_arcsec": worst("on_sky_rms_arcsec")}
 

@@ -166,6 +166,11 @@ def _place_sidereal(sky: TargetSky, grid: NightGrid, blocks: list[Block], left_o
     target = sky.target
     valid = sky.valid
     steps = int(math.ceil(target.duration_s / grid.step_s))
+    if sky.az_deg is None or sky.el_deg is None:  # valid nowhere: nothing to place
+        left_out.append({"target": target.name,
+                         "reason": _why_not(sky, grid, np.zeros(len(valid), bool), blocks,
+                                            steps, 0)})
+        return
     # ok[i]: a block starting at grid index i has every grid point from i-1 to i+steps+1 valid
     n = len(valid)
     padded = np.r_[False, valid, False]
@@ -326,7 +331,7 @@ def _why_not(sky: TargetSky, grid: NightGrid, ok: np.ndarray, blocks: list[Block
              "sun_zone": "out of the Sun's exclusion zone",
              "moon_separation": f"{sky.target.moon_min_sep_deg:g}° from the Moon",
              "window": "inside its time window"}
-    never = [names[k] for k, mask in sky.checks.items() if not mask.any()]
+    never = [names[k] for k in sky.never]
     if never:
         return "never " + " nor ".join(never) + " during the night"
     if not ok.any():

@@ -33,10 +33,13 @@ from virtualstar.astro.bodies import DARK_SUN_EL_DEG, satellite_sunlit
 from .exceptions import ProgramError
 from .program import ProgramTarget
 
-__all__ = ["NightGrid", "TargetSky", "night_window", "target_skies"]
+__all__ = ["SUNSET_SUN_EL_DEG", "NightGrid", "TargetSky", "night_window", "target_skies"]
 
 DEFAULT_STEP_S = 60.0
 SCAN_STEP_S = 10.0  # satellites: the step of the search for passes above min_el
+#: Sidereal targets observed together (ERFA's per-time work is shared by all the chunks);
+#: their arrays, not the whole program's, are what a plan holds at once.
+STARS_PER_CHUNK = 256
 
 
 @dataclass(frozen=True)
@@ -77,23 +80,46 @@ class NightGrid:
 
 @dataclass(frozen=True)
 class TargetSky:
-    """A target's observed place on the grid, and which constraints hold there (masks)."""
+    """A target's observed place on the grid and where its constraints hold.
+
+    `valid`: every constraint holds (mask over the grid); `never`: the constraints that hold
+    at no grid point. The place (degrees, float32: 0.1″ is plenty for a plan) is kept only
+    for a target that is valid somewhere: a night of 10 000 targets, most of them never
+    up, stays small (benchmarks/bench_plan_memory.py).
+    """
 
     target: ProgramTarget
-    az_deg: np.ndarray
-    el_deg: np.ndarray
-    checks: dict[str, np.ndarray]  # constraint name -> mask over the grid
+    az_deg: np.ndarray | None
+    el_deg: np.ndarray | None
+    valid: np.ndarray
+    never: tuple[str, ...] = ()
 
-    @property
-    def valid(self) -> np.ndarray:
-        ok = np.ones(self.az_deg.shape, bool)
-        for mask in self.checks.values():
-            ok &= mask
-        return ok
+    @classmethod
+    def from_masks(cls, target: ProgramTarget, az_deg: np.ndarray, el_deg: np.ndarray,
+                   checks: dict[str, np.ndarray]) -> TargetSky:
+        """Reduce {constraint: mask} to `valid` and `never`; keep the place if ever valid."""
+        valid = np.ones(az_deg.shape, bool)
+        for mask in checks.values():
+            valid &= mask
+        never = tuple(name for name, mask in checks.items() if not mask.any())
+        if not valid.any():
+            return cls(target, None, None, valid, never)
+        return cls(target, az_deg.astype(np.float32), el_deg.astype(np.float32), valid, never)
+
+
+#: Sunset and sunrise: the Sun's upper limb on the horizon with standard refraction, i.e. its
+#: centre's geometric elevation at −(16′ semi-diameter + 34′ refraction) (USNO, skyfield's
+#: almanac). The site's own refraction model is not used for it: at the horizon no model
+#: is good to a few arcminutes, and the almanac's sunset is the one people compare with.
+SUNSET_SUN_EL_DEG = -50.0 / 60.0
 
 
 def night_window(date_text: str, site: Site, eop: EarthOrientation) -> tuple[int, int]:
-    """Return (sunset, sunrise) in µs of the night that begins on a local calendar date."""
+    """Return (sunset, sunrise) in µs of the night that begins on a local calendar date.
+
+    Sunset and sunrise as in the almanacs: SUNSET_SUN_EL_DEG (the upper limb touching the
+    horizon through standard refraction), for a sea-level horizon (no dip for the height).
+    """
     try:
         day = UtcTimes.from_iso([f"{date_text}T12:00:00Z"])
     except Exception as exc:
@@ -105,7 +131,8 @@ def night_window(date_text: str, site: Site, eop: EarthOrientation) -> tuple[int
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        events = find_events(SolarSystemBody("sun"), site, noon, 36 * 3600.0, eop=eop)
+        events = find_events(SolarSystemBody("sun"), site.without_refraction(), noon,
+                             36 * 3600.0, horizon_deg=SUNSET_SUN_EL_DEG, eop=eop)
     sets = [e for e in events if e.kind == "set"]
     if not sets:
         raise ProgramError(f"--night {date_text}: the Sun does not set at this site (polar "
@@ -179,20 +206,24 @@ def target_skies(targets: list[ProgramTarget], grid: NightGrid, site: Site,
     from virtualstar.astro.stars import observe_stars
 
     objects = [_sky_object(t) for t in targets]
+    out: list[TargetSky | None] = [None] * len(targets)
+
+    def keep(k: int, az_rad: np.ndarray, el_rad: np.ndarray) -> None:
+        az, el = np.degrees(az_rad) % 360.0, np.degrees(el_rad)
+        out[k] = TargetSky.from_masks(targets[k], az, el,
+                                      constraint_masks(targets[k], az, el, grid, zones))
+
     stars = [k for k, obj in enumerate(objects) if isinstance(obj, IcrsStar)]
-    places: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    if stars:
-        az, el = observe_stars([objects[k] for k in stars], grid.times, site, eop)
-        places.update({k: (az[i], el[i]) for i, k in enumerate(stars)})
+    for first in range(0, len(stars), STARS_PER_CHUNK):  # memory: one chunk's arrays at a time
+        chunk = stars[first:first + STARS_PER_CHUNK]
+        az, el = observe_stars([objects[k] for k in chunk], grid.times, site, eop)
+        for i, k in enumerate(chunk):
+            keep(k, az[i], el[i])
     for k, obj in enumerate(objects):
-        if k not in places:
+        if out[k] is None:
             obs = observe_mount_times(obj, grid.t_us, site, eop)
-            places[k] = (obs.az_rad, obs.el_rad)
-    out = []
-    for k, target in enumerate(targets):
-        az, el = np.degrees(places[k][0]) % 360.0, np.degrees(places[k][1])
-        out.append(TargetSky(target, az, el, constraint_masks(target, az, el, grid, zones)))
-    return out
+            keep(k, obs.az_rad, obs.el_rad)
+    return [sky for sky in out if sky is not None]
 
 
 def constraint_masks(target: ProgramTarget, az: np.ndarray, el: np.ndarray, grid: NightGrid,

@@ -20,6 +20,7 @@ import pyarrow.parquet as pq
 
 from astcom_client.events import Event
 
+from .damage import Damage, short_error, warn_damaged
 from .exceptions import StoreError
 
 __all__ = ["EventJournal", "read_events"]
@@ -61,17 +62,22 @@ class EventJournal:
         journal = self.path / JOURNAL
         if not journal.exists():
             return
-        mine, others = [], []
-        for line in journal.read_text().splitlines():
+        docs, others = [], []
+        for line in journal.read_bytes().split(b"\n"):
             if not line.strip():
                 continue
             try:
-                doc = json.loads(line)
+                doc = json.loads(line.decode("utf-8"))
+                if not isinstance(doc, dict):
+                    raise ValueError("not an event")
             except ValueError:
-                continue  # a line cut by a crash
-            (mine if doc.get("session") == self.session else others).append(line)
-        if mine:
-            docs = [json.loads(x) for x in mine]
+                others.append(line)  # cut by a crash, or damaged: kept, never dropped
+                continue
+            if doc.get("session") == self.session:
+                docs.append(doc)
+            else:
+                others.append(line)
+        if docs:
             (self.path / "events").mkdir(exist_ok=True)
             table = pa.Table.from_pylist([{
                 "seq": d["seq"], "t_us": d["t_us"], "source": d["source"], "level": d["level"],
@@ -83,25 +89,48 @@ class EventJournal:
             os.replace(tmp, final)
         if others:
             tmp = journal.with_suffix(".jsonl.tmp")
-            tmp.write_text("".join(x + "\n" for x in others))
+            tmp.write_bytes(b"".join(x + b"\n" for x in others))
             os.replace(tmp, journal)
         else:
             journal.unlink()
 
 
 def read_events(path: Path) -> list[Event]:
-    """Return every event of the store at `path`, ordered by mount time then sequence."""
+    """Return every event of the store at `path`, ordered by mount time then sequence.
+
+    Needs no sample file. A damaged events/<session>.parquet is skipped, and unreadable
+    journal lines beyond the one a crash may cut are counted, each with a
+    DamagedFileWarning naming the file.
+    """
     out: list[Event] = []
     for f in sorted((Path(path) / "events").glob("*.parquet")):
-        for row in pq.read_table(f).to_pylist():
-            out.append(Event(row["t_us"], row["source"], row["level"], row["kind"],
-                             row["message"], json.loads(row["fields"] or "{}"), row["seq"]))
+        try:
+            rows = pq.read_table(f).to_pylist()
+            out += [Event(int(row["t_us"]), row["source"], row["level"], row["kind"],
+                          row["message"], json.loads(row["fields"] or "{}"), int(row["seq"]))
+                    for row in rows]
+        except (OSError, pa.ArrowException, ValueError, KeyError, TypeError) as exc:
+            warn_damaged(Damage(f, short_error(exc)), Path(path), "its events are skipped")
     journal = Path(path) / JOURNAL
     if journal.exists():
-        for line in journal.read_text().splitlines():
-            try:
-                out.append(Event.from_dict(json.loads(line)))
-            except (ValueError, KeyError):
-                continue  # a line cut by a crash
+        lines = journal.read_bytes().split(b"\n")
+        bad = 0
+        for i, line in enumerate(lines):
+            event = _event_of(line)
+            if event is not None:
+                out.append(event)
+            elif line.strip() and i < len(lines) - 1:
+                bad += 1  # an unterminated last line is one a crash cut: not damage
+        if bad:
+            warn_damaged(Damage(journal, f"{bad} unreadable line(s)"), Path(path),
+                         "those lines are skipped")
     out.sort(key=lambda e: (e.t_us, e.source, e.seq))
     return out
+
+
+def _event_of(line: bytes) -> Event | None:
+    """Return the event of one journal line, or None when it is not one."""
+    try:
+        return Event.from_dict(json.loads(line.decode("utf-8")))
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return None

@@ -20,7 +20,7 @@ import contextlib
 import csv
 import fcntl
 import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,15 +28,18 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from .damage import DAMAGED_SUFFIX, is_torn_tail, short_error
 from .decimation import envelope, merge_envelope
 from .exceptions import StoreError
 
 __all__ = ["CRASH_REASON", "GAP_FIELDS", "JOURNAL_SUFFIX", "LOCK_NAME", "HourJournal", "RecoveryReport", "WriterLock",
-           "finalize_journal", "live_writer_pid", "recover"]
+           "append_gap", "finalize_journal", "hour_of", "hour_span_us", "live_writer_pid", "recover",
+           "session_of", "write_hour_files"]
 
 JOURNAL_SUFFIX = ".arrows.inprogress"
 LOCK_NAME = "writer.lock"
 CRASH_REASON = "recorder died"
+HOUR_US = 3_600_000_000
 GAP_FIELDS = ["after_t_us", "before_t_us", "lost_samples", "reason", "session"]
 _IPC_OPTIONS = pa.ipc.IpcWriteOptions(compression="lz4")
 
@@ -125,24 +128,46 @@ class HourJournal:
         self._file.close()
 
 
-def read_journal(path: Path) -> Iterator[pa.RecordBatch]:
-    """Yield every complete batch of a journal, stopping quietly at a torn last one."""
+@dataclass
+class JournalEnd:
+    """How reading a journal ended: `problem` is None at its end or at a torn last batch
+    (a writer that died), else what is wrong with the bytes after `good_bytes`."""
+
+    good_bytes: int = 0
+    size_bytes: int = 0
+    problem: str | None = None
+
+
+def read_journal(path: Path, end: JournalEnd | None = None) -> Iterator[pa.RecordBatch]:
+    """Yield every complete batch of a journal, stopping at a torn last one or at damage.
+
+    `end`, when given, is filled in with how the reading ended (JournalEnd).
+    """
+    end = end if end is not None else JournalEnd()
     try:
         source = pa.OSFile(str(path))  # read batch by batch: memory stays one batch
     except OSError as exc:
         raise StoreError(f"cannot read {path}: {exc}") from None
     with source:
+        end.size_bytes = source.size()
         try:
             reader = pa.ipc.open_stream(source)
-        except (pa.ArrowInvalid, OSError):
-            return  # killed before the schema was complete: nothing to recover
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            # killed before the schema was complete: nothing to recover; else damage
+            end.problem = None if is_torn_tail(exc) else f"its schema: {short_error(exc)}"
+            return
         while True:
+            end.good_bytes = source.tell()
             try:
                 batch = reader.read_next_batch()
             except StopIteration:
                 return
-            except (pa.ArrowInvalid, OSError):
-                return  # the batch being written when the writer died
+            except (pa.ArrowException, OSError, ValueError) as exc:
+                # the batch being written when the writer died, or bytes that are wrong
+                if not is_torn_tail(exc):
+                    end.problem = (f"unreadable after byte {end.good_bytes} of "
+                                   f"{end.size_bytes}: {short_error(exc)}")
+                return
             yield batch
 
 
@@ -154,6 +179,8 @@ class FinalizedHour:
     first_t_us: int | None = None
     last_t_us: int | None = None
     files: list[Path] = field(default_factory=list)
+    damaged: Path | None = None  # the journal moved aside (.damaged), when it was damaged
+    problem: str | None = None  # what was wrong with it
 
 
 def finalize_journal(journal: Path, samples_final: Path, overview_final: Path, *,
@@ -163,8 +190,28 @@ def finalize_journal(journal: Path, samples_final: Path, overview_final: Path, *
 
     Row groups of `row_group_rows`; memory stays within one row group. Each file is written
     under a temporary name, fsynced and renamed, so a crash here leaves the journal, which a
-    later `recover` finalizes again.
+    later `recover` finalizes again. A damaged journal (bytes that are wrong, not a torn
+    last batch) gives its batches before the damage, and is moved aside as
+    ``<name>.damaged`` instead of removed (`done.damaged`, `done.problem`).
     """
+    end = JournalEnd()
+    done = write_hour_files(read_journal(journal, end), samples_final, overview_final,
+                            row_group_rows=row_group_rows, zstd_level=zstd_level,
+                            overview_bucket_us=overview_bucket_us)
+    if end.problem is None:
+        journal.unlink(missing_ok=True)
+    else:  # evidence: never deleted
+        done.damaged = journal.with_name(journal.name + DAMAGED_SUFFIX)
+        done.problem = end.problem
+        os.replace(journal, done.damaged)
+    return done
+
+
+def write_hour_files(batches: Iterable[pa.RecordBatch], samples_final: Path,
+                     overview_final: Path, *, row_group_rows: int, zstd_level: int,
+                     overview_bucket_us: int) -> FinalizedHour:
+    """Write an hour's samples (`batches`, in time order) as its Parquet file and 1-s
+    overview, each under a temporary name then renamed; nothing when there are no rows."""
     done = FinalizedHour()
     pending: list[pa.RecordBatch] = []
     pending_rows = 0
@@ -188,7 +235,7 @@ def finalize_journal(journal: Path, samples_final: Path, overview_final: Path, *
         done.last_t_us = int(t[-1])
 
     schema = None
-    for batch in read_journal(journal):
+    for batch in batches:
         schema = batch.schema
         if batch.num_rows == 0:
             continue
@@ -198,15 +245,12 @@ def finalize_journal(journal: Path, samples_final: Path, overview_final: Path, *
             write_group()
     if pending:
         write_group()
-    if writer is None:
-        journal.unlink(missing_ok=True)
-        return done
-    writer.close()
-    _fsync_and_rename(temp, samples_final)
-    done.files.append(samples_final)
-    assert schema is not None
-    _write_overview(merge_envelope(overview_parts), schema, overview_final, zstd_level)
-    journal.unlink(missing_ok=True)
+    if writer is not None:
+        writer.close()
+        _fsync_and_rename(temp, samples_final)
+        done.files.append(samples_final)
+        assert schema is not None
+        _write_overview(merge_envelope(overview_parts), schema, overview_final, zstd_level)
     return done
 
 
@@ -273,16 +317,21 @@ class RecoveryReport:
     rows: int = 0
     last_t_us: int | None = None
     unreadable: list[Path] = field(default_factory=list)
+    #: damaged files moved aside (<name>.damaged) with what was wrong, each also a gap
+    damaged: list[tuple[Path, str]] = field(default_factory=list)
 
     def __str__(self) -> str:
         where = (f", the last sample at t_us {self.last_t_us}" if self.last_t_us is not None
                  else "")
         text = (f"recovered {self.store}: its recorder died; {len(self.journals)} unfinished "
                 f"hour file(s) finalized, {self.rows} samples kept{where}; the crash is "
-                "recorded as a gap")
+                "recorded as a gap" if self.journals else f"recovered {self.store}")
         if self.unreadable:
             text += ("; unreadable (written by an older recorder, no journal): "
                      + ", ".join(p.name for p in self.unreadable))
+        for moved, problem in self.damaged:
+            text += (f"; DAMAGED {moved.name.removesuffix(DAMAGED_SUFFIX)} ({problem}): "
+                     f"moved aside as {moved.name}, its loss recorded as a gap")
         return text
 
 
@@ -312,7 +361,16 @@ def recover(store: Path, *, row_group_rows: int, zstd_level: int, overview_bucke
                                     overview_bucket_us=overview_bucket_us)
             report.journals.append(journal)
             report.rows += done.rows
-            session = stem.split("-", 1)[1] if "-" in stem else ""
+            session = session_of(journal)
+            if done.damaged is not None:
+                assert done.problem is not None
+                report.damaged.append((done.damaged, done.problem))
+                # after the last sample kept (or the hour's start): what followed is lost
+                after = (done.last_t_us if done.last_t_us is not None
+                         else hour_span_us(journal)[0])
+                append_gap(store, [after, -1, -1, f"damaged: samples/{journal.name} "
+                                    f"({done.problem}); moved aside as {done.damaged.name}",
+                                    session])
             if done.last_t_us is not None:
                 sessions[session] = max(sessions.get(session, done.last_t_us), done.last_t_us)
                 report.last_t_us = max(report.last_t_us or done.last_t_us, done.last_t_us)
@@ -323,14 +381,39 @@ def recover(store: Path, *, row_group_rows: int, zstd_level: int, overview_bucke
         for session, last in sessions.items():
             # after_t_us: the last sample kept; before_t_us unknown (-1): nothing was received
             # after it by this session
-            _append_gap(store, [last, -1, -1, CRASH_REASON, session])
+            append_gap(store, [last, -1, -1, CRASH_REASON, session])
         return report
     finally:
         if hold_lock is None:
             lock.release()
 
 
-def _append_gap(store: Path, row: list[object]) -> None:
+def hour_of(path: Path) -> int | None:
+    """Return the mount-time hour (hours since 1970) in an hour file's name
+    (<YYYYmmddTHHZ>-<session>...), None if it has none."""
+    import datetime as dt
+
+    try:
+        when = dt.datetime.strptime(path.name[:12], "%Y%m%dT%HZ").replace(tzinfo=dt.UTC)
+    except ValueError:
+        return None
+    return int(when.timestamp()) // 3600
+
+
+def hour_span_us(path: Path) -> tuple[int, int]:
+    """Return [start, end) µs of the hour in a file's name, (-1, -1) if it names none."""
+    hour = hour_of(path)
+    return (hour * HOUR_US, (hour + 1) * HOUR_US) if hour is not None else (-1, -1)
+
+
+def session_of(path: Path) -> str:
+    """Return the session in an hour file's name (<hour>-<session>[-part].<suffixes>)."""
+    stem = path.name.split(".", 1)[0]
+    return stem.split("-", 1)[1] if "-" in stem else ""
+
+
+def append_gap(store: Path, row: list[object]) -> None:
+    """Append one row (GAP_FIELDS) to the store's gaps.csv, with the header when new."""
     path = store / "gaps.csv"
     new = not path.exists()
     with path.open("a", newline="") as f:

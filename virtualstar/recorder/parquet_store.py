@@ -26,6 +26,7 @@ import csv
 import json
 import os
 import time
+import warnings
 from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
@@ -37,20 +38,34 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
 from .background import BackgroundWriter, new_session_id
+from .damage import (
+    Damage,
+    DamagedFileWarning,
+    damaged_reason,
+    footer_problem,
+    row_group_span,
+    short_error,
+    warn_damaged,
+)
 from .decimation import Envelope, envelope, rebucket
 from .event_store import EventJournal, read_events
 from .exceptions import EmptyStore, QueryError, StoreError
 from .parquet_journal import (
     GAP_FIELDS,
+    HOUR_US,
     JOURNAL_SUFFIX,
     HourJournal,
     RecoveryReport,
     WriterLock,
     finalize_journal,
+    hour_of,
+    hour_span_us,
     live_writer_pid,
     recover,
+    session_of,
 )
-from .samples import Gap, SampleBlock, SignalInfo
+from .samples import UNKNOWN_LOST, Gap, SampleBlock, SignalInfo
+from .timeparse import utc_text
 
 __all__ = [
     "DEFAULT_FLUSH_INTERVAL_S",
@@ -60,12 +75,12 @@ __all__ = [
     "ParquetStoreReader",
     "ParquetStoreWriter",
     "recover_store",
+    "utc_text",
 ]
 
 PARQUET_FORMAT = "virtualstar-recorder/1"
 DEFAULT_ROW_GROUP_ROWS = 1 << 16  # ≈ 65 s at 1 kHz: big enough for zstd (+0.4 % vs 4×), fast 2-s queries
 DEFAULT_ZSTD_LEVEL = 3
-HOUR_US = 3_600_000_000
 OVERVIEW_BUCKET_US = 1_000_000
 MAX_PENDING_FLUSHES = 2  # row groups handed to the writer thread before `write` waits
 DEFAULT_FLUSH_INTERVAL_S = 1.0  # wall seconds: at most this much is lost to a crash
@@ -75,9 +90,6 @@ def _hour_label(hour: int) -> str:
     return datetime.fromtimestamp(hour * 3600, UTC).strftime("%Y%m%dT%HZ")
 
 
-def _utc_text(t_us: int) -> str:
-    return datetime.fromtimestamp(t_us / 1e6, UTC).isoformat(timespec="microseconds").replace(
-        "+00:00", "Z")
 
 
 class ParquetStoreWriter:
@@ -130,11 +142,17 @@ class ParquetStoreWriter:
         except OSError as exc:
             raise StoreError(f"cannot create the store directory {self.path}: {exc.strerror}") from None
         self._lock.acquire()
-        self.recovered = recover(self.path, row_group_rows=self.row_group_rows,
-                                 zstd_level=self.zstd_level, overview_bucket_us=OVERVIEW_BUCKET_US,
-                                 hold_lock=self._lock)
-        meta = _read_meta(self.path)
-        known = {s["name"]: s for s in meta.get("signals", [])}
+        try:
+            self.recovered = recover(self.path, row_group_rows=self.row_group_rows,
+                                     zstd_level=self.zstd_level,
+                                     overview_bucket_us=OVERVIEW_BUCKET_US, hold_lock=self._lock)
+            meta = _read_meta(self.path)
+            known = _known_signals(meta, self.path)
+        except (StoreError, OSError) as exc:
+            self._lock.release()
+            if isinstance(exc, StoreError):
+                raise
+            raise StoreError(f"cannot recover {self.path} before recording: {exc}") from None
         for s in self.signals:
             old = known.get(s.name)
             if old is not None and old.get("dtype") != s.dtype:
@@ -293,13 +311,40 @@ def recover_store(path: str | Path) -> RecoveryReport | None:
 
 
 def _read_meta(path: Path) -> dict[str, Any]:
+    """Return recording.json ({} when there is none); raise StoreError naming it, with
+    what is wrong, when it is damaged (cut short, not JSON, not an object)."""
     meta_path = path / "recording.json"
     if not meta_path.exists():
         return {}
     try:
-        return json.loads(meta_path.read_text())
-    except (OSError, ValueError) as exc:
-        raise StoreError(f"{meta_path} is not readable JSON: {exc}") from None
+        raw = meta_path.read_bytes()
+    except OSError as exc:
+        raise StoreError(f"cannot read {meta_path}: {exc.strerror}") from None
+    try:
+        meta = json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise StoreError(f"{meta_path} is damaged: not UTF-8 text (byte {exc.start} of "
+                         f"{len(raw)})") from None
+    except ValueError as exc:
+        cut = " (cut short?)" if getattr(exc, "pos", -1) >= len(raw.rstrip()) else ""
+        raise StoreError(f"{meta_path} is damaged: not valid JSON{cut}: {exc}") from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("signals", []), list) \
+            or not isinstance(meta.get("sessions", []), list):
+        raise StoreError(f"{meta_path} is damaged: expected an object with 'signals' and "
+                         "'sessions' lists")
+    return meta
+
+
+def _known_signals(meta: dict[str, Any], path: Path) -> dict[str, dict[str, Any]]:
+    """Return recording.json's signals by name; StoreError when an entry is not a signal."""
+    try:
+        known = {str(d["name"]): dict(d) for d in meta.get("signals", [])}
+        for d in known.values():
+            pa.from_numpy_dtype(np.dtype(str(d.get("dtype", "float64"))))
+        return known
+    except (KeyError, TypeError, ValueError, pa.ArrowException):
+        raise StoreError(f"{path / 'recording.json'} is damaged: a 'signals' entry without a "
+                         "name or with an unknown dtype") from None
 
 
 def _write_meta(path: Path, meta: dict[str, Any]) -> None:
@@ -318,18 +363,48 @@ class ParquetStoreReader:
         self.path = Path(path)
         if not self.path.is_dir():
             raise EmptyStore(f"store directory {self.path} does not exist")
+        #: Damaged files (or row groups) met so far: each is warned about once
+        #: (DamagedFileWarning), skipped, and reported by gaps() as a gap.
+        self.damaged: list[Damage] = []
         # A recorder that died left its hour in progress as a journal: finish it now (once;
         # `recovered` says what was done). A live recorder's journal is its own.
         self.recovered = recover_store(self.path) if recover_crashed else None
         self.writer_pid = live_writer_pid(self.path)
-        self.meta = _read_meta(self.path)
-        self.sample_files = sorted((self.path / "samples").glob("*.parquet"))
-        self.overview_files = sorted((self.path / "overview").glob("*.parquet"))
+        try:
+            self.meta = _read_meta(self.path)
+            _known_signals(self.meta, self.path)
+        except StoreError as exc:  # the samples say what they are without it
+            warnings.warn(f"{exc}; the signals are read from the sample files instead",
+                          DamagedFileWarning, stacklevel=2)
+            self.meta = {}
+        found = sorted((self.path / "samples").glob("*.parquet"))
+        self.sample_files = [f for f in found if self._footer_ok(f, "its hour is skipped")]
+        damaged_stems = {d.path.stem for d in self.damaged}
+        self.overview_files = [
+            f for f in sorted((self.path / "overview").glob("*.parquet"))
+            if f.stem not in damaged_stems and self._footer_ok(f, "the envelope of its hour "
+                                                                   "is computed from the samples")]
         if not self.sample_files:
             hint = (f" (a recording, PID {self.writer_pid}, is writing it: its hour in progress "
                     "becomes readable when the hour ends)" if self.writer_pid else "")
+            if self.damaged:
+                raise EmptyStore(f"{self.path} holds no readable sample files (damaged: "
+                                 f"{', '.join(d.path.name for d in self.damaged)}){hint}")
             raise EmptyStore(f"{self.path} holds no sample files (samples/*.parquet){hint}")
         self._signals: list[SignalInfo] | None = None
+
+    def _footer_ok(self, f: Path, skipped: str) -> bool:
+        """Check a file's Parquet footer; a damaged one is recorded, warned about, and False."""
+        problem = footer_problem(f)
+        if problem is None:
+            return True
+        self._damaged(Damage(f, problem, *hour_span_us(f)), skipped)
+        return False
+
+    def _damaged(self, damage: Damage, skipped: str) -> None:
+        if all((d.path, d.problem) != (damage.path, damage.problem) for d in self.damaged):
+            self.damaged.append(damage)
+            warn_damaged(damage, self.path, skipped)
 
     def _read_schema(self, files: list[Path]) -> pa.Schema:
         try:
@@ -350,8 +425,9 @@ class ParquetStoreReader:
         if self._signals is None:
             listed = self.meta.get("signals")
             if listed:
-                self._signals = [SignalInfo(d["name"], d.get("unit", ""), d.get("dtype", "float64"))
-                                 for d in listed]
+                self._signals = [SignalInfo(str(d["name"]), str(d.get("unit", "")),
+                                            str(d.get("dtype", "float64")))
+                                 for d in _known_signals(self.meta, self.path).values()]
             else:  # no recording.json: ask the files themselves
                 self._signals = [
                     SignalInfo(f.name, (f.metadata or {}).get(b"unit", b"").decode(),
@@ -363,7 +439,7 @@ class ParquetStoreReader:
         """Return the files whose hour (from their name) overlaps [from, to)."""
         keep = []
         for f in files:
-            hour = _hour_of(f)
+            hour = hour_of(f)
             if hour is None or (hour * HOUR_US < to_t_us and (hour + 1) * HOUR_US > from_t_us):
                 keep.append(f)
         return keep
@@ -371,10 +447,10 @@ class ParquetStoreReader:
     def time_range(self) -> tuple[int, int]:
         """Return (first, last) sample time in the store, µs."""
         lo, hi = None, None
-        hours = [h for h in map(_hour_of, self.sample_files) if h is not None]
+        hours = [h for h in map(hour_of, self.sample_files) if h is not None]
         ends = ({min(hours), max(hours)} if len(hours) == len(self.sample_files) else None)
         for f in self.sample_files:
-            if ends is not None and _hour_of(f) not in ends:
+            if ends is not None and hour_of(f) not in ends:
                 continue  # an hourly file lies between the first and the last hour's
             md = pq.ParquetFile(f).metadata
             for i in range(md.num_row_groups):
@@ -404,10 +480,8 @@ class ParquetStoreReader:
     def window(self, from_t_us: int, to_t_us: int, names: list[str] | None = None) -> SampleBlock:
         """Return every sample with from_t_us <= t_us < to_t_us, sorted by time."""
         names = self._names(names)
-        flt = (ds.field("t_us") >= from_t_us) & (ds.field("t_us") < to_t_us)
         files = self._files(self.sample_files, from_t_us, to_t_us)
-        dataset = ds.dataset([str(f) for f in files], schema=self.schema, format="parquet")
-        table = dataset.to_table(columns=["t_us", *names], filter=flt)
+        table = self._read_window(files, ["t_us", *names], from_t_us, to_t_us)
         t = table.column("t_us").to_numpy()
         cols = {n: table.column(n).to_numpy(zero_copy_only=False) for n in names}
         if len(t) > 1 and np.any(np.diff(t) < 0):
@@ -415,6 +489,43 @@ class ParquetStoreReader:
             t = t[order]
             cols = {n: v[order] for n, v in cols.items()}
         return SampleBlock(t, cols)
+
+    def _read_window(self, files: list[Path], columns: list[str], from_t_us: int,
+                     to_t_us: int) -> pa.Table:
+        """Read [from, to) of `files`: all at once, or, when a file turns out damaged,
+        row group by row group, skipping (and naming) the ones that cannot be read."""
+        flt = (ds.field("t_us") >= from_t_us) & (ds.field("t_us") < to_t_us)
+        try:
+            dataset = ds.dataset([str(f) for f in files], schema=self.schema, format="parquet")
+            return dataset.to_table(columns=columns, filter=flt)
+        except (OSError, pa.ArrowException, ValueError):
+            pass  # some file is damaged inside: find it below
+        parts = [self.schema.empty_table().select(columns)]
+        for f in files:
+            for i, group in self._row_groups(f, from_t_us, to_t_us):
+                try:
+                    table = group.read_row_group(i, columns=[c for c in columns
+                                                             if c in group.schema_arrow.names])
+                except (OSError, pa.ArrowException, ValueError) as exc:
+                    lo, hi = row_group_span(group, i)
+                    self._damaged(Damage(f, f"row group {i}: {short_error(exc)}", lo, hi),
+                                  "that row group is skipped")
+                    continue
+                t = table.column("t_us").to_numpy()
+                keep = (t >= from_t_us) & (t < to_t_us)
+                table = table.filter(pa.array(keep))
+                parts.append(pa.table({c: (table.column(c) if c in table.column_names
+                                           else pa.nulls(table.num_rows, self.schema.field(c).type))
+                                       for c in columns}).cast(parts[0].schema))
+        return pa.concat_tables(parts)
+
+    def _row_groups(self, f: Path, from_t_us: int, to_t_us: int):
+        """Yield (index, ParquetFile) of the row groups of `f` that may hold [from, to)."""
+        group = pq.ParquetFile(f)
+        for i in range(group.metadata.num_row_groups):
+            lo, hi = row_group_span(group, i)
+            if lo == -1 or (lo < to_t_us and hi >= from_t_us):
+                yield i, group
 
     def envelope(self, from_t_us: int, to_t_us: int, names: list[str] | None = None,
                  buckets: int = 2000) -> Envelope:
@@ -438,10 +549,17 @@ class ParquetStoreReader:
         if not ov_files:
             return rebucket(envelope(np.empty(0, np.int64), {n: np.empty(0) for n in names},
                                      OVERVIEW_BUCKET_US), bucket_us)
-        ov = ds.dataset([str(f) for f in ov_files], format="parquet")
         lo = from_t_us // OVERVIEW_BUCKET_US * OVERVIEW_BUCKET_US
-        table = ov.to_table(columns=cols, filter=(ds.field("t_us") >= lo)
-                            & (ds.field("t_us") < to_t_us))
+        try:
+            ov = ds.dataset([str(f) for f in ov_files], format="parquet")
+            table = ov.to_table(columns=cols, filter=(ds.field("t_us") >= lo)
+                                & (ds.field("t_us") < to_t_us))
+        except (OSError, pa.ArrowException, ValueError) as exc:
+            # a damaged overview: the samples give the same envelope, only slower
+            self._damaged(Damage(ov_files[0].parent, f"an overview file cannot be read: {exc}"),
+                          "the envelope is computed from the samples")
+            block = self.window(from_t_us, to_t_us, names)
+            return envelope(block.t_us, block.columns, bucket_us, from_t_us)
         fine = Envelope(OVERVIEW_BUCKET_US, table.column("t_us").to_numpy(),
                         table.column("n").to_numpy(),
                         {n: table.column(f"{n}__min").to_numpy() for n in names},
@@ -449,13 +567,31 @@ class ParquetStoreReader:
         return rebucket(fine, bucket_us, lo)
 
     def gaps(self) -> list[Gap]:
-        """Return every recorded gap, in file order."""
+        """Return every recorded gap, in file order, then one per damaged file or row group
+        met so far (reason "damaged: ...", lost_samples -1, the stretch it may have held).
+
+        Rows of gaps.csv that cannot be read are skipped with a DamagedFileWarning.
+        """
+        out = []
         path = self.path / "gaps.csv"
-        if not path.exists():
-            return []
-        with path.open(newline="") as f:
-            return [Gap(int(r["after_t_us"]), int(r["before_t_us"]), int(r["lost_samples"]),
-                        r["reason"], r["session"]) for r in csv.DictReader(f)]
+        if path.exists():
+            text = path.read_bytes().decode("utf-8", errors="replace")
+            bad = 0
+            for row in csv.reader(text.splitlines()):
+                if row == GAP_FIELDS or not row:
+                    continue
+                try:
+                    after, before, lost, reason, session = row
+                    out.append(Gap(int(after), int(before), int(lost), reason, session))
+                except ValueError:  # a wrong number of fields, or not numbers
+                    bad += 1
+            if bad:
+                self._damaged(Damage(path, f"{bad} unreadable row(s)"), "those rows are skipped")
+        for d in self.damaged:
+            if d.path.parent.name == "samples":
+                out.append(Gap(d.from_t_us, d.to_t_us, UNKNOWN_LOST, damaged_reason(d, self.path),
+                               session_of(d.path)))
+        return out
 
     def events(self) -> list:
         """Return the store's structured events (astcom_client.events.Event), by time."""
@@ -469,24 +605,29 @@ class ParquetStoreReader:
         for f in files:
             pf = pq.ParquetFile(f)
             present = [n for n in names if n in pf.schema_arrow.names]
-            for batch in pf.iter_batches(batch_size=batch_rows, columns=["t_us", *present]):
-                t = batch.column("t_us").to_numpy()
-                cols = {}
-                for n in names:
-                    if n in present:
-                        cols[n] = batch.column(n).to_numpy(zero_copy_only=False)
-                    else:
-                        cols[n] = np.full(len(t), np.nan)
-                yield SampleBlock(t, cols)
+            for i in range(pf.metadata.num_row_groups):
+                try:
+                    group = pf.read_row_group(i, columns=["t_us", *present])
+                except (OSError, pa.ArrowException, ValueError) as exc:
+                    lo, hi = row_group_span(pf, i)
+                    self._damaged(Damage(f, f"row group {i}: {short_error(exc)}", lo, hi),
+                                  "that row group is skipped")
+                    continue
+                yield from self._blocks_of(group, names, present, batch_rows)
 
-
-def _hour_of(path: Path) -> int | None:
-    """Return the mount-time hour (hours since 1970) in a file's name, None if it has none."""
-    try:
-        when = datetime.strptime(path.name[:12], "%Y%m%dT%HZ").replace(tzinfo=UTC)
-    except ValueError:
-        return None
-    return int(when.timestamp()) // 3600
+    @staticmethod
+    def _blocks_of(group: pa.Table, names: list[str], present: list[str],
+                   batch_rows: int) -> Any:
+        """Yield a row group as SampleBlocks of `batch_rows`; absent signals are NaN."""
+        for batch in group.to_batches(max_chunksize=batch_rows):
+            t = batch.column("t_us").to_numpy()
+            cols = {}
+            for n in names:
+                if n in present:
+                    cols[n] = batch.column(n).to_numpy(zero_copy_only=False)
+                else:
+                    cols[n] = np.full(len(t), np.nan)
+            yield SampleBlock(t, cols)
 
 
 def _first_t(path: Path) -> int:
@@ -495,7 +636,3 @@ def _first_t(path: Path) -> int:
         return int(md.row_group(0).column(0).statistics.min)
     return 0
 
-
-def utc_text(t_us: int) -> str:
-    """Return mount time `t_us` as ISO-8601 UTC text with microseconds."""
-    return _utc_text(t_us)

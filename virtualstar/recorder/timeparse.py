@@ -7,7 +7,7 @@ from datetime import UTC, datetime
 
 from .exceptions import QueryError
 
-__all__ = ["parse_time_bound"]
+__all__ = ["parse_time_bound", "utc_text"]
 
 _FORMS = ("expected 'start', 'end', +SECONDS (after the first sample), -SECONDS (before the "
           "last), an ISO-8601 UTC time such as 2026-03-01T20:00:00Z, or mount time in integer µs")
@@ -44,3 +44,9 @@ def parse_time_bound(text: str, start_us: int, end_us: int, *, option: str = "--
         when = when.replace(tzinfo=UTC)
     delta = when - datetime(1970, 1, 1, tzinfo=UTC)
     return (delta.days * 86_400 + delta.seconds) * 1_000_000 + delta.microseconds
+
+
+def utc_text(t_us: int) -> str:
+    """Return mount time `t_us` as ISO-8601 UTC text with microseconds."""
+    return datetime.fromtimestamp(t_us / 1e6, UTC).isoformat(timespec="microseconds").replace(
+        "+00:00", "Z")

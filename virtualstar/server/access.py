@@ -9,6 +9,16 @@ the wire. Roles:
 
 * `observer`: `ping`, `status`, `errors`, `wait`, `program`, `log` and the events (watching);
 * `operator`: everything else — whatever moves the mount or changes the server.
+(Each command's role is in its entry of `commands.COMMANDS`.)
+
+Hostile by assumption: before it authenticates, a connection gets a tiny `Budget`
+(two requests in flight, 4 KiB messages, ten requests a second, `auth_timeout_s` to
+authenticate), and at most `max_unauthenticated` such connections are open at once
+(`max_unauthenticated_per_address` from one address). Authenticated connections get
+a larger budget. A connection whose answers are not read uses up its requests in
+flight and is then no longer read (back-pressure), so it buffers nothing without
+bound. Password attempts are throttled per address and overall (`AuthThrottle`,
+astcom_client/throttle.py) and each wrong one is logged with the address.
 
 Without passwords every connection is an operator; that is allowed on loopback only
 (`check_listen`). Browsers send `Origin` with a WebSocket handshake: pages not served
@@ -21,27 +31,48 @@ page open in the operator's browser cannot drive the telescope.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from astcom_client.auth import MIN_CLIENT_NONCE_BYTES, Authenticator, Role, new_nonce
 from astcom_client.origins import check_allowed_origins, is_loopback_host, origin_refusal
+from astcom_client.throttle import ThrottlePolicy
 
 from .exceptions import BadRequest, Forbidden, Unauthorized
 
-__all__ = ["OBSERVER_COMMANDS", "AccessConfig", "Session", "check_listen", "refuse_origin"]
+__all__ = ["AUTHENTICATED", "UNAUTHENTICATED", "AccessConfig", "AuthAttempt", "Budget",
+           "Session", "check_listen", "refuse_origin"]
 
-OPEN_COMMANDS = frozenset({"ping", "auth"})  # allowed before authenticating
-OBSERVER_COMMANDS = frozenset({"ping", "auth", "status", "errors", "wait", "program", "log"})
 MAX_AUTH_FAILURES = 3  # then the connection is closed
 
 
 @dataclass(frozen=True)
+class Budget:
+    """What one connection may use: requests handled at once, message size, request rate."""
+
+    in_flight: int  # requests being handled or answered at once; beyond, it is not read
+    message_bytes: int  # a larger message closes the connection (WebSocket code 1009)
+    rate_per_s: float | None = None  # requests read per second (None: no limit)
+    burst: int = 0  # ... after a burst of this many
+
+
+UNAUTHENTICATED = Budget(in_flight=2, message_bytes=4096, rate_per_s=10.0, burst=10)
+AUTHENTICATED = Budget(in_flight=64, message_bytes=1 << 20)
+
+
+@dataclass(frozen=True)
 class AccessConfig:
-    """Passwords per role ({"operator": ..., "observer": ...}, None: none) and allowed origins."""
+    """Passwords per role ({"operator": ..., "observer": ...}, None: none), allowed
+    origins, and the limits on connections that have not authenticated."""
 
     passwords: Mapping[str, str] | None = None
     allowed_origins: Sequence[str] | None = None  # None: pages from loopback only
+    throttle: ThrottlePolicy = field(default_factory=ThrottlePolicy)
+    unauthenticated: Budget = UNAUTHENTICATED
+    authenticated: Budget = AUTHENTICATED
+    auth_timeout_s: float = 30.0
+    max_unauthenticated: int = 128
+    max_unauthenticated_per_address: int = 16
 
     def __post_init__(self) -> None:
         try:
@@ -80,6 +111,15 @@ def refuse_origin(origins: list[str], access: AccessConfig) -> str | None:
             "served from loopback only, unless started with --allow-origin ORIGIN")
 
 
+@dataclass(frozen=True)
+class AuthAttempt:
+    """A well-formed `auth` request, not yet checked."""
+
+    client_nonce: bytes
+    mac: bytes
+    requested: Role | None
+
+
 class Session:
     """One connection's authentication state and role."""
 
@@ -95,32 +135,57 @@ class Session:
                 "role": self.role.label if self.role else None}
 
     @property
+    def budget(self) -> Budget:
+        return self.access.authenticated if self.role else self.access.unauthenticated
+
+    @property
     def closed_for_failures(self) -> bool:
         return self.failures >= MAX_AUTH_FAILURES
 
-    def authenticate(self, params: dict[str, Any]) -> dict[str, Any]:
-        """Check an `auth` request; return {"role", "server_proof"}; raise Unauthorized."""
+    def parse_auth(self, params: dict[str, Any]) -> AuthAttempt | None:
+        """Check the layout of an `auth` request; None when the server needs no password.
+
+        Raises BadRequest for a malformed one, Unauthorized once this connection has
+        used up its attempts.
+        """
         if not self.access.required:
-            return {"role": self.role.label, "server_proof": None}
+            return None
         if self.closed_for_failures:  # several auth requests in flight at once: no more guesses
             raise Unauthorized("too many wrong passwords; closing the connection")
         unknown = sorted(set(params) - {"client_nonce", "mac", "role"})
         if unknown:
-            raise BadRequest(f"auth: unknown parameters {unknown}; valid: client_nonce, mac, role")
+            raise BadRequest(f"auth: unknown parameters {unknown[:10]}; valid: client_nonce, "
+                             "mac, role")
+        nonce_hex, mac_hex = params.get("client_nonce", ""), params.get("mac", "")
+        if not isinstance(nonce_hex, str) or not isinstance(mac_hex, str) \
+                or len(nonce_hex) > 512 or len(mac_hex) != 64:
+            raise BadRequest(f"auth: expected a client_nonce of {MIN_CLIENT_NONCE_BYTES} to 256 "
+                             "bytes and a 32-byte HMAC-SHA256 mac, as hex text")
         try:
-            client_nonce = bytes.fromhex(str(params.get("client_nonce", "")))
-            mac = bytes.fromhex(str(params.get("mac", "")))
+            client_nonce, mac = bytes.fromhex(nonce_hex), bytes.fromhex(mac_hex)
         except ValueError:
             raise BadRequest("auth: client_nonce and mac must be hex text") from None
-        if len(client_nonce) < MIN_CLIENT_NONCE_BYTES or len(mac) != 32:
-            raise BadRequest(f"auth: expected a client_nonce of at least {MIN_CLIENT_NONCE_BYTES} "
-                             "bytes and a 32-byte HMAC-SHA256 mac, as hex")
+        if len(client_nonce) < MIN_CLIENT_NONCE_BYTES:
+            raise BadRequest(f"auth: expected a client_nonce of at least "
+                             f"{MIN_CLIENT_NONCE_BYTES} bytes")
         requested = params.get("role")
         if requested not in (None, "observer", "operator"):
-            raise BadRequest(f"auth: role {requested!r}: expected 'observer' or 'operator'")
+            raise BadRequest(f"auth: role {str(requested)[:20]!r}: expected 'observer' or "
+                             "'operator'")
+        return AuthAttempt(client_nonce, mac,
+                           None if requested is None else Role[str(requested).upper()])
+
+    def refused(self, message: str) -> Unauthorized:
+        """Count an attempt refused unchecked (throttled) against this connection."""
+        self.failures += 1
+        return Unauthorized(message + ("; closing the connection"
+                                       if self.closed_for_failures else ""))
+
+    def verify(self, attempt: AuthAttempt) -> dict[str, Any]:
+        """Check the password of `attempt`; return {"role", "server_proof", "nonce"};
+        raise Unauthorized for a wrong one."""
         role, proof = self.access.authenticator.verify(
-            self.nonce, client_nonce, mac,
-            None if requested is None else Role[str(requested).upper()])
+            self.nonce, attempt.client_nonce, attempt.mac, attempt.requested)
         if role == Role.NONE:
             self.failures += 1
             raise Unauthorized("wrong password" + ("; closing the connection"
@@ -129,15 +194,16 @@ class Session:
         self.role = role
         return {"role": role.label, "server_proof": proof.hex(), "nonce": self.nonce.hex()}
 
-    def permit(self, cmd: str) -> None:
-        """Raise Unauthorized/Forbidden when this connection may not send `cmd`."""
-        if self.role == Role.NONE and cmd not in OPEN_COMMANDS:
-            raise Unauthorized(f"{cmd}: authenticate first: this server needs a password "
+    def permit(self, cmd: str, needed: Role, watching: str = "") -> None:
+        """Raise Unauthorized/Forbidden when this connection may not send `cmd` (which
+        needs the role `needed`); `watching` lists what an observer may send."""
+        if self.role >= needed:
+            return
+        if self.role == Role.NONE:
+            raise Unauthorized(f"{cmd[:64]}: authenticate first: this server needs a password "
                                "(vs --password PW, or VS_PASSWORD)")
-        if self.role == Role.OBSERVER and cmd not in OBSERVER_COMMANDS:
-            watching = ", ".join(sorted(OBSERVER_COMMANDS - OPEN_COMMANDS))
-            raise Forbidden(f"{cmd}: the observer role may only watch ({watching}); log in "
-                            "with the operator password to move or configure the telescope")
+        raise Forbidden(f"{cmd}: the observer role may only watch ({watching}); log in with "
+                        "the operator password to move or configure the telescope")
 
     @property
     def may_watch(self) -> bool:

@@ -11,7 +11,12 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["NOT_LOGGED", "QUIET_COMMANDS", "describe"]
+__all__ = ["KEPT_APART", "NOT_LOGGED", "QUIET_COMMANDS", "describe"]
+
+# Kinds any client can cause in numbers keep rings of their own (astcom_client.events):
+# however many connections come and go, or passwords are guessed, the operations,
+# commands, faults, safety actions and modes in the main ring stay.
+KEPT_APART = {"connection": 2000, "auth": 2000}
 
 NOT_LOGGED = frozenset({"heartbeat", "hello"})
 # Read-only commands a panel or `vs watch` sends over and over: logging them would drown

@@ -9,6 +9,7 @@
     ├── NotActive (PermissionError)                 passive          the server is passive: it only watches
     ├── Unauthorized (PermissionError)              unauthorized     no (or a wrong) password: authenticate first
     ├── Forbidden (PermissionError)                 forbidden        the connection's role may not do this (observer)
+    ├── Throttled (PermissionError)                 throttled        a password attempt not checked: too many wrong ones (retry later)
     ├── MountUnavailable (ConnectionError)          mount_offline    no connection to the mount right now
     ├── MountRejected (RuntimeError)                mount_rejected   the mount refused a command (its message)
     ├── MountFault (RuntimeError)                   mount_fault      the mount latched a fault during an operation
@@ -16,9 +17,12 @@
     ├── StaleElements (ValueError)                  stale_tle        TLE too old for the mount time, or the satellite decayed
     ├── InExclusionZone (ValueError)                exclusion_zone   the target or the slew's path is too near the Sun (or Moon)
     ├── NotTracking (RuntimeError)                  not_tracking     a guide pulse needs a sky target being tracked
+    ├── NoCamera (LookupError)                      no_camera        a closed loop needs a guide camera (--camera)
     ├── NotArrived (RuntimeError)                   not_arrived      the mount is not where the target is (how far: in the message)
     ├── TrackingLost (RuntimeError)                 tracking_lost    the mount stopped following the trajectory (buffer underrun)
+    ├── Unsupported (RuntimeError)                  unsupported      the mount's backend cannot do this (its capabilities)
     ├── OperationAborted (RuntimeError)             aborted          stopped by a newer command, a fault or a shutdown
+    │   └── StoppedByClient                         aborted          ended by a client's `stop` (`stopped`: true)
     └── InternalError (RuntimeError)                internal         a bug: reported, the server keeps running
 """
 
@@ -34,12 +38,16 @@ __all__ = [
     "MountRejected",
     "MountUnavailable",
     "NotActive",
+    "NoCamera",
     "NotArrived",
     "NotTracking",
     "OperationAborted",
     "StaleElements",
+    "StoppedByClient",
     "TargetUnreachable",
+    "Throttled",
     "TrackingLost",
+    "Unsupported",
     "Unauthorized",
     "UnknownCommand",
     "VssError",
@@ -116,6 +124,16 @@ class OperationAborted(RuntimeError, VssError):
     code = "aborted"
 
 
+class StoppedByClient(OperationAborted):
+    """An operation ended by a client's `stop`: what an operator asked for, not a failure.
+
+    Its code stays `aborted` (clients know it); `stopped` marks it in the operation's
+    `info.error`, so a panel can tell a deliberate stop from a replacement or a shutdown.
+    """
+
+    stopped = True
+
+
 class StaleElements(ValueError, VssError):
     """A satellite's elements are too far from the mount time to be trusted, or SGP4 failed."""
 
@@ -166,3 +184,21 @@ class NotTracking(RuntimeError, VssError):
     """A guide pulse arrived while no sky target is being tracked (nothing to offset)."""
 
     code = "not_tracking"
+
+
+class NoCamera(LookupError, VssError):
+    """A closed loop was asked for but the server has no guide camera."""
+
+    code = "no_camera"
+
+
+class Unsupported(RuntimeError, VssError):
+    """The mount's backend cannot do what was asked (its capabilities say so)."""
+
+    code = "unsupported"
+
+
+class Throttled(PermissionError, VssError):
+    """A password attempt refused unchecked: too many wrong ones from the address or overall."""
+
+    code = "throttled"

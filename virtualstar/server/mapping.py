@@ -39,13 +39,16 @@ OPTIONAL_SIGNAL_ROLES = (
     "buffered_points", "underruns", "late_points",
     "az_slew_rate_limit", "el_slew_rate_limit", "az_slew_accel_limit", "el_slew_accel_limit",
     "az_track_rate_limit", "el_track_rate_limit", "az_min", "az_max", "el_min", "el_max",
+    "replace_min_lead",
 )
 FUNCTION_ROLES = (
     "power_on", "power_off", "stop", "slew", "traj_init", "traj_start", "traj_reset",
     "traj_push", "time_sync", "reset_faults",
 )
-# A mount without a guide camera simply leaves this out; `pointing_sample` then says so.
-OPTIONAL_FUNCTION_ROLES = ("guide_measure",)
+# A mount without a guide camera leaves `guide_measure` out; `pointing_sample` then says so.
+# A controller whose buffer only appends leaves `traj_replace` out: corrections then start
+# after the points already buffered (the VSS says so in `status`, "corrections").
+OPTIONAL_FUNCTION_ROLES = ("guide_measure", "traj_replace")
 STATE_NAMES = ("off", "holding", "slewing", "tracking", "manual", "stopping", "fault")
 
 

@@ -1,6 +1,6 @@
 """Motion primitives over the mount link: rest, power, slew, start a trajectory, wait.
 
-Each primitive is one short conversation with the mount in roles (`MountLink`),
+Each primitive is one short conversation with the mount in roles (`link_interface.MountBackend`; `MountLink` for ASTCom),
 waiting in mount time on the VSS's clock (`clock.MountClock`). Primitives never
 decide *what* to do next; the procedures (`procedures.py`) do, and only the
 supervisor runs procedures, so everything here is called by one owner at a time.
@@ -22,7 +22,7 @@ from virtualstar.astro.constants import ARCSEC_PER_RAD
 from .clock import MountClock
 from .exceptions import MountFault, NotArrived, OperationAborted, TargetUnreachable, VssError
 from .feeder import Feeder, FeederConfig
-from .mount_link import MountLink
+from .link_interface import MountBackend
 from .trajectories import Path, RampIn
 
 __all__ = ["Motion", "Position", "sky_distance_arcsec"]
@@ -50,7 +50,7 @@ def sky_distance_arcsec(az1_rad: float, el1_rad: float, az2_rad: float, el2_rad:
 class Motion:
     """What the VSS can make the mount do, in mount time."""
 
-    def __init__(self, link: MountLink, clock: MountClock) -> None:
+    def __init__(self, link: MountBackend, clock: MountClock) -> None:
         self.link = link
         self.clock = clock
         self.codes = link.mapping.state_codes

@@ -26,6 +26,7 @@ from astcom_client import AstcomError, Client, ConnectionClosed, DeviceError, St
 from virtualstar.astro.constants import ARCSEC_PER_RAD
 
 from .exceptions import MappingError, MountRejected, MountUnavailable
+from .link_interface import MountCapabilities
 from .mapping import RoleMapping
 from .operations import current_operation
 
@@ -65,7 +66,12 @@ class LinkConfig:
 
 
 class MountLink:
-    """A self-healing, serialised ASTCom connection to a mount, spoken in roles."""
+    """A self-healing, serialised ASTCom connection to a mount, spoken in roles.
+
+    The ASTCom backend of the mount-link interface (`link_interface.MountBackend`): the
+    controller follows timed points from its trajectory buffer and streams its own
+    following error, so the VSS never closes a loop over the network.
+    """
 
     def __init__(self, config: LinkConfig, mapping: RoleMapping, *,
                  on_event: Callable[[str, dict[str, Any]], None] | None = None) -> None:
@@ -88,6 +94,19 @@ class MountLink:
     @property
     def connected(self) -> bool:
         return self._client is not None and self._client.connected
+
+    @property
+    def capabilities(self) -> MountCapabilities:
+        """An ASTCom controller as the mapping describes it: an alt-az mount with a buffer."""
+        m = self.mapping
+        return MountCapabilities(backend="astcom", geometry="altaz", trajectory_buffer=True,
+                                 goto=True, park=True, guide=True,
+                                 time_sync=m.has_function("time_sync"), error_stream=True)
+
+    def describe(self) -> dict[str, Any]:
+        """The backend's part of the status (the error itself comes from the mount's stream)."""
+        return {"backend": "astcom", "url": self.config.url,
+                "capabilities": self.capabilities.as_dict()}
 
     def start(self) -> None:
         """Start connecting (and reconnecting) in the background."""

@@ -45,18 +45,19 @@ from virtualstar.astro import (
     satellite_passes,
     unwrap_azimuth,
 )
-from virtualstar.astro.constants import ARCSEC_PER_RAD
 from virtualstar.astro.exceptions import SatelliteError
 
+from . import closed_loop as guided
+from . import rate_procedures
+from .corrections import Corrections
 from .exceptions import InExclusionZone, StaleElements, TargetUnreachable
-from .feeder import Feeder
+from .feeder import Feeder, FeederConfig
 from .operations import Operation, Phase
 from .pass_selection import choose_pass, windows_from_passes
 from .trajectories import (
     SLEW_MARGIN,
     ConstantRatePath,
     Path,
-    Points,
     RampIn,
     RampOut,
     TargetPath,
@@ -65,7 +66,7 @@ from .trajectories import (
 )
 
 if TYPE_CHECKING:
-    from .telescope import Telescope
+    from .station import Station
 
 __all__ = ["follow_sky_target", "hold_fixed", "measure_pointing", "move_at_rates",
            "track_satellite_pass"]
@@ -77,6 +78,8 @@ T = TypeVar("T")
 MAX_JOIN_PLANS = 12  # plans of a join before giving up (each with 1.5× the previous margin)
 PASS_LOOKBACK_S = 1800.0  # predictions start this far back, so a pass in progress is found
 MIN_JOIN_TRACK_S = 10.0  # a finite path is joined only if this much of it is left
+CLOSED_LOOP_LEAD_S = 5.0  # mount seconds buffered under a closed loop (real time's lead)
+PASS_OFFSET_MARGIN_S = 30.0  # a pass is planned this much longer at both ends (path offsets)
 RUN_UP_STEP_US = 2_000_000  # a run-up inside a zone moves the join this much later
 MOVE_LOOKAHEAD_S = 3600.0  # a move at rates is checked against the limits and zones this far
 MOVE_CHECK_STEP_DEG = 0.1  # ... on a grid of mount time that moves at most this far a step
@@ -104,17 +107,32 @@ async def run_beside(main: Awaitable[T], feeder: Feeder) -> T:
         await asyncio.wait({feeding, main_task})
 
 
-async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int | None = None,
-                  end_us: int | None = None, allow_sun: bool = False) -> tuple[RampIn, Feeder]:
-    """Slew to the run-up of `path` and start following it; return the run-up and its feeder."""
+async def acquire(t: Station, op: Operation, path: Path, *, not_before_us: int | None = None,
+                  end_us: int | None = None, allow_sun: bool = False,
+                  corrections: Corrections | None = None,
+                  feed: FeederConfig | None = None) -> tuple[RampIn, Feeder]:
+    """Slew to the run-up of `path` and start following it; return the run-up and its feeder.
+
+    With `corrections`, offsets changed from now on start at the join (the run-up aims
+    at the place they had when it was planned), and the feeder is handed to them.
+
+    A mount without a trajectory buffer is joined by a goto to a point ahead and
+    followed by a closed rate loop (`rate_procedures.acquire_by_rates`): the same
+    shape comes back (the join and what keeps the mount on the path).
+    """
+    if not t.link.capabilities.trajectory_buffer:
+        return await rate_procedures.acquire_by_rates(t, op, path, not_before_us=not_before_us,
+                                                      end_us=end_us, allow_sun=allow_sun)
     cfg = t.config
-    lead_s = cfg.start_lead_s
+    lead_s = t.margins.start_lead_s
     plan = 0
     while plan < MAX_JOIN_PLANS:
         here = await t.motion.position()
         ramp = plan_run_up(path, az_rad=here.az_rad, el_rad=here.el_rad, now_us=here.t_us,
                            limits=t.limits, lead_s=lead_s, ramp_s=cfg.ramp_s,
                            not_before_us=not_before_us)
+        if corrections is not None:
+            corrections.hold_until(ramp.join_us)
         if end_us is not None and ramp.join_us > end_us - int(MIN_JOIN_TRACK_S * 1e6):
             raise TargetUnreachable(f"too little of the path is left to join it: it ends "
                                     f"{(end_us - here.t_us) / 1e6:.0f} s from now")
@@ -137,13 +155,16 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         t.motion.verify_at(pos, rest_az, rest_el, cfg.arrival_tolerance_arcsec,
                            f"slew to the run-up of {op.target}")
         if pos.t_us + int(lead_s * 1e6) < ramp.begin_us:
-            if ramp.begin_us - pos.t_us > cfg.feed_lead_s * 1e6:
+            feed = feed or t.feeder_config()
+            if ramp.begin_us - pos.t_us > feed.lead_s * 1e6:
                 t.supervisor.phase(op, Phase.WAITING, start_utc=iso_utc(ramp.begin_us))
-                await t.motion.wait_until(ramp.begin_us - int((cfg.feed_lead_s - lead_s) * 1e6),
+                await t.motion.wait_until(ramp.begin_us - int((feed.lead_s - lead_s) * 1e6),
                                           op.info)
-            feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
+            feeder = await t.motion.start_trajectory(ramp, feed, lead_s,
                                                      on_points=t.note_points)
             if feeder is not None:
+                if corrections is not None:
+                    corrections.attach(feeder)
                 t.supervisor.phase(op, Phase.JOINING)
                 return ramp, feeder
         log.warning("operation %s: the join at %s came too late for the host (plan %d); "
@@ -153,10 +174,10 @@ async def acquire(t: Telescope, op: Operation, path: Path, *, not_before_us: int
         op.info["join_plans"] = plan + 1
         lead_s *= 1.5
     raise TargetUnreachable(f"could not join {op.target} after {MAX_JOIN_PLANS} plans: the host "
-                            f"cannot keep up with ×{t.config.speed:g} simulated time")
+                            f"cannot keep up with ×{t.clock.speed:g} simulated time")
 
 
-async def goto_safely(t: Telescope, op: Operation, az_rad: float, el_rad: float, what: str, *,
+async def goto_safely(t: Station, op: Operation, az_rad: float, el_rad: float, what: str, *,
                       allow_sun: bool, stow: bool = False):
     """Slew to encoder angles along a path out of the Sun/Moon zones (a detour if need be)."""
     here = await t.motion.position()
@@ -165,20 +186,51 @@ async def goto_safely(t: Telescope, op: Operation, az_rad: float, el_rad: float,
     if len(legs) > 1:
         op.info["detour_deg"] = [[round(math.degrees(a), 3), round(math.degrees(e), 3)]
                                  for a, e in legs[:-1]]
+    if not t.link.capabilities.trajectory_buffer:
+        # a driver's goto takes its own path: short legs keep it near the checked one
+        legs = rate_procedures.short_legs(here, legs)
     pos = None
-    for leg_az, leg_el in legs:
+    for k, (leg_az, leg_el) in enumerate(legs):
+        if k < len(legs) - 1 and not t.link.capabilities.trajectory_buffer:
+            await t.link.call("goto_place", math.degrees(leg_az), math.degrees(leg_el))
+            continue
         pos = await t.motion.goto(leg_az, leg_el, t.limits)
     return pos
 
 
-async def prepare(t: Telescope, op: Operation) -> None:
+def _settle_s(t: Station, feeder) -> float:
+    """Mount seconds from the join to the landing check: the configured settle, or what a
+    rate loop needs to take up the path's rate from a few driver reports."""
+    if t.link.capabilities.trajectory_buffer:
+        return t.config.settle_s
+    return feeder.settle_s(t.config.settle_s)
+
+
+def _place_tolerance(t: Station) -> float:
+    """How close a slew to a fixed place must land: the arrival tolerance, or the goto
+    accuracy a mount without a trajectory buffer declares (its driver lands the goto)."""
+    return max(t.config.arrival_tolerance_arcsec,
+               t.link.capabilities.goto_tolerance_arcsec or 0.0)
+
+
+async def verify_joined(t: Station, ramp, feeder, what: str) -> float:
+    """Compare the mount with the path after the join: the encoders at the same mount time
+    (a trajectory buffer), or the rate loop's last report at its own time (rate axes)."""
+    tolerance = t.config.arrival_tolerance_arcsec
+    if t.link.capabilities.trajectory_buffer:
+        return await t.motion.verify_on_path(ramp, tolerance, what)
+    return await feeder.verify(tolerance, what)
+
+
+async def prepare(t: Station, op: Operation) -> None:
     t.supervisor.phase(op, Phase.PREPARING)
     await t.motion.prepare()
 
 
 # ---------------------------------------------------------------------- procedures
-async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
-                            duration_s: float | None, allow_sun: bool = False) -> dict[str, Any]:
+async def follow_sky_target(t: Station, op: Operation, target: Any, *,
+                            duration_s: float | None, allow_sun: bool = False,
+                            closed_loop: bool = False) -> dict[str, Any]:
     """Slew to a sky target, verify the landing, track it (for `duration_s`, or until ended).
 
     The track stops before the target would enter a Sun/Moon zone or pass below the
@@ -187,19 +239,25 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
     cfg = t.config
     await prepare(t, op)
     here = await t.motion.position()
-    path = TargetPath(target, cfg.site, limits=t.limits, eop=t.eop, model=t.model,
-                      current_az_rad=here.az_rad,
-                      guard=t.safety.guard(op.target, allow_sun=allow_sun),
-                      offsets=t.guide_offsets(op))
-    ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun)
+    corrections = t.steering.corrections(op)
+    path = corrections.wrap(TargetPath(target, cfg.site, limits=t.limits, eop=t.eop,
+                                       model=t.model, current_az_rad=here.az_rad,
+                                       guard=t.safety.guard(op.target, allow_sun=allow_sun)))
+    ramp, feeder = await acquire(t, op, path, allow_sun=allow_sun, corrections=corrections,
+                                 feed=_feed(t, closed_loop))
+    t.on_target.follow(target, op.target, model=t.model, from_us=ramp.join_us, op_id=op.id,
+                       offsets=corrections.offsets)
 
     async def on_path() -> dict[str, Any]:
-        settled_us = ramp.join_us + int(cfg.settle_s * 1e6)
         await t.motion.wait_until(ramp.join_us)
+        async with guided.running(t, op, corrections, "sky", closed_loop):
+            return await joined()
+
+    async def joined() -> dict[str, Any]:
+        settled_us = ramp.join_us + int(_settle_s(t, feeder) * 1e6)
         t.supervisor.phase(op, Phase.SETTLING)
         await t.motion.wait_until(settled_us)
-        err = await t.motion.verify_on_path(ramp, cfg.arrival_tolerance_arcsec,
-                                            f"landing on {op.target}")
+        err = await verify_joined(t, ramp, feeder, f"landing on {op.target}")
         s = t.errors.stats(ramp.join_us, settled_us)
         landing = {"slew_time_s": (ramp.join_us - here.t_us) / 1e6,
                    "landing_rms_arcsec": s.rms_arcsec, "landing_peak_arcsec": s.peak_arcsec,
@@ -217,22 +275,29 @@ async def follow_sky_target(t: Telescope, op: Operation, target: Any, *,
     try:
         result = await run_beside(on_path(), feeder)
     except (TargetUnreachable, InExclusionZone) as exc:
+        corrections.attach(None)
         if op.phase is not Phase.TRACKING:
             raise
         # the next chunk would leave the limits or enter a zone: the points already
         # buffered stop short of it; let them play out, then rest
-        await t.motion.wait_until(feeder.stats.last_point_us - 200_000)
+        if t.link.capabilities.trajectory_buffer:
+            await t.motion.wait_until(feeder.stats.last_point_us - 200_000)
+        else:
+            await feeder.halt_rates()
         why = ("the target left the limits" if isinstance(exc, TargetUnreachable)
                else "stopped before entering the exclusion zone")
         result = {"ended": f"{why}: {exc}", "tracking_to_us": await t.motion.mount_time_us()}
+    finally:
+        corrections.attach(None)
     op.info["feeder"] = feeder.stats.as_dict()
+    t.on_target.end(result["tracking_to_us"])
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
     s = t.errors.stats(op.info["tracking_from_us"], result["tracking_to_us"])
-    return {**result, **tracking_figures(s)}
+    return {**result, **tracking_figures(t, op, s)}
 
 
-async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, *,
+async def hold_fixed(t: Station, op: Operation, az_deg: float, el_deg: float, *,
                      power_off: bool, allow_sun: bool = False, stow: bool = False) -> dict[str, Any]:
     """Slew to a fixed observed direction, verify the landing and hold (park: power off)."""
     await prepare(t, op)
@@ -240,8 +305,7 @@ async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, 
     pos, enc_az, enc_el = await _slew_to_fixed(t, op, here, az_deg % 360.0, el_deg, here.t_us,
                                                op.target, allow_sun=allow_sun, stow=stow)
     t.supervisor.phase(op, Phase.SETTLING)
-    err = t.motion.verify_at(pos, enc_az, enc_el, t.config.arrival_tolerance_arcsec,
-                             f"slew to {op.target}")
+    err = t.motion.verify_at(pos, enc_az, enc_el, _place_tolerance(t), f"slew to {op.target}")
     if power_off:
         t.supervisor.phase(op, Phase.ENDING)
         await t.link.call("power_off")
@@ -250,7 +314,7 @@ async def hold_fixed(t: Telescope, op: Operation, az_deg: float, el_deg: float, 
             "landed_us": pos.t_us}
 
 
-async def _slew_to_fixed(t: Telescope, op: Operation, here, az_deg: float, el_deg: float,
+async def _slew_to_fixed(t: Station, op: Operation, here, az_deg: float, el_deg: float,
                          at_us: int, name: str, *, allow_sun: bool, stow: bool = False):
     """Slew to the encoder place of an observed direction (through the pointing model, in
     the cable wrap nearest `here`) as it is at `at_us`; return (landed position, enc az, el)."""
@@ -263,7 +327,7 @@ async def _slew_to_fixed(t: Telescope, op: Operation, here, az_deg: float, el_de
     return pos, enc_az, enc_el
 
 
-async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_rate_deg_s: float,
+async def move_at_rates(t: Station, op: Operation, az_rate_deg_s: float, el_rate_deg_s: float,
                         *, allow_sun: bool = False) -> dict[str, Any]:
     """Turn the axes at constant rates from where the mount rests (a hand pad; ASCOM MoveAxis).
 
@@ -279,7 +343,7 @@ async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_ra
     v = np.radians([az_rate_deg_s, el_rate_deg_s])
     accel = np.radians([lim.az_max_accel_deg_s2, lim.el_max_accel_deg_s2])
     ramp_s = max(cfg.ramp_s, 2.0 * float(np.max(np.abs(v) / accel)))
-    lead_s = cfg.start_lead_s
+    lead_s = t.margins.start_lead_s
     join_us = here.t_us + int((lead_s + ramp_s) * 1e6)
     start = np.array([here.az_rad, here.el_rad]) + 0.5 * v * ramp_s
     end_us, why = _move_end(t, start, v, join_us, ramp_s, allow_sun)
@@ -292,8 +356,14 @@ async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_ra
     ramp = RampIn(path, join_us, ramp_s)
     t.supervisor.phase(op, Phase.SLEWING, az_rate_deg_s=az_rate_deg_s,
                        el_rate_deg_s=el_rate_deg_s, stops_at_utc=iso_utc(end_us), stops_for=why)
-    feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
-                                             on_points=t.note_points)
+    if not t.link.capabilities.trajectory_buffer:
+        # the driver turns at the rates at once: the move starts here, without a run-up
+        path = ConstantRatePath(here.t_us + int(lead_s * 1e6), here.az_rad, here.el_rad,
+                                float(v[0]), float(v[1]), end_us)
+        ramp, feeder = rate_procedures.follow_now(t, path, path.at_us)
+    else:
+        feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
+                                                 on_points=t.note_points)
     if feeder is None:
         raise TargetUnreachable("the host was too slow to start the move; send it again")
     t.supervisor.begun(op)
@@ -308,7 +378,7 @@ async def move_at_rates(t: Telescope, op: Operation, az_rate_deg_s: float, el_ra
     return {"ended": why, "moved_until_us": end_us}
 
 
-def _move_end(t: Telescope, start: np.ndarray, v: np.ndarray, join_us: int, ramp_s: float,
+def _move_end(t: Station, start: np.ndarray, v: np.ndarray, join_us: int, ramp_s: float,
               allow_sun: bool) -> tuple[int, str]:
     """When a move at rates `v` (from `start` at `join_us`) must begin its run-out, and why."""
     lim = t.limits
@@ -335,7 +405,7 @@ def _move_end(t: Telescope, start: np.ndarray, v: np.ndarray, join_us: int, ramp
     return join_us + int(run_s * 1e6), why
 
 
-async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, *,
+async def measure_pointing(t: Station, op: Operation, target: Any, name: str, *,
                            settle_s: float, allow_sun: bool = False) -> dict[str, Any]:
     """Point at a sky target's place at the exposure instant, hold, and measure with the camera.
 
@@ -343,7 +413,6 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
     model, if one is loaded) and *held* there, so the encoders and the star's place
     given to the camera refer to the same instant however long the requests take.
     """
-    cfg = t.config
     await prepare(t, op)
     here = await t.motion.position()
     # where the star will be when the mount has landed and settled
@@ -357,7 +426,7 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
     t.safety.check_place(star_az, star_el, t_exp, name, allow_sun=allow_sun)
     pos, enc_az, enc_el = await _slew_to_fixed(t, op, here, star_az, star_el, t_exp, name,
                                                allow_sun=allow_sun)
-    t.motion.verify_at(pos, enc_az, enc_el, cfg.arrival_tolerance_arcsec, f"slew to {name}")
+    t.motion.verify_at(pos, enc_az, enc_el, _place_tolerance(t), f"slew to {name}")
     t.supervisor.phase(op, Phase.MEASURING)
     await t.motion.wait_until(max(pos.t_us + int(settle_s * 1e6), t_exp), op.info)
     v = await t.link.read(["az_position", "el_position", "mount_time"])
@@ -376,8 +445,9 @@ async def measure_pointing(t: Telescope, op: Operation, target: Any, name: str, 
         "pointing_model": t.model_source or None}}
 
 
-async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
-                               max_wait_s: float | None, allow_sun: bool = False) -> dict[str, Any]:
+async def track_satellite_pass(t: Station, op: Operation, sat: Satellite, *,
+                               max_wait_s: float | None, allow_sun: bool = False,
+                               closed_loop: bool = False) -> dict[str, Any]:
     """Track the next pass of `sat` that can still be reached, or the one in progress.
 
     Only a stretch of the pass outside every zone (Sun, Moon, horizon profile) is
@@ -395,15 +465,17 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
         raise TargetUnreachable(f"the next pass of {sat.name} begins in "
                                 f"{(choice.join_us - here.t_us) / 1e6:.0f} s, more than the "
                                 f"{max_wait_s:g} s allowed")
-    with _sgp4_errors(sat, here.t_us):
-        plan = plan_satellite_pass(
-            sat, cfg.site, choice.join_us, set_us, step_s=cfg.sat_grid_s, limits=t.limits,
-            track_rate_limit_deg_s=t.track_rate_limit_deg_s * cfg.keyhole_rate_fraction,
-            accel_limit_deg_s2=t.limits.az_max_accel_deg_s2, eop=t.eop, model=t.model,
-            current_az_rad=here.az_rad)
+    full = _plan_pass(t, sat, here, choice.join_us, set_us)
+    plan = dataclasses.replace(full, path=full.path.between(choice.join_us, set_us))
     join_us, set_us, stops = _safe_part(t, plan, choice.join_us, allow_sun)
     if stops is not None:
         op.info["zone_stop"] = stops
+    caps = t.link.capabilities
+    if caps.equatorial:
+        join_us, set_us, turns = rate_procedures.equatorial_stretch(
+            t, plan.path.between(join_us, set_us), join_us, cfg.min_pass_track_s)
+        if turns is not None:
+            op.info["geometry_stop"] = turns
     plan = dataclasses.replace(plan, path=plan.path.between(join_us, set_us))
     t.supervisor.phase(op, Phase.PLANNED, slew_from_us=here.t_us, pass_start_us=join_us,
                        pass_end_us=set_us, pass_start_utc=iso_utc(join_us, 3),
@@ -415,30 +487,76 @@ async def track_satellite_pass(t: Telescope, op: Operation, sat: Satellite, *,
                        keyhole_max_error_arcsec=plan.keyhole_max_error_arcsec,
                        max_az_rate_deg_s=plan.max_az_rate_deg_s)
     t.supervisor.begun(op)
+    # the offsets move along the whole table (margins included), the feed ends at set
+    corrections = t.steering.corrections(op)
     # run out to rest after set, and hold: stopping a little late costs nothing
-    path = RampOut(plan.path, cfg.ramp_s, max(2.0, 1.0 * cfg.margin_speed))
+    path = (RampOut(corrections.wrap(full.path, end_us=set_us), cfg.ramp_s,
+                    t.margins.hold_after_run_out_s)
+            if caps.trajectory_buffer else plan.path)
     ramp, feeder = await acquire(t, op, path, not_before_us=join_us, end_us=set_us,
-                                 allow_sun=allow_sun)
+                                 allow_sun=allow_sun, corrections=corrections,
+                                 feed=_feed(t, closed_loop))
+    planned = ["keyhole"] if plan.keyhole_limited else []
+    t.on_target.follow(sat, sat.name, model=t.model, from_us=ramp.join_us, op_id=op.id,
+                       planned=planned, offsets=corrections.offsets)
+    op.info["planned_deviation"] = planned  # known from the plan, before the pass ends
 
     async def on_path() -> int:
         await t.motion.wait_until(ramp.join_us)
+        async with guided.running(t, op, corrections, "satellite", closed_loop):
+            return await joined()
+
+    async def joined() -> int:
         t.supervisor.phase(op, Phase.SETTLING, tracking_from_us=ramp.join_us)
-        await t.motion.wait_until(ramp.join_us + int(cfg.settle_s * 1e6))
-        err = await t.motion.verify_on_path(ramp, cfg.arrival_tolerance_arcsec,
-                                            f"joining the pass of {sat.name}")
+        await t.motion.wait_until(ramp.join_us + int(_settle_s(t, feeder) * 1e6))
+        err = await verify_joined(t, ramp, feeder, f"joining the pass of {sat.name}")
         t.supervisor.phase(op, Phase.TRACKING, join_error_arcsec=err)
         return min(await t.motion.wait_until(set_us, op.info), set_us)
 
-    track_to = await run_beside(on_path(), feeder)
+    try:
+        track_to = await run_beside(on_path(), feeder)
+    finally:
+        corrections.attach(None)
     op.info["feeder"] = feeder.stats.as_dict()
+    t.on_target.end(track_to)
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
     s = t.errors.stats(op.info["tracking_from_us"], track_to)
-    return {"ended": "the pass ended", "tracking_to_us": track_to, **tracking_figures(s)}
+    return {"ended": "the pass ended", "tracking_to_us": track_to, **tracking_figures(t, op, s)}
 
 
 # ---------------------------------------------------------------------- helpers
-def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, int, str | None]:
+def _feed(t: Station, closed_loop: bool) -> FeederConfig:
+    """The feed of a track: a closed loop re-plans ten times a second, and each re-plan
+    sends the buffered future again, so it keeps at most `CLOSED_LOOP_LEAD_S` buffered."""
+    feed = t.feeder_config()
+    if closed_loop and feed.lead_s > CLOSED_LOOP_LEAD_S:
+        feed = dataclasses.replace(feed, lead_s=CLOSED_LOOP_LEAD_S)
+    return feed
+
+
+def _plan_pass(t: Station, sat: Satellite, here, join_us: int, set_us: int):
+    """Plan the pass from `join_us` to `set_us`, with `PASS_OFFSET_MARGIN_S` more at both
+    ends for path offsets (without, if the longer pass would not fit the cable wrap)."""
+    cfg = t.config
+    margin_us = int(PASS_OFFSET_MARGIN_S * 1e6)
+    for margin in (margin_us, 0):
+        try:
+            with _sgp4_errors(sat, here.t_us):
+                return plan_satellite_pass(
+                    sat, cfg.site, join_us - margin, set_us + margin, step_s=cfg.sat_grid_s,
+                    limits=t.limits,
+                    track_rate_limit_deg_s=(t.track_rate_limit_deg_s * cfg.keyhole_rate_fraction
+                                            if not t.link.capabilities.equatorial else 1e9),
+                    accel_limit_deg_s2=t.limits.az_max_accel_deg_s2, eop=t.eop, model=t.model,
+                    current_az_rad=here.az_rad)
+        except TargetUnreachable:
+            if not margin:
+                raise
+    raise AssertionError("unreachable")
+
+
+def _safe_part(t: Station, plan, join_us: int, allow_sun: bool) -> tuple[int, int, str | None]:
     """Return (join, end, why it ends early or None) of the pass stretch outside every zone.
 
     (`acquire` then keeps the run-up's rest point outside too.)
@@ -456,13 +574,22 @@ def _safe_part(t: Telescope, plan, join_us: int, allow_sun: bool) -> tuple[int, 
 
 
 
-def tracking_figures(s) -> dict[str, Any]:
-    return {"tracking_rms_arcsec": s.rms_arcsec, "tracking_peak_arcsec": s.peak_arcsec,
-            "on_sky_rms_arcsec": s.on_sky_rms_arcsec, "on_sky_peak_arcsec": s.on_sky_peak_arcsec,
-            "clock_error_peak_arcsec": s.clock_error_peak_arcsec}
+def tracking_figures(t: Station, op: Operation, s) -> dict[str, Any]:
+    """A finished track's figures: on target (the truth), following, planned, the outcome;
+    the offsets in force at its end apart (the place on target moved with them)."""
+    figures = s.track_summary(t.config.degraded_after_s, t.on_target.planned_for(op.id))
+    offsets = t.steering.corrections(op).offsets
+    if offsets.any:
+        end_us = int(op.info.get("tracking_to_us") or s.to_us)
+        figures["guide_offset_arcsec"] = {"north": offsets.total("dec", end_us),
+                                          "east": offsets.total("ra", end_us)}
+        figures["offsets"] = {axis: offsets.total(axis, end_us)
+                              for axis in ("ra", "dec", "az", "el", "path", "transverse")
+                              if offsets.total(axis, end_us)}
+    return figures
 
 
-def _observed_deg(t: Telescope, target: Any, t_us: int) -> tuple[float, float]:
+def _observed_deg(t: Station, target: Any, t_us: int) -> tuple[float, float]:
     o = observe_mount_times(target, np.array([t_us], np.int64), t.config.site, t.eop)
     return math.degrees(float(o.az_rad[0])) % 360.0, math.degrees(float(o.el_rad[0]))
 
@@ -491,7 +618,7 @@ def _sgp4_errors(sat: Satellite, now_us: int):
             "(e.g. from CelesTrak); `vs where --tle FILE` gives the same warning") from None
 
 
-def _choose_pass(t: Telescope, sat: Satellite, here):
+def _choose_pass(t: Station, sat: Satellite, here):
     cfg = t.config
     start = UtcTimes.from_unix_us(here.t_us - int(PASS_LOOKBACK_S * 1e6))
     with _sgp4_errors(sat, here.t_us), warnings.catch_warnings():
@@ -505,7 +632,7 @@ def _choose_pass(t: Telescope, sat: Satellite, here):
         o = observe_mount_times(sat, np.array([join_us], np.int64), cfg.site, t.eop)
         to_az = float(unwrap_azimuth(o.az_rad, limits=t.limits, current_az_rad=here.az_rad)[0])
         slew_s = t.motion.plan_slew_s(here, to_az, float(o.el_rad[0]), t.limits)
-        return slew_s * SLEW_MARGIN + 3.0 + cfg.start_lead_s + cfg.ramp_s
+        return slew_s * SLEW_MARGIN + 3.0 + t.margins.start_lead_s + cfg.ramp_s
 
     with _sgp4_errors(sat, here.t_us):
         choice = choose_pass(windows_from_passes(passes), here.t_us, prepare_s=prepare_s,
@@ -515,10 +642,3 @@ def _choose_pass(t: Telescope, sat: Satellite, here):
                                 f"at least {cfg.min_pass_track_s:g} s left to track in the next "
                                 f"{cfg.pass_search_s / 3600:g} h")
     return choice
-
-
-def sky_rate_arcsec_s(p: Points) -> np.ndarray:
-    """Return the on-sky rate of trajectory points (arcsec/s)."""
-    return np.hypot(p.az_rate_rad_s * np.cos(p.el_rad), p.el_rate_rad_s) * ARCSEC_PER_RAD
-
-

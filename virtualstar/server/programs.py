@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 from .exceptions import BadRequest
 
 if TYPE_CHECKING:
-    from .telescope import Telescope
+    from .station import Station
 
 __all__ = ["ProgramControl"]
 
@@ -27,7 +27,7 @@ Execute = Callable[[str, dict[str, Any]], Awaitable[Any]]
 class _TelescopeApi:
     """The runner's view of the server: commands, mount time, place, re-planning."""
 
-    def __init__(self, t: Telescope, execute: Execute) -> None:
+    def __init__(self, t: Station, execute: Execute) -> None:
         self.t = t
         self.execute = execute
 
@@ -58,7 +58,7 @@ class _TelescopeApi:
 class ProgramControl:
     """Start, follow and end the server's program run."""
 
-    def __init__(self, telescope: Telescope, emit: Callable[[str, dict[str, Any]], None]) -> None:
+    def __init__(self, telescope: Station, emit: Callable[[str, dict[str, Any]], None]) -> None:
         self.t = telescope
         self.emit = emit
         self.runner = None
@@ -93,9 +93,10 @@ class ProgramControl:
         except TypeError as exc:
             raise BadRequest(f"run_plan: done: a previous run's records expected ({exc})") \
                 from None
-        self.t._check_can_move()
+        self.t.check_can_move()
         runner = ProgramRunner(plan, program, _TelescopeApi(self.t, execute),
-                               on_change=self._changed, done_before=history)
+                               on_change=self._changed, done_before=history,
+                               degraded_s=self.t.config.degraded_after_s)
         self.runner = runner
         self.task = asyncio.get_running_loop().create_task(self._run(runner),
                                                            name="vss-program")

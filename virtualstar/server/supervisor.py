@@ -34,8 +34,8 @@ from .exceptions import (
     OperationAborted,
     VssError,
 )
+from .link_interface import MountBackend
 from .motion import Motion
-from .mount_link import MountLink
 from .operations import Operation, Phase, Resume, current_operation, resume_decision
 
 __all__ = ["Procedure", "Supervisor", "operations_of_tasks"]
@@ -56,7 +56,7 @@ def operations_of_tasks(task_names) -> set[str]:
 class Supervisor:
     """Run operations one at a time on a mount; emit ``operation`` events as they change."""
 
-    def __init__(self, link: MountLink, motion: Motion, *,
+    def __init__(self, link: MountBackend, motion: Motion, *,
                  emit: Callable[[str, dict[str, Any]], None],
                  resume_timeout_s: float = DEFAULT_RESUME_TIMEOUT_S) -> None:
         self.link = link
@@ -93,10 +93,12 @@ class Supervisor:
             self.emit("operation", op.as_dict())
             return op
 
-    async def stop(self, reason: str, *, then: Callable[[], Awaitable[Any]] | None = None) -> None:
+    async def stop(self, reason: str | OperationAborted, *,
+                   then: Callable[[], Awaitable[Any]] | None = None) -> None:
         """End the running operation, wait for it, then run `then` (bring to rest), all under the lock."""
         async with self._lock:
-            await self._end_running(OperationAborted(reason))
+            await self._end_running(reason if isinstance(reason, OperationAborted)
+                                    else OperationAborted(reason))
             if then is not None:
                 await then()
 
@@ -228,5 +230,8 @@ class Supervisor:
         self.emit("operation", op.as_dict())
 
 
-def _error_dict(error: VssError) -> dict[str, str]:
-    return {"code": error.code, "message": str(error)}
+def _error_dict(error: VssError) -> dict[str, Any]:
+    doc: dict[str, Any] = {"code": error.code, "message": str(error)}
+    if getattr(error, "stopped", False):  # a client's stop: asked for, not a failure
+        doc["stopped"] = True
+    return doc

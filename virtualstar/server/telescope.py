@@ -40,27 +40,32 @@ from virtualstar.astro import (
     check_places,
     iso_utc,
 )
+from virtualstar.astro.constants import ARCSEC_PER_RAD
 
-from . import procedures
-from .clock import MountClock, PacedClock
+from . import on_target, procedures, tracking_errors
+from .clock import Margins, MountClock, PacedClock
+from .event_log import KEPT_APART
 from .exceptions import (
     BadRequest,
     MappingError,
     MountFault,
     MountUnavailable,
     NotActive,
-    NotTracking,
     OperationAborted,
+    StoppedByClient,
     TargetUnreachable,
+    Unsupported,
     VssError,
 )
 from .feeder import FeederConfig
-from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, GuideOffsets
+from .link_interface import MountBackend
 from .motion import Motion
-from .mount_link import MountLink
-from .operations import TERMINAL, Operation, Phase
+from .offset_path import sky_rate_arcsec_s
+from .on_target import OnTarget
+from .operations import Operation
 from .programs import ProgramControl
 from .safety import HOLD_LOOKAHEAD_S, Safety
+from .steering import Steering
 from .supervisor import Supervisor
 from .timesync import TimeSync
 from .tracking_errors import TrackingErrorHistory
@@ -80,7 +85,6 @@ _LIMIT_ROLES = ("az_slew_rate_limit", "el_slew_rate_limit", "az_slew_accel_limit
                 "el_max")
 WATCH_S = 1.0  # mount seconds between the slow polls of the mount state
 STALL_WALL_S = 5.0  # paced time: a mount clock standing this long (wall) is a lost mount
-LOCKSTEP_LEAD_S = 30.0  # mount seconds of trajectory buffered in lockstep
 SUN_WATCH_US = 60_000_000  # a mount at rest is checked against the zones once a mount minute
 
 
@@ -89,11 +93,9 @@ class TelescopeConfig:
     """How the VSS drives the mount (mount seconds unless the name says otherwise)."""
 
     site: Site
-    speed: float = 1.0  # mount seconds per wall second (paced), shown in the status
-    simulated: bool = False
-    lockstep: bool = False  # the VSS and the embedded emulator share a LockstepClock
+    simulated: bool = False  # the mount's UTC truth is UTC (an emulator), not the host clock
     point_rate_hz: float = 20.0
-    lead_s: float | None = None  # None: 5 s; 3 s of wall time in paced time; 30 s in lockstep
+    lead_s: float | None = None  # None: from the clock (clock.Margins)
     error_rate_hz: float = 1000.0
     ramp_s: float = 2.0
     settle_s: float = 1.0
@@ -105,52 +107,29 @@ class TelescopeConfig:
     active: bool = True
     timesync_period_s: float = 10.0
     arrival_tolerance_arcsec: float = 5.0
+    off_target_arcsec: float = 5.0  # the boresight farther than this from the target is off it
+    degraded_after_s: float = 1.0  # a track off target longer than this is `degraded`
     max_tle_age_days: float = 14.0
     resume_timeout_s: float = 60.0  # wall seconds an interrupted track waits for the mount
     zones: AvoidanceZones = AvoidanceZones()  # Sun (30°), Moon, horizon profile
     hold_lookahead_s: float = HOLD_LOOKAHEAD_S  # a fixed hold must stay out of the zones this long
-
-    @property
-    def margin_speed(self) -> float:
-        """The speed margins are sized for: 1 in lockstep (the VSS is never late)."""
-        return 1.0 if self.lockstep else self.speed
-
-    @property
-    def start_lead_s(self) -> float:
-        """Mount time kept between "now" and the first point pushed (covers request delays)."""
-        return max(1.0, 0.25 * self.margin_speed)
-
-    @property
-    def feed_lead_s(self) -> float:
-        """Mount time of points kept buffered ahead of the mount clock.
-
-        In paced simulated time the same mount lead is a shorter wall time, and an
-        event loop stalled by a loaded host must not drain the buffer: keep at least
-        3 s of wall time. In lockstep nothing is ever late, and longer batches cost
-        less (each one computes the target's place once): 30 s.
-        """
-        if self.lead_s is not None:
-            return self.lead_s
-        return LOCKSTEP_LEAD_S if self.lockstep else max(5.0, 3.0 * self.margin_speed)
-
-    @property
-    def time_mode(self) -> str:
-        if self.lockstep:
-            return "lockstep"
-        return "paced" if self.simulated else "real time"
+    offset_rate_arcsec_s: float = 1800.0  # how fast an offset moves the boresight (steering.py)
+    offset_accel_arcsec_s2: float = 3600.0
+    mount_endpoint: str = ""  # where ASTCom clients reach the mount ('' unknown or nowhere)
 
 
 class Telescope:
-    """Drive one mount through a `MountLink`; emit events through `emit(kind, data)`."""
+    """Drive one mount through its mount link (`link_interface.MountBackend`); emit events through `emit(kind, data)`."""
 
-    def __init__(self, link: MountLink, config: TelescopeConfig, clock: MountClock | None = None,
+    def __init__(self, link: MountBackend, config: TelescopeConfig, clock: MountClock | None = None,
                  emit: Callable[[str, dict[str, Any]], None] | None = None) -> None:
         self.link = link
         self.config = config
-        self.clock = clock or PacedClock(config.speed)
+        self.clock = clock or PacedClock()
+        self.margins = Margins.for_clock(self.clock, config.lead_s)  # the time mode's margins
         self.emit = emit or (lambda kind, data: None)
         self.codes = link.mapping.state_codes
-        self.errors = TrackingErrorHistory()
+        self.errors = TrackingErrorHistory(off_target_arcsec=config.off_target_arcsec)
         self.timesync = TimeSync(link, self.clock, simulated=config.simulated,
                                  period_s=config.timesync_period_s,
                                  on_offset=self.errors.note_clock_offset)
@@ -161,6 +140,7 @@ class Telescope:
         self.limits = MountLimits()
         self.track_rate_limit_deg_s = 6.0
         self.eop = EarthOrientation.from_astropy_iers_data()
+        self.on_target = OnTarget(config.site, self.eop)  # the target followed, for the truth
         self.motion = Motion(link, self.clock)
         self.safety = Safety(config.zones, config.site, self.eop, lambda: self.limits)
         self.supervisor = Supervisor(link, self.motion, emit=lambda k, d: self.emit(k, d),
@@ -169,9 +149,11 @@ class Telescope:
         self._mount_state: int | None = None
         self._tasks: set[asyncio.Task] = set()
         self.programs = ProgramControl(self, lambda kind, data: self.emit(kind, data))
-        self._guide: tuple[int, GuideOffsets] | None = None  # (operation id, its offsets)
-        self.log = EventLog("vss")
+        self.steering = Steering(self)  # offsets and guide pulses of the running track
+        self.log = EventLog("vss", kept_apart=KEPT_APART)
         self.last_mount_us: int | None = None  # the newest tracking-error sample's time
+        self.signals_url: str | None = None  # where a rate-driven mount's reports are served
+        self.signals = None
 
     def log_event(self, level: str, kind: str, message: str, **fields: Any) -> None:
         """Log an event at the mount time last seen; before any sample, the lockstep
@@ -187,13 +169,35 @@ class Telescope:
     def op(self) -> Operation | None:
         return self.supervisor.op
 
+    @property
+    def time_mode(self) -> str:
+        """lockstep (one clock with the embedded emulator), paced (a simulated mount running
+        by itself) or real time: from the clock and the mount."""
+        if self.clock.lockstep:
+            return "lockstep"
+        return "paced" if self.config.simulated else "real time"
+
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
         """Connect to the mount and start the background tasks."""
+        tracking_errors.warm_up()  # compiled kernels ready before any client or sample comes
+        on_target.warm_up()
         self.link.on_event = self._on_link_event
+        if self.signals_url is not None:
+            await self._serve_signals(self.signals_url)
         self.link.start()
         self._spawn(self._watch(), "vss-watch")
         self._spawn(self.timesync.run(), "vss-timesync")
+
+    async def _serve_signals(self, url: str) -> None:
+        """Serve a rate-driven mount's reports as ASTCom signals (backend_signals.py)."""
+        if not hasattr(self.link, "report_listeners"):
+            raise BadRequest("--signals: this mount streams its own signals over ASTCom; "
+                             "record them from its endpoint")
+        from .backend_signals import ReportSignals
+
+        self.signals = ReportSignals(self.link)
+        await self.signals.serve(url)
 
     async def close(self) -> None:
         """Stop everything: a running operation is ended (the mount brought to rest), tasks too."""
@@ -205,7 +209,10 @@ class Telescope:
             task.cancel()
         if tasks:
             await asyncio.wait(tasks)
+        await self.steering.close()
         await self.link.stop()
+        if self.signals is not None:
+            await self.signals.close()
 
     async def first_samples(self, timeout_s: float) -> None:
         """Wait until the error stream has delivered samples (the VSS is fully up)."""
@@ -230,13 +237,23 @@ class Telescope:
             self._spawn(self._after_connecting(), "vss-after-connecting")
         elif kind == "mount_disconnected":
             self._mount_state = None
-            self.supervisor.interrupt(MountUnavailable("lost the connection to the mount"))
+            if self.link.capabilities.trajectory_buffer:
+                self.supervisor.interrupt(MountUnavailable("lost the connection to the mount"))
+            else:
+                # a mount told rates keeps turning at them: an operation on it cannot wait
+                # for the link to come back, it ends with a fault (the link told it to stop)
+                self.last_fault = f"lost the driver: {data.get('reason', 'connection lost')}"
+                self.supervisor.interrupt(MountFault(
+                    f"lost the {self.link.capabilities.backend} driver in the middle of the "
+                    f"operation ({data.get('reason', 'connection lost')}); the mount was told "
+                    "to stop"))
 
     async def _after_connecting(self) -> None:
         for attempt in range(5):  # a loaded host may time a first request out: try again
             try:
                 await self._read_limits()
-                await self._start_error_stream()
+                if self.link.capabilities.error_stream:
+                    await self._start_error_stream()
                 return
             except VssError as exc:
                 log.warning("after connecting (attempt %d): %s", attempt + 1, exc)
@@ -261,21 +278,31 @@ class Telescope:
             az_max_accel_deg_s2=v.get("az_slew_accel_limit", d.az_max_accel_deg_s2),
             el_max_accel_deg_s2=v.get("el_slew_accel_limit", d.el_max_accel_deg_s2))
         self.track_rate_limit_deg_s = v.get("az_track_rate_limit", self.limits.az_max_rate_deg_s)
+        if m.has("replace_min_lead"):
+            lead = (await self.link.read(["replace_min_lead"]))["replace_min_lead"]
+            self.steering.min_lead_us = max(0, int(lead))
 
     async def _start_error_stream(self) -> None:
         link = self.link
-        stream = await link.stream(["az_error", "el_error", "el_position", "mount_state"],
-                                   self.config.error_rate_hz)
-        az_name, el_name, pos_name, state_name = stream.names
-        s_az, s_el, s_pos = (link.scale("az_error"), link.scale("el_error"),
-                             link.scale("el_position"))
+        stream = await link.stream(["az_error", "el_error", "az_position", "el_position",
+                                    "mount_state"], self.config.error_rate_hz)
+        az_name, el_name, az_pos_name, el_pos_name, state_name = stream.names
+        s_az, s_el, s_az_pos, s_el_pos = (link.scale("az_error"), link.scale("el_error"),
+                                          link.scale("az_position"), link.scale("el_position"))
         fault = self.codes["fault"]
 
         def on_packet(packet) -> None:
             if len(packet.t_us):
                 self.last_mount_us = int(packet.t_us[-1])
-            self.errors.add(packet.t_us, packet.column(az_name) * s_az,
-                            packet.column(el_name) * s_el, packet.column(pos_name) * s_pos)
+            az_err, el_err = packet.column(az_name) * s_az, packet.column(el_name) * s_el
+            enc_az = packet.column(az_pos_name) * s_az_pos
+            enc_el = packet.column(el_pos_name) * s_el_pos
+            # the demand is where the encoders are plus what they miss of it
+            truth = self.on_target.measure(packet.t_us, enc_az, enc_el,
+                                           enc_az + az_err / ARCSEC_PER_RAD,
+                                           enc_el + el_err / ARCSEC_PER_RAD)
+            self.errors.add(packet.t_us, az_err, el_err, enc_el,
+                            *(truth if truth is not None else ()))
             states = packet.column(state_name)
             if len(states):
                 self._saw_state(int(states[-1]) if not np.any(states == fault) else fault)
@@ -373,15 +400,15 @@ class Telescope:
 
     def note_points(self, p: Points) -> None:
         """The feeder pushed points: keep the target's on-sky rate for the on-sky error."""
-        self.errors.note_rates(p.t_us, procedures.sky_rate_arcsec_s(p))
+        self.errors.note_rates(p.t_us, sky_rate_arcsec_s(p))
 
     def feeder_config(self) -> FeederConfig:
         cfg = self.config
-        return FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=cfg.feed_lead_s,
-                            min_lead_s=min(0.5, cfg.start_lead_s / 2))
+        return FeederConfig(point_rate_hz=cfg.point_rate_hz, lead_s=self.margins.feed_lead_s,
+                            min_lead_s=min(0.5, self.margins.start_lead_s / 2))
 
     # ------------------------------------------------------------------ commands
-    def _check_can_move(self) -> None:
+    def check_can_move(self) -> None:
         """Refuse a moving command on a passive server or without a mount (again under the lock)."""
         if not self.active:
             raise NotActive("the server is passive (it only watches the mount): run "
@@ -391,13 +418,17 @@ class Telescope:
                                    f"({self.link.last_error or 'connecting'})")
 
     async def follow_target(self, target, name: str, *, kind: str = "track",
-                            duration_s: float | None = None, allow_sun: bool = False) -> Operation:
-        """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped)."""
-        self._check_can_move()
+                            duration_s: float | None = None, allow_sun: bool = False,
+                            closed_loop: bool = False) -> Operation:
+        """Slew to `target` and track it (for `duration_s` mount seconds, or until stopped);
+        `closed_loop`: guided by the guide camera's centroids (closed_loop.py)."""
+        self.check_can_move()
+        if closed_loop:
+            self.steering.need_camera(kind)
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.follow_sky_target(self, op, target, duration_s=duration_s,
-                                                      allow_sun=allow_sun)
+                                                      allow_sun=allow_sun, closed_loop=closed_loop)
 
         check = self._target_check(target, name, allow_sun)
         return await self._start(kind, name, procedure, resumable=True, allow_sun=allow_sun,
@@ -413,11 +444,17 @@ class Telescope:
     async def _start(self, kind: str, name: str, procedure, *, resumable: bool = False,
                      allow_sun: bool = False, check=None) -> Operation:
         async def checks() -> None:
-            self._check_can_move()  # it may have gone passive while this waited for the lock
+            self.check_can_move()  # it may have gone passive while this waited for the lock
             if check is not None:
                 await check()
 
-        op = await self.supervisor.start(kind, name, procedure, resumable=resumable, check=checks)
+        async def run(op: Operation) -> dict[str, Any]:
+            try:
+                return await procedure(op)
+            finally:  # ended early (stopped, replaced, failed): its target is no longer followed
+                self.on_target.end(self.last_mount_us or 0, op_id=op.id)
+
+        op = await self.supervisor.start(kind, name, run, resumable=resumable, check=checks)
         if allow_sun:
             op.info["allow_sun"] = True
             log.warning("safety override: operation %s (%s %s) may point inside the Sun and "
@@ -433,7 +470,7 @@ class Telescope:
         A hold must stay out of the Sun/Moon zones for the next hour (the Sun drifts
         15°/h); the park position is exempt (the stow is the safe place).
         """
-        self._check_can_move()
+        self.check_can_move()
         lim = self.limits
         lowest = lim.el_min_deg - self.config.horizon_deg if kind == "park" else lim.el_min_deg
         if not lowest <= el_deg <= lim.el_max_deg:
@@ -457,6 +494,10 @@ class Telescope:
         return op
 
     async def park(self) -> Operation:
+        caps = self.link.capabilities
+        if not caps.park:
+            raise Unsupported(f"park: the {caps.backend} mount cannot park (its driver says "
+                              "so); slew to a safe place and stop instead")
         m = self.link.mapping
         return await self.slew_altaz(m.park_az_deg, m.park_el_deg, kind="park", power_off=True)
 
@@ -475,7 +516,7 @@ class Telescope:
                                "star_el_deg) -> [dx_arcsec, dy_arcsec] function)")
         if not settle_s >= 0:
             raise BadRequest(f"settle_s={settle_s}: expected >= 0 mount seconds")
-        self._check_can_move()
+        self.check_can_move()
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.measure_pointing(self, op, target, name, settle_s=settle_s,
@@ -484,12 +525,6 @@ class Telescope:
         check = self._target_check(target, name, allow_sun)
         return await self._start("pointing_sample", name, procedure, allow_sun=allow_sun,
                                  check=check)
-
-    def guide_offsets(self, op: Operation) -> GuideOffsets:
-        """The guide offsets of a sky track (kept through its re-acquisitions)."""
-        if self._guide is None or self._guide[0] != op.id:
-            self._guide = (op.id, GuideOffsets())
-        return self._guide[1]
 
     async def move(self, az_rate_deg_s: float, el_rate_deg_s: float, *,
                    allow_sun: bool = False) -> Operation:
@@ -502,7 +537,7 @@ class Telescope:
                                  f"±{top:g}°/s")
         if az_rate_deg_s == 0.0 and el_rate_deg_s == 0.0:
             raise BadRequest("move: both rates are 0; send stop to end a move")
-        self._check_can_move()
+        self.check_can_move()
         name = f"move az {az_rate_deg_s:+g}°/s el {el_rate_deg_s:+g}°/s"
 
         async def procedure(op: Operation) -> dict[str, Any]:
@@ -513,47 +548,25 @@ class Telescope:
 
     async def guide(self, north_arcsec: float, east_arcsec: float,
                     rate_arcsec_s: float) -> dict[str, Any]:
-        """Offset the sky target being tracked north/east at `rate_arcsec_s` (a guide pulse).
+        """Offset the target being tracked north/east at `rate_arcsec_s` (a guide pulse).
 
-        A slew or track of a sky target accepts pulses from its start: given before the
-        mount has joined the target, they are part of the place it joins.
+        A slew or track accepts pulses from its start: given before the mount has
+        joined the target, they are part of the place it joins (steering.py).
         """
-        if not 0 < rate_arcsec_s <= MAX_GUIDE_RATE_ARCSEC_S:
-            raise BadRequest(f"guide: rate_arcsec_s={rate_arcsec_s:g}: expected > 0 and at most "
-                             f"{MAX_GUIDE_RATE_ARCSEC_S:g} (ten times sidereal)")
-        size = math.hypot(north_arcsec, east_arcsec)
-        if size == 0.0:
-            raise BadRequest("guide: north_arcsec and east_arcsec are both 0")
-        if size > MAX_GUIDE_STEP_ARCSEC:
-            raise BadRequest(f"guide: a pulse of {size:g}\u2033 is beyond the "
-                             f"{MAX_GUIDE_STEP_ARCSEC:g}\u2033 a guide pulse may move; slew instead")
-        op = self.op
-        if (op is None or op.kind not in ("slew", "track") or op.info.get("fixed")
-                or op.phase in TERMINAL or op.phase is Phase.ENDING):
-            what = "nothing runs" if op is None else f"operation {op.id} ({op.kind}) is " \
-                f"{op.phase.label}"
-            raise NotTracking(f"guide: no sky target is being tracked ({what}); a guide pulse "
-                              "offsets a running track or slew of a star, planet or RA/Dec")
-        offsets = self.guide_offsets(op)
-        now = await self.motion.mount_time_us()
-        if self.op is not op:
-            raise NotTracking(f"guide: operation {op.id} was replaced while the pulse was "
-                              "being scheduled")
-        pulse = offsets.add(north_arcsec, east_arcsec, rate_arcsec_s, now,
-                            self.feeder_config().step_us)
-        north, east = offsets.total_arcsec()
-        return {"id": op.id, "start_us": pulse.start_us, "end_us": pulse.end_us,
-                "start_utc": iso_utc(pulse.start_us, 3), "end_utc": iso_utc(pulse.end_us, 3),
-                "offset_arcsec": {"north": north, "east": east}}
+        return await self.steering.guide(north_arcsec, east_arcsec, rate_arcsec_s)
 
     async def track_satellite(self, sat: Satellite, *, max_wait_s: float | None = None,
-                              allow_sun: bool = False) -> Operation:
-        """Track the pass of `sat` in progress, or the next one above the horizon limit."""
-        self._check_can_move()
+                              allow_sun: bool = False, closed_loop: bool = False) -> Operation:
+        """Track the pass of `sat` in progress, or the next one above the horizon limit;
+        `closed_loop`: the along/across offsets follow the guide camera (closed_loop.py)."""
+        self.check_can_move()
+        if closed_loop:
+            self.steering.need_camera("track")
 
         async def procedure(op: Operation) -> dict[str, Any]:
             return await procedures.track_satellite_pass(self, op, sat, max_wait_s=max_wait_s,
-                                                         allow_sun=allow_sun)
+                                                         allow_sun=allow_sun,
+                                                         closed_loop=closed_loop)
 
         return await self._start("track_satellite", sat.name, procedure, resumable=True,
                                  allow_sun=allow_sun)
@@ -573,7 +586,7 @@ class Telescope:
             state = await self.motion.state()
             result["mount_state"] = self.link.mapping.state_name(state)
 
-        await self.supervisor.stop("stopped by a client", then=to_rest)
+        await self.supervisor.stop(StoppedByClient("stopped by a client"), then=to_rest)
         return result
 
     async def set_mode(self, mode: str) -> dict[str, Any]:
@@ -589,11 +602,12 @@ class Telescope:
         self.emit("mode", {"mode": mode})
         return {"mode": mode}
 
-    def load_model(self, path: str) -> dict[str, Any]:
-        from pointing_model import PointingModelError, load_model
+    def load_model(self, path: str, text: str | None = None) -> dict[str, Any]:
+        """Use the pointing model in file `path` (its `text` when already read)."""
+        from pointing_model import PointingModelError, load_model, model_from_text
 
         try:
-            self.model = load_model(path)
+            self.model = load_model(path) if text is None else model_from_text(text, str(path))
         except (PointingModelError, OSError, ValueError) as exc:
             raise BadRequest(f"cannot load pointing model {path}: {exc}") from None
         self.model_source = str(path)
@@ -617,9 +631,10 @@ class Telescope:
         """Return encoder and observed positions, RA/Dec, states, mount time, error statistics."""
         cfg = self.config
         out: dict[str, Any] = {"connected": self.link.connected, "url": self.link.config.url,
+                               "mount_endpoint": cfg.mount_endpoint or None,
                                "mode": "active" if self.active else "passive",
-                               "simulated": cfg.simulated, "time_mode": cfg.time_mode,
-                               "speed": None if cfg.lockstep and cfg.speed <= 0 else cfg.speed,
+                               "simulated": cfg.simulated, "time_mode": self.time_mode,
+                               "speed": self.clock.pace,
                                "pointing_model": self.model_source or None,
                                "site": {k: getattr(cfg.site, k) for k in _SITE_KEYS},
                                "operation": self.op.as_dict() if self.op else None,
@@ -627,6 +642,9 @@ class Telescope:
                                "time_sync": self.timesync.status.as_dict(),
                                "safety": self._safety_doc(),
                                "limits": dataclasses.asdict(self.limits),
+                               "corrections": self.steering.status(self.last_mount_us),
+                               "backend": {**self.link.describe(), "signals_url":
+                                           self.signals.url if self.signals else None},
                                "tracking_error": {f"{w}s": self.errors.window(w).as_dict()
                                                   for w in (1, 10, 60)}}
         if not self.link.connected:
@@ -650,8 +668,19 @@ class Telescope:
             "buffer": {"free_points": int(v["free_points"]),
                        "points": v.get("buffered_points"), "underruns": v.get("underruns"),
                        "late_points": v.get("late_points")},
+            "on_target": self._on_target_now(t_us, obs_az, obs_el),
         })
         return out
+
+    def _on_target_now(self, t_us: int, obs_az_deg: float, obs_el_deg: float):
+        """The boresight against the followed target's true place at the status's mount time,
+        with the newest sample's on-target error and planned deviation (docs/vss-api.md)."""
+        now = self.on_target.now(t_us, obs_az_deg % 360.0, obs_el_deg)
+        if now is not None:
+            e = self.errors
+            now["last_sample"] = {"t_us": e.last_t_us, "on_target_arcsec": e.last_on_target_arcsec,
+                                  "planned_deviation_arcsec": e.last_deviation_arcsec}
+        return now
 
     def _safety_doc(self) -> dict[str, Any]:
         return self.safety.zones().as_dict()

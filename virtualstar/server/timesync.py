@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 from .clock import MountClock
 from .exceptions import VssError
-from .mount_link import MountLink
+from .link_interface import MountBackend
 
 __all__ = ["ARM_WINDOW_US", "TimeSync", "TimeSyncStatus"]
 
@@ -57,7 +57,7 @@ class TimeSyncStatus:
 class TimeSync:
     """Periodically sync the mount clock to UTC and measure its offset."""
 
-    def __init__(self, link: MountLink, clock: MountClock, *, simulated: bool,
+    def __init__(self, link: MountBackend, clock: MountClock, *, simulated: bool,
                  period_s: float = 10.0,
                  on_offset: Callable[[int, int], None] | None = None) -> None:
         self.link = link
@@ -74,13 +74,13 @@ class TimeSync:
         The measurement before the sync is the drift accumulated since the last one (the
         worst offset of the period), the one after it what the sync left.
         """
-        if not self.active:
+        if not self.active or not self.link.capabilities.time_sync:
+            # a driver without a PPS clock keeps its own time (host UTC): only measured
+            if not self.link.capabilities.time_sync:
+                self.status.mode = "verify only (the driver keeps its own time)"
             await self.verify()
             return
-        if self.simulated:
-            second = await self._truth_second_in_window()
-        else:
-            second = await self._host_second_in_window()
+        second = await self._second_in_window()
         await self.verify()
         if second is not None and self.active:  # it may have gone passive meanwhile
             await self.link.call("time_sync", second + 1)
@@ -88,34 +88,41 @@ class TimeSync:
             await self._past_edge(second + 1)
             await self.verify()
 
-    async def _past_edge(self, second: int) -> None:
-        """Wait until just after the PPS edge of `second`, so the measurement sees the sync."""
-        target_us = second * 1_000_000 + _AFTER_EDGE_US
-        if self.simulated:
-            truth = int((await self.link.read(["utc_truth"]))["utc_truth"])
-            await self.clock.sleep(max(target_us - truth, 0) / 1e6)
-        else:
-            await asyncio.sleep(max(target_us - time.time_ns() // 1000, 0) / 1e6)
-
-    async def _host_second_in_window(self) -> int:
-        for _ in range(20):
-            frac = time.time_ns() // 1000 % 1_000_000
-            if ARM_WINDOW_US[0] <= frac <= ARM_WINDOW_US[1]:
-                break
-            await asyncio.sleep(((_ARM_AT_US - frac) % 1_000_000) / 1e6)
-        return time.time_ns() // 1000 // 1_000_000
-
-    async def _truth_second_in_window(self) -> int | None:
+    async def _utc_us(self) -> int | None:
+        """UTC now, µs: the mount's UTC truth in simulated time (None without that role),
+        the host clock in real time."""
+        if not self.simulated:
+            return time.time_ns() // 1000
         if not self.link.mapping.has("utc_truth"):
             self.status.mode = "verify only (the mount has no utc_truth role)"
             return None
+        return int((await self.link.read(["utc_truth"]))["utc_truth"])
+
+    async def _sleep_utc(self, seconds: float) -> None:
+        """Let `seconds` of UTC pass: mount time in simulated time, wall time in real time."""
+        if self.simulated:
+            await self.clock.sleep(seconds)
+        else:
+            await asyncio.sleep(seconds)
+
+    async def _second_in_window(self) -> int | None:
+        """Wait until UTC lies inside `ARM_WINDOW_US` of its second; return that second
+        (None: no UTC to sync to, or the window was missed 20 times)."""
         for _ in range(20):
-            truth = int((await self.link.read(["utc_truth"]))["utc_truth"])
-            frac = truth % 1_000_000
+            now = await self._utc_us()
+            if now is None:
+                return None
+            frac = now % 1_000_000
             if ARM_WINDOW_US[0] <= frac <= ARM_WINDOW_US[1]:
-                return truth // 1_000_000
-            await self.clock.sleep(((_ARM_AT_US - frac) % 1_000_000) / 1e6)
+                return now // 1_000_000
+            await self._sleep_utc(((_ARM_AT_US - frac) % 1_000_000) / 1e6)
         return None
+
+    async def _past_edge(self, second: int) -> None:
+        """Wait until just after the PPS edge of `second`, so the measurement sees the sync."""
+        now = await self._utc_us()
+        if now is not None:
+            await self._sleep_utc(max(second * 1_000_000 + _AFTER_EDGE_US - now, 0) / 1e6)
 
     async def verify(self) -> None:
         """Measure the mount clock's offset from UTC."""

@@ -7,13 +7,24 @@ time holding the count, the sums of squares and the peak of the on-sky error
 axis. Any window's RMS and peak are then exact sums over bins, and memory is
 bounded by the number of bins kept (a deque), whatever the sample rate.
 
-The following error is what the *encoders* miss. The sky misses more when the
-mount clock is off UTC: the mount is then where the target was (or will be)
-`offset` earlier, `rate × |offset|` away on the sky. So the history also keeps
-the target's on-sky rate per bin (from the points the feeder pushed) and the
-clock offsets TimeS measured, and reports the **on-sky error** beside the
-encoder error: per bin the clock term is added to the encoder RMS in quadrature
-and to its peak linearly (the two may point the same way).
+Three errors, kept apart (`on_target.py` computes the last two per sample):
+
+* the **following error** (`rms_arcsec`, `peak_arcsec`): what the *encoders* miss of
+  the demand the VSS sent — the mount's servo error;
+* the **on-target error** (`on_target_*`): the encoders (through the pointing model)
+  against the target's true place — what the sky sees; with the time spent farther
+  than `off_target_arcsec` from it (`off_target_s`);
+* the **planned deviation** (`planned_deviation_*`): the demand against the target's
+  true place — what the VSS chose to send (a keyhole, a clipped rate, offsets).
+
+The sky misses more when the mount clock is off UTC: the mount is then where the
+target was (or will be) `offset` earlier, `rate × |offset|` away on the sky. So the
+history also keeps the target's on-sky rate per bin (from the points the feeder
+pushed) and the clock offsets TimeS measured, and reports the **on-sky error**:
+per bin the clock term added to the on-target RMS in quadrature and to its peak
+linearly (the two may point the same way). Where no target is followed (a slew, a
+fixed place, a hand-pad move) the demand is the goal, and the following error
+stands in for the on-target one.
 """
 
 from __future__ import annotations
@@ -23,17 +34,29 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-__all__ = ["ErrorStats", "TrackingErrorHistory"]
+__all__ = ["ErrorStats", "TrackingErrorHistory", "warm_up"]
 
 DEFAULT_BIN_US = 100_000  # 0.1 s of mount time
 DEFAULT_MAX_BINS = 36_000  # one hour of mount time at 0.1 s
+DEFAULT_OFF_TARGET_ARCSEC = 5.0
+
+# a bin: [index, n, Σsky², Σaz², Σel², peak sky,
+#         n on target, Σon², peak on, µs off target, peak deviation, µs deviating]
+_IDX, _N, _SKY, _AZ, _EL, _PEAK, _NT, _ON, _PEAK_ON, _OFF_US, _PEAK_DEV, _DEV_US = range(12)
 
 
 @dataclass(frozen=True)
 class ErrorStats:
-    """RMS and peak of the tracking error over a window (arcsec); n samples."""
+    """Error figures over a window (arcsec; n samples; times in mount µs).
+
+    `rms_arcsec`/`peak_arcsec`: the following error (encoders vs demand). `on_target_*`:
+    the encoders vs the target's true place (NaN where no target was followed);
+    `planned_deviation_*`: the demand vs that place. `on_sky_*`: on target (or, where
+    nothing is followed, the following error) with the clock term.
+    """
 
     n: int
     rms_arcsec: float
@@ -46,6 +69,13 @@ class ErrorStats:
     on_sky_peak_arcsec: float = math.nan
     clock_error_peak_arcsec: float = math.nan  # the largest rate × |clock offset| in the window
     clock_offset_us: int | None = None  # the offset of largest size applied in the window
+    target_samples: int = 0
+    on_target_rms_arcsec: float = math.nan
+    on_target_peak_arcsec: float = math.nan
+    off_target_s: float = 0.0  # mount seconds farther than the threshold from the target
+    off_target_threshold_arcsec: float = DEFAULT_OFF_TARGET_ARCSEC
+    planned_deviation_peak_arcsec: float = math.nan
+    planned_deviation_s: float = 0.0  # mount seconds the demand was beyond the threshold
 
     def as_dict(self) -> dict:
         return {"n": self.n, "rms_arcsec": self.rms_arcsec, "peak_arcsec": self.peak_arcsec,
@@ -54,23 +84,54 @@ class ErrorStats:
                 "on_sky_peak_arcsec": self.on_sky_peak_arcsec,
                 "clock_error_peak_arcsec": self.clock_error_peak_arcsec,
                 "clock_offset_us": self.clock_offset_us,
+                "target_samples": self.target_samples,
+                "on_target_rms_arcsec": self.on_target_rms_arcsec,
+                "on_target_peak_arcsec": self.on_target_peak_arcsec,
+                "off_target_s": self.off_target_s,
+                "off_target_threshold_arcsec": self.off_target_threshold_arcsec,
+                "planned_deviation_peak_arcsec": self.planned_deviation_peak_arcsec,
+                "planned_deviation_s": self.planned_deviation_s,
                 "from_us": self.from_us, "to_us": self.to_us}
+
+    def track_summary(self, degraded_after_s: float, planned: list[str]) -> dict:
+        """A finished track's figures for its operation: `tracking_*` is on target (the
+        truth; the following error if no target sample arrived), `following_*` the
+        servo error, the planned deviation apart with what it was planned for, and
+        `outcome`: `degraded` when off target longer than `degraded_after_s`, else `done`."""
+        has_target = self.target_samples > 0
+        return {
+            "tracking_rms_arcsec": self.on_target_rms_arcsec if has_target else self.rms_arcsec,
+            "tracking_peak_arcsec": (self.on_target_peak_arcsec if has_target
+                                     else self.peak_arcsec),
+            "following_rms_arcsec": self.rms_arcsec, "following_peak_arcsec": self.peak_arcsec,
+            "on_sky_rms_arcsec": self.on_sky_rms_arcsec,
+            "on_sky_peak_arcsec": self.on_sky_peak_arcsec,
+            "clock_error_peak_arcsec": self.clock_error_peak_arcsec,
+            "off_target_s": self.off_target_s,
+            "off_target_threshold_arcsec": self.off_target_threshold_arcsec,
+            "planned_deviation_peak_arcsec": self.planned_deviation_peak_arcsec,
+            "planned_deviation_s": self.planned_deviation_s, "planned_deviation": planned,
+            "outcome": "degraded" if self.off_target_s > degraded_after_s else "done"}
 
 
 class TrackingErrorHistory:
-    """Bounded history of tracking-error bins; feed it with `add(t_us, az_as, el_as, el_rad)`."""
+    """Bounded history of error bins; feed it with `add(t_us, az_as, el_as, el_rad, ...)`."""
 
-    def __init__(self, *, bin_us: int = DEFAULT_BIN_US, max_bins: int = DEFAULT_MAX_BINS) -> None:
+    def __init__(self, *, bin_us: int = DEFAULT_BIN_US, max_bins: int = DEFAULT_MAX_BINS,
+                 off_target_arcsec: float = DEFAULT_OFF_TARGET_ARCSEC) -> None:
         self.bin_us = int(bin_us)
-        # each bin: [bin index, n, sum sky², sum az², sum el², peak sky]
+        self.off_target_arcsec = float(off_target_arcsec)
         self._bins: deque[list[float]] = deque(maxlen=max_bins)
         self._max_bins = max_bins
         self._rates: dict[int, float] = {}  # bin index -> the target's on-sky rate, arcsec/s
         self._offset_t: list[int] = []  # mount times of clock-offset measurements (increasing)
         self._offset_us: list[int] = []
+        self._period_us = 1000.0  # the stream's sample period, learnt from the samples
         self.samples = 0
         self.last_t_us = 0
         self.last_sky_arcsec = 0.0
+        self.last_on_target_arcsec = math.nan  # the newest sample's (NaN: no target)
+        self.last_deviation_arcsec = math.nan
 
     def clear(self) -> None:
         self._bins.clear()
@@ -112,35 +173,41 @@ class TrackingErrorHistory:
         return max(around, key=abs) if around else 0
 
     def add(self, t_us: np.ndarray, az_err_arcsec: np.ndarray, el_err_arcsec: np.ndarray,
-            el_rad: np.ndarray) -> None:
-        """Reduce a block of samples into the bins (times increasing)."""
+            el_rad: np.ndarray, on_target_arcsec: np.ndarray | None = None,
+            deviation_arcsec: np.ndarray | None = None) -> None:
+        """Reduce a block of samples into the bins (times increasing).
+
+        `on_target_arcsec` and `deviation_arcsec` (from `OnTarget.measure`, NaN where no
+        target is followed) are optional: without them the bins have no target samples.
+        """
         t = np.asarray(t_us, np.int64)
         if t.size == 0:
             return
-        az_sky = np.asarray(az_err_arcsec, float) * np.cos(np.asarray(el_rad, float))
-        el = np.asarray(el_err_arcsec, float)
-        sky2 = az_sky**2 + el**2
-        idx = t // self.bin_us
-        starts = np.flatnonzero(np.r_[True, idx[1:] != idx[:-1]])
-        n = np.diff(np.r_[starts, t.size])
-        s_sky = np.add.reduceat(sky2, starts)
-        s_az = np.add.reduceat(az_sky**2, starts)
-        s_el = np.add.reduceat(el**2, starts)
-        peak = np.sqrt(np.maximum.reduceat(sky2, starts))
-        for k, i0 in enumerate(starts):
-            b = int(idx[i0])
+        if t.size > 1:
+            self._period_us = float(t[-1] - t[0]) / (t.size - 1)
+        el = np.asarray(el_rad, float)
+        az_err, el_err = np.asarray(az_err_arcsec, float), np.asarray(el_err_arcsec, float)
+        if on_target_arcsec is None:
+            on_target_arcsec = deviation_arcsec = np.full(t.size, math.nan)
+        rows = _bin_rows(t, az_err, el_err, el, np.asarray(on_target_arcsec, float),
+                         np.asarray(deviation_arcsec, float), self.bin_us,
+                         self.off_target_arcsec, self._period_us)
+        for row in rows.tolist():
+            b = int(row[0])
             if self._bins and self._bins[-1][0] == b:
                 last = self._bins[-1]
-                last[1] += n[k]
-                last[2] += s_sky[k]
-                last[3] += s_az[k]
-                last[4] += s_el[k]
-                last[5] = max(last[5], peak[k])
+                for j in (_N, _SKY, _AZ, _EL, _NT, _ON, _OFF_US, _DEV_US):
+                    last[j] += row[j]
+                for j in (_PEAK, _PEAK_ON, _PEAK_DEV):
+                    last[j] = max(last[j], row[j])
             elif not self._bins or self._bins[-1][0] < b:
-                self._bins.append([b, float(n[k]), s_sky[k], s_az[k], s_el[k], peak[k]])
+                row[0] = b
+                self._bins.append(row)
         self.samples += int(t.size)
         self.last_t_us = int(t[-1])
-        self.last_sky_arcsec = float(math.sqrt(sky2[-1]))
+        self.last_sky_arcsec = float(math.hypot(az_err[-1] * math.cos(el[-1]), el_err[-1]))
+        self.last_on_target_arcsec = float(on_target_arcsec[-1])
+        self.last_deviation_arcsec = float(deviation_arcsec[-1])
 
     def _select(self, from_us: int | None, to_us: int | None) -> list[list[float]]:
         """Return the bins whose start lies in [from_us, to_us), oldest first.
@@ -159,27 +226,48 @@ class TrackingErrorHistory:
         return sel
 
     def stats(self, from_us: int | None = None, to_us: int | None = None) -> ErrorStats:
-        """Return RMS and peak over bins whose start lies in [from_us, to_us)."""
+        """Return the figures over bins whose start lies in [from_us, to_us)."""
         sel = self._select(from_us, to_us)
-        n = sum(b[1] for b in sel)
+        n = sum(b[_N] for b in sel)
         if n == 0:
             return ErrorStats(0, math.nan, math.nan, math.nan, math.nan,
-                              int(from_us or 0), int(to_us or 0))
-        sky2 = sum(b[2] for b in sel)
+                              int(from_us or 0), int(to_us or 0),
+                              off_target_threshold_arcsec=self.off_target_arcsec)
+        sky2 = sum(b[_SKY] for b in sel)
         clock = self._clock_terms(sel)
+        n_t = sum(b[_NT] for b in sel)
+        # on the sky: per bin the on-target error where a target was followed, else the
+        # following error (the demand is the goal there), with the clock term
+        sky_n = sky_s = 0.0
+        sky_peak = 0.0
+        for b, (c, _) in zip(sel, clock, strict=True):
+            cnt, s2, pk = ((b[_NT], b[_ON], b[_PEAK_ON]) if b[_NT] > 0
+                           else (b[_N], b[_SKY], b[_PEAK]))
+            sky_n += cnt
+            sky_s += s2 + cnt * c * c
+            sky_peak = max(sky_peak, pk + c)
+        targeted = [b for b in sel if b[_NT] > 0]
         return ErrorStats(
             int(n),
             math.sqrt(sky2 / n),
-            max(b[5] for b in sel),
-            math.sqrt(sum(b[3] for b in sel) / n),
-            math.sqrt(sum(b[4] for b in sel) / n),
+            max(b[_PEAK] for b in sel),
+            math.sqrt(sum(b[_AZ] for b in sel) / n),
+            math.sqrt(sum(b[_EL] for b in sel) / n),
             int(sel[0][0] * self.bin_us),
             int((sel[-1][0] + 1) * self.bin_us),
-            on_sky_rms_arcsec=math.sqrt((sky2 + sum(b[1] * c[0] ** 2 for b, c in
-                                                    zip(sel, clock, strict=True))) / n),
-            on_sky_peak_arcsec=max(b[5] + c[0] for b, c in zip(sel, clock, strict=True)),
+            on_sky_rms_arcsec=math.sqrt(sky_s / sky_n),
+            on_sky_peak_arcsec=sky_peak,
             clock_error_peak_arcsec=max(c[0] for c in clock),
             clock_offset_us=max((c[1] for c in clock), key=abs),
+            target_samples=int(n_t),
+            on_target_rms_arcsec=(math.sqrt(sum(b[_ON] for b in targeted) / n_t) if n_t
+                                  else math.nan),
+            on_target_peak_arcsec=max((b[_PEAK_ON] for b in targeted), default=math.nan),
+            off_target_s=sum(b[_OFF_US] for b in sel) / 1e6,
+            off_target_threshold_arcsec=self.off_target_arcsec,
+            planned_deviation_peak_arcsec=max((b[_PEAK_DEV] for b in targeted),
+                                              default=math.nan),
+            planned_deviation_s=sum(b[_DEV_US] for b in sel) / 1e6,
         )
 
     def _clock_terms(self, sel: list[list[float]]) -> list[tuple[float, int]]:
@@ -196,18 +284,69 @@ class TrackingErrorHistory:
 
     def series(self, from_us: int | None = None, to_us: int | None = None,
                max_points: int = 5000) -> dict[str, list]:
-        """Return per-bin (t_us, rms, peak, az and el RMS on the sky) in arcsec, decimated to
-        at most `max_points`."""
+        """Return per bin (t_us; following error rms, peak, az and el RMS on the sky; on-target
+        RMS and peak and the peak planned deviation, None where no target was followed) in
+        arcsec, decimated to at most `max_points`."""
         sel = self._select(from_us, to_us)
         step = max(1, math.ceil(len(sel) / max_points))
-        out: dict[str, list] = {"t_us": [], "rms_arcsec": [], "peak_arcsec": [],
-                                "az_rms_arcsec": [], "el_rms_arcsec": []}
+        out: dict[str, list] = {k: [] for k in (
+            "t_us", "rms_arcsec", "peak_arcsec", "az_rms_arcsec", "el_rms_arcsec",
+            "on_target_rms_arcsec", "on_target_peak_arcsec", "planned_deviation_arcsec")}
         for k in range(0, len(sel), step):
             group = sel[k:k + step]
-            n = sum(b[1] for b in group)
+            n = sum(b[_N] for b in group)
+            n_t = sum(b[_NT] for b in group)
             out["t_us"].append(int(group[0][0] * self.bin_us))
-            out["rms_arcsec"].append(math.sqrt(sum(b[2] for b in group) / n))
-            out["peak_arcsec"].append(max(b[5] for b in group))
-            out["az_rms_arcsec"].append(math.sqrt(sum(b[3] for b in group) / n))
-            out["el_rms_arcsec"].append(math.sqrt(sum(b[4] for b in group) / n))
+            out["rms_arcsec"].append(math.sqrt(sum(b[_SKY] for b in group) / n))
+            out["peak_arcsec"].append(max(b[_PEAK] for b in group))
+            out["az_rms_arcsec"].append(math.sqrt(sum(b[_AZ] for b in group) / n))
+            out["el_rms_arcsec"].append(math.sqrt(sum(b[_EL] for b in group) / n))
+            out["on_target_rms_arcsec"].append(
+                math.sqrt(sum(b[_ON] for b in group) / n_t) if n_t else None)
+            out["on_target_peak_arcsec"].append(max(b[_PEAK_ON] for b in group) if n_t else None)
+            out["planned_deviation_arcsec"].append(max(b[_PEAK_DEV] for b in group) if n_t
+                                                   else None)
         return out
+
+
+def warm_up() -> None:
+    """Compile the kernel (or load it from numba's cache) before the first packet arrives."""
+    x = np.zeros(2)
+    _bin_rows(np.zeros(2, np.int64), x, x, x, x, x, DEFAULT_BIN_US, 1.0, 1000.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _bin_rows(t, az_err, el_err, el, on, dev, bin_us, limit, period_us):  # pragma: no cover
+    """Reduce samples (times increasing) into bin rows laid out as the history's bins:
+    following error on the sky and per axis; on target (NaN: no target) and deviation."""
+    n = t.shape[0]
+    rows = np.zeros((n, 12))
+    r = -1
+    last = -(2**62)
+    for i in range(n):
+        b = t[i] // bin_us
+        if b != last:
+            r += 1
+            last = b
+            rows[r, 0] = b
+            rows[r, 5] = 0.0
+            rows[r, 8] = -1.0
+            rows[r, 10] = -1.0
+        a = az_err[i] * math.cos(el[i])
+        e = el_err[i]
+        sky2 = a * a + e * e
+        rows[r, 1] += 1.0
+        rows[r, 2] += sky2
+        rows[r, 3] += a * a
+        rows[r, 4] += e * e
+        rows[r, 5] = max(rows[r, 5], math.sqrt(sky2))
+        if not math.isnan(on[i]):
+            rows[r, 6] += 1.0
+            rows[r, 7] += on[i] * on[i]
+            rows[r, 8] = max(rows[r, 8], on[i])
+            if on[i] > limit:
+                rows[r, 9] += period_us
+            rows[r, 10] = max(rows[r, 10], dev[i])
+            if dev[i] > limit:
+                rows[r, 11] += period_us
+    return rows[:r + 1]

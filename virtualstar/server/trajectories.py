@@ -15,7 +15,6 @@ the cable wrap, radians and rad/s); ``end_us`` is None for an endless path.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Protocol
@@ -109,9 +108,8 @@ class TargetPath:
     end_us: int | None = None
 
     def __init__(self, target, site: Site, *, limits: MountLimits, eop=None, model=None,
-                 current_az_rad: float | None = None, guard=None, offsets=None) -> None:
+                 current_az_rad: float | None = None, guard=None) -> None:
         self.target = target
-        self.offsets = offsets  # GuideOffsets (guiding.py): pulses along RA/Dec, or None
         self.site = site
         self.limits = limits
         self.eop = eop
@@ -123,12 +121,6 @@ class TargetPath:
     def observe(self, t_us: np.ndarray) -> tuple[np.ndarray, ...]:
         """Return observed (az, el, az rate, el rate) with az continuous with earlier samples."""
         obs = observe_mount_times(self.target, np.asarray(t_us, np.int64), self.site, self.eop)
-        if self.offsets is not None:
-            obs = dataclasses.replace(obs, **dict(zip(
-                ("az_rad", "el_rad", "az_rate_rad_s", "el_rate_rad_s"),
-                self.offsets.apply(t_us, obs.az_rad, obs.el_rad, obs.az_rate_rad_s,
-                                   obs.el_rate_rad_s, math.radians(self.site.lat_deg)),
-                strict=True)))
         anchor = self._last[1] if self._last is not None else self._anchor
         try:
             az = unwrap_azimuth(obs.az_rad, limits=self.limits, current_az_rad=anchor)
@@ -221,6 +213,10 @@ class RampIn:
         self._v = np.array([j.az_rate_rad_s[0], j.el_rate_rad_s[0]])
         self.rest_rad = ramp_start(self._p, self._v, duration_s)
 
+    def knots_between(self, t0_us: int, t1_us: int) -> list[int]:
+        inner = getattr(self.path, "knots_between", None)
+        return [] if inner is None else inner(max(t0_us, self.join_us), t1_us)
+
     def sample(self, t_us: np.ndarray) -> Points:
         t = np.asarray(t_us, np.int64)
         late = t >= self.join_us
@@ -275,24 +271,29 @@ class RampOut:
         self.stop_us = int(path.end_us)
         self.duration_s = duration_s
         self.end_us = self.stop_us + int(round((duration_s + hold_s) * 1e6))
-        e = path.sample(np.array([self.stop_us], np.int64))
-        self._p = np.array([e.az_rad[0], e.el_rad[0]])
-        self._v = np.array([e.az_rate_rad_s[0], e.el_rate_rad_s[0]])
 
     def sample(self, t_us: np.ndarray) -> Points:
         t = np.asarray(t_us, np.int64)
         early = t <= self.stop_us
         if early.all():
             return self.path.sample(t)
+        # where the path is at the stop, sampled now: an offset changed since still counts
+        e = self.path.sample(np.array([self.stop_us], np.int64))
+        p0 = np.array([e.az_rad[0], e.el_rad[0]])
+        v0 = np.array([e.az_rate_rad_s[0], e.el_rate_rad_s[0]])
         dt = np.clip((t - self.stop_us) * 1e-6, 0.0, self.duration_s)[:, None]
-        dec = self._v / self.duration_s
-        pos = self._p + self._v * dt - 0.5 * dec * dt**2
-        vel = self._v - dec * dt
+        dec = v0 / self.duration_s
+        pos = p0 + v0 * dt - 0.5 * dec * dt**2
+        vel = v0 - dec * dt
         if early.any():
             head = self.path.sample(t[early])
             pos[early, 0], pos[early, 1] = head.az_rad, head.el_rad
             vel[early, 0], vel[early, 1] = head.az_rate_rad_s, head.el_rate_rad_s
         return Points(t, pos[:, 0], pos[:, 1], vel[:, 0], vel[:, 1])
+
+    def knots_between(self, t0_us: int, t1_us: int) -> list[int]:
+        inner = getattr(self.path, "knots_between", None)
+        return [] if inner is None else inner(t0_us, min(t1_us, self.stop_us))
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,11 @@
 /* The POSIX host layer: a real-time tick thread, a TCP server and a framed serial link,
  * pumped by one poll() loop. Memory: the device's arena (ad_arena_bytes), and per TCP
- * connection a receive buffer of max_frame_bytes + 4 and a send ring of
- * 2 × max_reply_bytes + tx_extra_bytes, allocated when the peer connects and freed when
- * it leaves; at most max_clients + max_pending + 1 connections exist at once. */
+ * connection a receive buffer and a send ring that start at 4 KiB and 16 KiB and grow
+ * to what the connection needs, up to max_frame_bytes + 4 and 2 × max_reply_bytes +
+ * tx_extra_bytes; freed when it leaves. At most max_clients + max_pending + 1
+ * connections hold a slot at once, and as many more may linger (2 s, 1 MiB at most) while
+ * their peers read the last frames (the TCP close is not a reset). The tick thread runs
+ * late ticks back to back; more than 2 s behind, it gives them up (counted). */
 #ifndef AD_POSIX_H
 #define AD_POSIX_H
 
@@ -17,6 +20,8 @@ typedef struct ad_posix_opts {
     double duration_s;        /* stop after this long (0: until SIGINT/SIGTERM) */
     uint32_t tx_extra_bytes;  /* per TCP connection, beyond two replies */
     const char *stats_path;   /* write the loop's lateness figures here as JSON at exit */
+    double warmup_s;          /* the lateness figures leave out the first warmup_s */
+    int rt_priority;          /* > 0: the tick thread runs SCHED_FIFO at this priority */
 } ad_posix_opts;
 
 /* Compute one tick (called with the critical section held); return its mount time. */

@@ -24,12 +24,21 @@
 #define LOOP_HZ 10000u
 
 /* ---- memory: everything the firmware uses is here, sized at compile time -------------- */
-#define ARENA_BYTES (35u * 1024u) /* ad_arena_bytes() of this configuration: 34.1 KiB */
-#define LINK_BYTES (7680u)      /* ad_link_bytes(2048, 5120, 3) */
-#define MBEDTLS_BYTES 1024u
-static uint64_t arena[ARENA_BYTES / 8];
-static uint64_t link_mem[LINK_BYTES / 8];
-static unsigned char mbedtls_heap[MBEDTLS_BYTES];
+#ifndef FW_ARENA_BYTES
+#define FW_ARENA_BYTES 40960u  /* ad_arena_bytes() of this configuration (firmware.mk) */
+#endif
+#ifndef FW_LINK_BYTES
+#define FW_LINK_BYTES 8192u    /* ad_link_bytes(max_frame, max_reply, channels) */
+#endif
+#ifndef FW_MBEDTLS_BYTES
+#define FW_MBEDTLS_BYTES 1024u /* mbedTLS's HMAC allocations */
+#endif
+static uint64_t arena[FW_ARENA_BYTES / 8];
+static uint64_t link_mem[FW_LINK_BYTES / 8];
+static unsigned char mbedtls_heap[FW_MBEDTLS_BYTES];
+/* What this configuration needs, for a debugger or QEMU's monitor to read
+ * (tests/device_c/test_device_qemu.py checks them against the sizes above). */
+volatile uint32_t fw_arena_needed, fw_link_needed;
 static ad_device *dev;
 static ad_link *link;
 static volatile uint64_t tick;
@@ -83,6 +92,15 @@ int ad_port_random(uint8_t *out, size_t n)
 static int64_t start_us = 1735689600000000; /* 2025-01-01T00:00:00Z: no RTC in QEMU */
 int64_t ad_port_wall_us(void) { return start_us + (int64_t)(tick * (1000000u / LOOP_HZ)); }
 
+/* A failed assertion (libmpack checks its own invariants) stops here instead of printing
+ * through newlib's fprintf: reset the core, as a watchdog would. */
+void __assert_func(const char *file, int line, const char *fn, const char *expr)
+{
+    (void)file; (void)line; (void)fn; (void)expr;
+    REG(0xe000ed0cu) = 0x05fa0004u; /* SCB AIRCR: VECTKEY | SYSRESETREQ */
+    for (;;) {}
+}
+
 /* ---- the control tick --------------------------------------------------------------------- */
 void systick_handler(void)
 {
@@ -130,7 +148,7 @@ int main(void)
     cfg.loop_rate_hz = LOOP_HZ;
     cfg.operator_password = FIRMWARE_PASSWORD;
     cfg.max_frame_bytes = 2048;
-    cfg.max_reply_bytes = 5120;
+    cfg.max_reply_bytes = 1024; /* a bigger LIST goes out in parts */
     cfg.max_arg_bytes = 512;
     cfg.max_array_len = 1024;
     cfg.max_str_bytes = 256;
@@ -146,15 +164,22 @@ int main(void)
     ex_init(cfg.loop_rate_hz, start_us, NULL);
     const ad_var *vars = ex_vars(EX_MAX_EXTRA, &nv);
     const ad_fn *fns = ex_fns(&nf);
+    fw_arena_needed = (uint32_t)ad_arena_bytes(&cfg, vars, nv, fns, nf);
+    fw_link_needed = (uint32_t)ad_link_bytes(cfg.max_frame_bytes, cfg.max_reply_bytes,
+                                             cfg.max_clients + cfg.max_pending);
     dev = ad_init(arena, sizeof arena, &cfg, vars, nv, fns, nf, why, sizeof why);
     uart_init();
-    if (!dev) {
+    if (dev) {
+        link = ad_link_init(link_mem, sizeof link_mem, dev, cfg.max_frame_bytes,
+                            cfg.max_reply_bytes, cfg.max_clients + cfg.max_pending, link_drain, NULL);
+        if (!link)
+            ad_snprintf(why, sizeof why, "the link needs %lu bytes; FW_LINK_BYTES is %lu",
+                        (unsigned long)fw_link_needed, (unsigned long)sizeof link_mem);
+    }
+    if (!dev || !link) { /* say why on the UART, in plain text, and stop */
         for (const char *p = why; *p; p++) { while (!(USART_SR & (1u << 7))) {} USART_DR = (uint8_t)*p; }
         for (;;) {}
     }
-    link = ad_link_init(link_mem, sizeof link_mem, dev, cfg.max_frame_bytes, cfg.max_reply_bytes,
-                        cfg.max_clients + cfg.max_pending, link_drain, NULL);
-    if (!link) for (;;) {}
     SYST_RVR = CPU_HZ / LOOP_HZ - 1;
     SYST_CVR = 0;
     SYST_CSR = 7; /* processor clock, interrupt, enable */

@@ -15,10 +15,18 @@ __attribute__((section(".vectors"), used)) static void (*const vectors[16 + 82])
     default_handler, 0, default_handler, systick_handler,
 };
 
+/* The stack is painted with 0xa5 at reset: how deep it ever got can be read later (a
+ * debugger, QEMU's monitor) as the first byte from its bottom that is not 0xa5. */
+extern uint32_t _stack_bottom;
+#define STACK_PAINT 0xa5a5a5a5u
+
 void reset_handler(void)
 {
     memcpy(&_data_start, &_data_load, (size_t)((char *)&_data_end - (char *)&_data_start));
     memset(&_bss_start, 0, (size_t)((char *)&_bss_end - (char *)&_bss_start));
+    uint32_t *sp;
+    __asm volatile("mov %0, sp" : "=r"(sp));
+    for (uint32_t *p = &_stack_bottom; p < sp - 16; p++) *p = STACK_PAINT;
     main();
     for (;;) {}
 }

@@ -53,6 +53,57 @@ export async function streamSignals(page, names, rateHz) {
 }
 
 /**
+ * On the Compute tab, define the series `name` = `expr` (in `unit`) and wait until it has
+ * been evaluated on `n` samples.
+ */
+export async function computeSeries(page, name, expr, { unit = '', n = 200, timeout = 15_000 } = {}) {
+  await page.click('button[data-tab=Compute]');
+  await page.fill('input[name=compute-name-0]', name);
+  await page.fill('input[name=compute-expr-0]', expr);
+  if (unit) await page.fill('input[name=compute-unit-0]', unit);
+  await page.click('button.apply-computes');
+  await page.waitForFunction(([nm, want]) => { // the expression has been evaluated on some packets
+    const { series } = window.panelProbe;
+    const c = series.series.get(nm);
+    let count = 0;
+    for (let i = 0; c && i < series.count; i++) if (!Number.isNaN(c[i])) count++;
+    return count >= want;
+  }, [name, n], { timeout });
+}
+
+/**
+ * Check the computed series `name` sample by sample against `reference`, a JS expression
+ * of the series `inputs` (and Math): return {n, worst} (the largest absolute difference).
+ */
+export async function checkComputed(page, name, inputs, reference) {
+  return page.evaluate(([nm, ins, ref]) => {
+    const { series } = window.panelProbe;
+    const f = new Function(...ins.map((_, k) => `x${k}`), `return ${ref};`);
+    const cols = ins.map((i) => series.series.get(i));
+    const c = series.series.get(nm);
+    let n = 0;
+    let worst = 0;
+    for (let i = 0; i < series.count; i++) {
+      if (Number.isNaN(c[i])) continue;
+      n++;
+      worst = Math.max(worst, Math.abs(c[i] - f(...cols.map((col) => col[i]))));
+    }
+    return { n, worst };
+  }, [name, inputs, reference]);
+}
+
+/** On the Parameters tab, set `name` to `value` and wait until the tab shows it; return it. */
+export async function writeParameter(page, name, value) {
+  await page.click('button[data-tab=Parameters]');
+  await page.fill('input[name=param-filter]', name);
+  await page.fill(`input[data-param="${name}"]`, value);
+  await page.click(`button[data-set="${name}"]`);
+  await page.waitForFunction(([n, v]) => document.querySelector(`[data-param-value="${n}"]`)?.textContent.trim() === v,
+    [name, value], { timeout: 10_000 });
+  return page.textContent(`[data-param-value="${name}"]`);
+}
+
+/**
  * Run `body(page, result)` in a fresh chromium page; write `result` (with ok, error and the
  * page's uncaught errors) as JSON to `resultPath`, keep a screenshot on failure, and exit
  * with 0 only when the body finished.

@@ -64,6 +64,9 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'log-result.json'), join(ARTIF
   await hasEvent(page, 'emulator', 'param', { name: sent.param, new: sent.value });
   result.steps.push('the test\'s slew and write shown');
 
+  // every event, routine ones included, as `vs log` shows them (test_panel_trust_e2e.py
+  // checks that they are hidden by default)
+  await page.check('input[name=log-routine]');
   // a still snapshot for the filters: paused, the table holds what it holds
   await page.click('button.log-follow');
   result.held = await held(page);
@@ -88,7 +91,10 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'log-result.json'), join(ARTIF
   say('PAUSED');
   const again = await heard('SENT');
   await page.waitForFunction(() => window.panelEventLog.eventLog.pending > 0, null, { timeout: 30_000 });
-  await page.waitForTimeout(1200); // two more polls: the table must still not move
+  // two more polls: the table must still not move
+  const polls = await page.evaluate(() => window.panelEventLog.eventLog.polls);
+  await page.waitForFunction((n) => window.panelEventLog.eventLog.polls >= n + 2, polls, { timeout: 30_000 });
+  await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
   result.paused = { before: before.length, during: (await table(page)).length, button: (await page.textContent('button.log-follow')).trim() };
   await page.click('button.log-follow');
   await hasEvent(page, 'emulator', 'param', { name: again.param, new: again.value });

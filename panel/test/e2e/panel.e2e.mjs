@@ -7,7 +7,7 @@
 import assert from 'node:assert/strict';
 import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { launch, openAndConnect, streamSignals } from './browser.mjs';
+import { checkComputed, computeSeries, launch, openAndConnect, streamSignals, writeParameter } from './browser.mjs';
 
 const env = process.env;
 const ARTIFACTS = env.ARTIFACTS || 'artifacts/panel';
@@ -53,25 +53,8 @@ try {
   step('streaming');
 
   // Compute: an expression over a streamed signal, checked sample by sample in the page.
-  await tab(page, 'Compute');
-  await page.fill('input[name=compute-name-0]', 'az_err_arcsec');
-  await page.fill('input[name=compute-expr-0]', 'axis.az.error * 3600 * 180 / pi');
-  await page.fill('input[name=compute-unit-0]', 'arcsec');
-  await page.click('button.apply-computes');
-  await page.waitForTimeout(400);
-  result.computeCheck = await page.evaluate(() => {
-    const { series } = window.panelProbe;
-    const err = series.series.get('axis.az.error');
-    const c = series.series.get('az_err_arcsec');
-    let n = 0;
-    let worst = 0;
-    for (let i = 0; i < series.count; i++) {
-      if (Number.isNaN(c[i])) continue;
-      n++;
-      worst = Math.max(worst, Math.abs(c[i] - err[i] * 3600 * 180 / Math.PI));
-    }
-    return { n, worst };
-  });
+  await computeSeries(page, 'az_err_arcsec', 'axis.az.error * 3600 * 180 / pi', { unit: 'arcsec', timeout: 10_000 });
+  result.computeCheck = await checkComputed(page, 'az_err_arcsec', ['axis.az.error'], 'x0 * 3600 * 180 / Math.PI');
   assert.ok(result.computeCheck.n > 0, 'the computed series received no sample');
   // Save the Compute tab's state, clear it, load the file back.
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#tab-Compute button.save-state')]);
@@ -104,6 +87,13 @@ try {
   result.allInOneAxes = await page.evaluate(() => ({ ...window.panelProbe.probe.yAxes }));
   await page.screenshot({ path: join(ARTIFACTS, 'plot-all-in-one.png') });
   await page.check('input[name=stacked]');
+  // an angle shown in another unit: the axis says it, the samples drawn are converted
+  await page.selectOption('select[name="unit:axis.az.error"]', 'arcsec');
+  await redrawn();
+  result.unitChosen = await page.evaluate(() => ({ axes: Object.keys(window.panelProbe.probe.yAxes), drawn: window.panelProbe.probe.drawn }));
+  await page.screenshot({ path: join(ARTIFACTS, 'plot-arcsec.png') });
+  await page.selectOption('select[name="unit:axis.az.error"]', 'rad');
+  await redrawn();
   // Export the visible window as CSV: every sample, with units in the header.
   await page.click('button.pause');
   const [csvFile] = await Promise.all([page.waitForEvent('download'), page.click('button.export-csv')]);
@@ -129,13 +119,7 @@ try {
   await page.waitForFunction(() => window.panelTrajectory.lastRun !== null);
   step('trajectory started');
 
-  await tab(page, 'Parameters');
-  await page.fill('input[name=param-filter]', env.PARAM_NAME);
-  await page.fill(`input[data-param="${env.PARAM_NAME}"]`, env.PARAM_VALUE);
-  await page.click(`button[data-set="${env.PARAM_NAME}"]`);
-  await page.waitForFunction(([name, v]) => document.querySelector(`[data-param-value="${name}"]`)?.textContent.trim() === v,
-    [env.PARAM_NAME, env.PARAM_VALUE], { timeout: 10_000 });
-  result.paramShown = await page.textContent(`[data-param-value="${env.PARAM_NAME}"]`);
+  result.paramShown = await writeParameter(page, env.PARAM_NAME, env.PARAM_VALUE);
   await page.fill('input[name=param-filter]', 'axis.az');
   await shot(page, 'Parameters');
   step('parameter written');
@@ -158,7 +142,9 @@ try {
   await tab(page, 'Signals');
   await shot(page, 'Signals');
   await tab(page, 'Board');
-  await page.waitForTimeout(1100); // one poll of the watch list and STATS
+  // one poll of the watch list and STATS
+  await page.waitForFunction(() => document.querySelector('#tab-Board [data-field=clients]')
+    && document.querySelector('#tab-Board [data-field^="watch:"]')?.textContent.trim() !== '—', null, { timeout: 10_000 });
   await shot(page, 'Board');
   step('screenshots');
 

@@ -38,6 +38,9 @@ const look = (page) => page.evaluate(() => {
     vssUpdatedMs: t.updatedMs,
     mountLink: q('#tab-Telescope [data-field="mount-link"]').textContent.trim(),
     encoderAz: q('#tab-Telescope [data-field="encoder-az"]').textContent.trim(),
+    encoderAzKept: q('#tab-Telescope [data-field="encoder-az"]').classList.contains('kept'),
+    encoderAzColor: getComputedStyle(q('#tab-Telescope [data-field="encoder-az"]')).color,
+    placeKept: q('[data-testid=place-kept]')?.textContent.trim() ?? '',
     log: q('[data-testid=log]').textContent,
   };
 });

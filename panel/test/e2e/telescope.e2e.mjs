@@ -19,8 +19,15 @@ const step = (result, name) => {
 };
 const field = (page, name) => page.textContent(`#tab-Telescope [data-field="${name}"]`).then((t) => t.trim());
 const BOARD_FIELDS = ['target', 'kind', 'phase', 'mode', 'mount-state', 'encoder-az', 'encoder-el', 'observed-az',
-  'observed-el', 'ra', 'dec', 'mount-time', 'rms-1s', 'on-sky-rms-1s', 'pointing-model', 'clock-offset', 'mount-link'];
+  'observed-el', 'ra', 'dec', 'mount-time', 'rms-1s', 'on-sky-rms-1s', 'on-target-rms-1s', 'planned-1s',
+  'pointing-model', 'clock-offset', 'mount-link'];
 const readBoard = async (page) => Object.fromEntries(await Promise.all(BOARD_FIELDS.map(async (f) => [f, await field(page, f)])));
+/** Wait until the board has drawn a status polled after this moment. */
+async function nextPoll(page) {
+  const now = await page.evaluate(() => Date.now());
+  await page.waitForFunction((t) => window.panelTelescope.updatedMs > t, now, { timeout: 30_000 });
+  await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+}
 const waitField = (page, name, pattern, timeout = 60_000) => page.waitForFunction(
   ([n, p]) => new RegExp(p).test(document.querySelector(`#tab-Telescope [data-field="${n}"]`)?.textContent.trim() ?? ''),
   [name, pattern], { timeout });
@@ -58,16 +65,29 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), join
       return s?.operation?.phase === 'tracking' && s.tracking_error?.['1s']?.n > 500
         && s.mount_time_us > s.operation.info.tracking_from_us + 2e6;
     }, null, { timeout: 60_000 });
-    await page.waitForTimeout(1200); // the next poll is drawn
+    await nextPoll(page);
     result.tracking = await readBoard(page);
     result.trackingOperation = await page.evaluate(() => JSON.parse(JSON.stringify(window.panelTelescope.state.operation)));
     await page.screenshot({ path: join(ARTIFACTS, 'telescope.png') });
     step(result, 'tracking Vega shown');
 
+    // the hand pad: an arrow key (focused) and a button, 5″ steps on the sky
+    await page.selectOption('select[name=hand-pad-frame]', 'sky');
+    await page.selectOption('select[name=hand-pad-step]', '5');
+    await page.focus('[data-testid=hand-pad]');
+    await page.keyboard.press('ArrowUp');
+    await page.click('[data-testid=hand-pad] button.pad-left');
+    await waitField(page, 'offset-dec', '^5\\.000″$', 30_000);
+    await waitField(page, 'offset-ra', '^5\\.000″$', 30_000);
+    result.handPad = { dec: await field(page, 'offset-dec'), ra: await field(page, 'offset-ra'),
+      mode: await field(page, 'corrections-mode'), labels: await page.$$eval('[data-testid=hand-pad] .hand-pad-grid button', (b) => b.map((x) => x.textContent.trim())),
+      corrections: await page.evaluate(() => JSON.parse(JSON.stringify(window.panelTelescope.state.corrections))) };
+    step(result, 'hand pad offsets');
+
     await page.click('[data-testid=stop-all]');
     await page.waitForFunction(() => /VSS: stop done/.test(document.querySelector('[data-testid=stop-outcome]')?.textContent ?? ''), null, { timeout: 30_000 });
     result.stopOutcome = await page.textContent('[data-testid=stop-outcome]');
-    await waitField(page, 'phase', '^(aborted|done)$');
+    await waitField(page, 'phase', '^(stopped|aborted|done)$');
     result.afterStop = await readBoard(page);
     result.log = await page.textContent('[data-testid=log]');
     step(result, 'header STOP');
@@ -86,7 +106,7 @@ await runPageScript(env.RESULT || join(ARTIFACTS, 'telescope-result.json'), join
     await waitField(page, 'kind', '^park');
     await waitField(page, 'phase', '^done$', 120_000);
     await waitField(page, 'mount-state', '^off$');
-    await page.waitForTimeout(1200);
+    await nextPoll(page);
     result.parked = await readBoard(page);
     await page.screenshot({ path: join(ARTIFACTS, 'telescope-parked.png') });
     step(result, 'parked');

@@ -1,0 +1,440 @@
+"""One run of the VSS on a simulator we did not write, in real time; prints what it saw as JSON.
+
+Usage: backend_scenario.py alpaca|indi OUT_DIR
+
+Run inside a private network namespace (`unshare -n`, loopback up): indiserver binds
+every interface, and the Alpaca simulator is kept there too. The VSS drives the
+simulator through `--mount alpaca://…` or `indi://…` (build_server), while an
+*independent* client (ASCOM's alpyca for Alpaca, indipyclient for INDI) records every
+place the simulator reports, with the time it was read. The tests
+(test_mount_backends.py) judge those places against astropy and skyfield; nothing
+here decides whether a figure is good.
+
+The site is put where the Sun stands about 50° high now, so that the Sun zone is
+real: stars and the satellite pass are chosen away from it, a goto to the Sun must be
+refused and a slew past it must go round.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from synthetic_pass import synthetic_pass_tle  # noqa: E402
+
+BIN = Path(sys.executable).parent
+INDI_PORT = 7624
+INDI_DEVICE = "Telescope Simulator"
+STAR_TRACK_S = 12.0
+PASS_LEAD_S = 55.0  # the pass culminates this long after it is commanded
+PASS_AFTER_S = 8.0  # ... and is stopped this long after culmination (mid-pass)
+
+
+def now_us() -> int:
+    return time.time_ns() // 1000
+
+
+def free_port() -> int:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+class Simulator:
+    """The simulator process (started, killed, started again on the same port)."""
+
+    def __init__(self, kind: str, out_dir: Path) -> None:
+        self.kind = kind
+        self.port = free_port() if kind == "alpaca" else INDI_PORT
+        self.log = open(out_dir / f"{kind}-simulator.log", "ab")  # noqa: SIM115
+        self.proc: subprocess.Popen | None = None
+
+    @property
+    def url(self) -> str:
+        if self.kind == "alpaca":
+            return f"alpaca://127.0.0.1:{self.port}/0"
+        return f"indi://127.0.0.1:{self.port}/{INDI_DEVICE.replace(' ', '%20')}"
+
+    def start(self) -> None:
+        if self.kind == "alpaca":
+            cmd = [sys.executable, "-m", "alpaca_simulators.run_simulator", "--host",
+                   "127.0.0.1", "--port", str(self.port)]
+        else:
+            cmd = ["indiserver", "-p", str(self.port), "indi_simulator_telescope"]
+        self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=self.log,
+                                     start_new_session=True)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", self.port)) == 0:
+                    return
+            time.sleep(0.1)
+        raise RuntimeError(f"the {self.kind} simulator did not listen on {self.port}")
+
+    def kill(self) -> None:
+        if self.proc is not None:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGTERM)
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.kill()
+
+
+class Observer:
+    """An independent client recording every reported place: (t_s, ra_h, dec_deg)."""
+
+    def __init__(self, sim: Simulator) -> None:
+        self.sim = sim
+        self.samples: list[tuple[float, float, float]] = []
+        self.lock = threading.Lock()
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            if self.sim.kind == "alpaca":
+                self._alpaca()
+            else:
+                asyncio.run(self._indi())
+        except Exception:  # the simulator killed on purpose ends this observer
+            pass
+
+    def _alpaca(self) -> None:
+        from alpaca.telescope import Telescope
+
+        tel = Telescope(f"127.0.0.1:{self.sim.port}", 0)
+        while not self.stopping.is_set():
+            try:
+                t0 = time.time()
+                ra = tel.RightAscension
+                dec = tel.Declination
+                t1 = time.time()
+            except Exception:
+                time.sleep(0.2)
+                continue
+            # the simulator answers each with where the mount is when asked (~1 ms apart)
+            with self.lock:
+                self.samples.append(((t0 + t1) / 2, float(ra), float(dec)))
+            time.sleep(0.05)
+
+    async def _indi(self) -> None:
+        from indipyclient import IPyClient
+
+        obs = self
+
+        class Client(IPyClient):
+            async def rxevent(self, event) -> None:
+                if (event.devicename == INDI_DEVICE and event.vectorname == "EQUATORIAL_EOD_COORD"
+                        and event.eventtype == "Set"):
+                    t = time.time()  # a push describes the moment it is sent
+                    v = self[INDI_DEVICE]["EQUATORIAL_EOD_COORD"]
+                    with obs.lock:
+                        obs.samples.append((t, v.getfloatvalue("RA"), v.getfloatvalue("DEC")))
+
+            async def hardware(self) -> None:
+                while not obs.stopping.is_set():
+                    await asyncio.sleep(0.1)
+                self.shutdown()
+
+        client = Client(indihost="127.0.0.1", indiport=self.sim.port)
+        client.debug_verbosity(0)
+        await client.asyncrun()
+
+    def mark(self) -> int:
+        with self.lock:
+            return len(self.samples)
+
+    def since(self, k: int) -> list[tuple[float, float, float]]:
+        with self.lock:
+            return list(self.samples[k:])
+
+    def close(self) -> None:
+        self.stopping.set()
+        self.thread.join(10)
+
+
+def daytime_site():
+    """A site where the Sun stands ~50° high now (latitude -30°, the Sun 2.5 h east)."""
+    from virtualstar.astro import EarthOrientation, SolarSystemBody, load_site
+    from virtualstar.astro.mount_frames import observed_to_apparent_radec
+
+    eop = EarthOrientation.from_astropy_iers_data()
+    base = load_site().with_overrides(lat_deg=-30.0, lon_deg=0.0, height_m=1500.0)
+    t = np.array([now_us()], np.int64)
+    from virtualstar.astro import observe_mount_times
+
+    o = observe_mount_times(SolarSystemBody("sun"), t, base, eop)
+    ra, _dec = observed_to_apparent_radec(o.az_rad, o.el_rad, t, base, eop)
+    from virtualstar.astro.mount_frames import hour_angle_rad
+
+    ha_deg = math.degrees(float(hour_angle_rad(ra, t, base, eop)[0]))
+    lon = (-37.5 - ha_deg + 180.0) % 360.0 - 180.0  # the Sun's hour angle there: -37.5°
+    return base.with_overrides(lon_deg=lon), eop
+
+
+def pick_star(site, eop, sun_azel):
+    """A bright star 35–70° high, ≥ 60° from the Sun, ≥ 20° of hour angle from the meridian."""
+    from catalogs import bright_stars
+    from virtualstar.astro import IcrsStar, observe_mount_times
+    from virtualstar.astro.mount_frames import hour_angle_rad, observed_to_apparent_radec
+
+    t = np.array([now_us() + 30_000_000], np.int64)
+    best = None
+    for s in bright_stars():
+        if not s.name or s.vmag > 3.5:
+            continue
+        o = observe_mount_times(IcrsStar.from_catalog(s), t, site, eop)
+        el, az = math.degrees(o.el_rad[0]), math.degrees(o.az_rad[0])
+        ra, dec = observed_to_apparent_radec(o.az_rad, o.el_rad, t, site, eop)
+        ha = math.degrees(float(hour_angle_rad(ra, t, site, eop)[0]))
+        if not 35 <= el <= 70 or abs(ha) < 20 or abs(math.degrees(float(dec[0]))) > 75:
+            continue
+        if sep_deg(az, el, *sun_azel) < 60:
+            continue
+        if best is None or s.vmag < best.vmag:
+            best = s
+    return best
+
+
+def sep_deg(az1, el1, az2, el2) -> float:
+    a1, e1, a2, e2 = (math.radians(x) for x in (az1, el1, az2, el2))
+    c = math.sin(e1) * math.sin(e2) + math.cos(e1) * math.cos(e2) * math.cos(a1 - a2)
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+
+
+async def wait_op(op, timeout_s: float) -> None:
+    await asyncio.wait_for(asyncio.shield(op.done), timeout_s)
+
+
+def op_doc(op) -> dict:
+    return json.loads(json.dumps(op.as_dict(), default=str))
+
+
+async def scenario(kind: str, out_dir: Path) -> dict:
+    from virtualstar.astro import IcrsStar, Satellite, SolarSystemBody, observe_mount_times
+    from virtualstar.server import build_server
+
+    doc: dict = {"kind": kind, "errors": []}
+    site, eop = daytime_site()
+    doc["site"] = {"lat_deg": site.lat_deg, "lon_deg": site.lon_deg, "height_m": site.height_m,
+                   "pressure_hpa": site.pressure_hpa, "temperature_c": site.temperature_c,
+                   "humidity": site.humidity, "wavelength_um": site.wavelength_um}
+    sim = Simulator(kind, out_dir)
+    sim.start()
+    vss = build_server(mount_url=sim.url, site=site, signals_url="ws://127.0.0.1:0")
+    url = await vss.start("ws://127.0.0.1:0")
+    t = vss.telescope
+    obs = Observer(sim)
+    try:
+        await t.link.wait_connected(30)
+        await asyncio.sleep(1.0)
+        doc["connected"] = json.loads(json.dumps((await t.status())["backend"], default=str))
+        tnow = np.array([now_us()], np.int64)
+        sun = observe_mount_times(SolarSystemBody("sun"), tnow, site, eop)
+        sun_azel = (math.degrees(sun.az_rad[0]), math.degrees(sun.el_rad[0]))
+        doc["sun_azel_deg"] = sun_azel
+
+        # 1. a star: slew, land, sidereal track (its reports judged against astropy)
+        star = pick_star(site, eop, sun_azel)
+        doc["star"] = star.name
+        # the recorder records the backend's reports like any signal, all through (started
+        # first: a loaded host takes seconds to start a process)
+        store = out_dir / "store"
+        rec = await asyncio.create_subprocess_exec(
+            str(BIN / "vs"), "record", t.signals.url, "report.ra_deg", "report.dec_deg",
+            "rate.axis1_arcsec_s", "error.sky_arcsec", "--rate", "50", "--duration", "600",
+            "--store", f"parquet:{store}",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+        await asyncio.sleep(2.0)
+        op = await t.follow_target(IcrsStar.from_catalog(star), star.name,
+                                   duration_s=STAR_TRACK_S)
+        await op.begun
+        k = obs.mark()
+        await wait_op(op, STAR_TRACK_S + 60)
+        rec.send_signal(signal.SIGINT)  # Ctrl-C: the recorder closes its store and exits
+        _out, rec_err = await asyncio.wait_for(rec.communicate(), 60)
+        doc["star_op"] = op_doc(op)
+        doc["star_samples"] = obs.since(k)
+        q = await asyncio.create_subprocess_exec(
+            str(BIN / "vs"), "data", "query", str(store), "--to", "end", "--json",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+        q_out, q_err = await q.communicate()
+        doc["recorded"] = {"record_exit": rec.returncode, "record_stderr": rec_err.decode()[-1500:],
+                           "query_exit": q.returncode, "query_stderr": q_err.decode()[-1500:],
+                           "data": json.loads(q_out) if q.returncode == 0 else None,
+                           "report_period_s": t.link.stats.period_s()}
+
+        # 2. vs run of a small plan: one block of the same star, planned and run by the CLI
+        doc["run"] = await run_small_plan(url, site, star.name, out_dir)
+
+        # 3. the Sun: refused before anything moves
+        try:
+            await t.follow_target(SolarSystemBody("sun"), "Sun", duration_s=10)
+            doc["sun_refusal"] = None
+        except Exception as exc:
+            doc["sun_refusal"] = {"code": getattr(exc, "code", type(exc).__name__),
+                                  "message": str(exc)}
+
+        # 4. a slew whose straight path would cross the Sun zone goes round it
+        # on either side of the Sun in azimuth, 50° from it on the sky, both on the same side
+        # of north (the VSS reports azimuths 0..360°): the straight way passes the Sun
+        el = 35.0 if sun_azel[1] > 30 else 25.0
+        off = 50.0 / math.cos(math.radians(el))
+        if not off < sun_azel[0] < 360.0 - off:
+            doc["errors"].append(f"the Sun's azimuth {sun_azel[0]:.1f}° leaves no room")
+        a = ((sun_azel[0] - off) % 360.0, el)
+        b = ((sun_azel[0] + off) % 360.0, el)
+        op = await t.slew_altaz(*a)
+        await wait_op(op, 300)
+        doc["route_first"] = op_doc(op)
+        k = obs.mark()
+        op = await t.slew_altaz(*b)
+        await wait_op(op, 300)
+        doc["route_op"] = op_doc(op)
+        doc["route_samples"] = obs.since(k)
+        doc["route_ends"] = [a, b]
+
+        # 5. a satellite pass (ISS-like, culminating away from the Sun), stopped mid-pass
+        culm_s = time.time() + PASS_LEAD_S
+        name, l1, l2 = synthetic_pass_tle(site.lat_deg, site.lon_deg, site.height_m, culm_s,
+                                          away_from_az_deg=sun_azel[0])
+        doc["tle"] = [name, l1, l2]
+        doc["culmination_s"] = culm_s
+        op = await t.track_satellite(Satellite.from_tle(l1, l2, name))
+        await op.begun
+        k = obs.mark()
+        # stopped mid-pass: past culmination (a German mount may follow only the stretch
+        # after the meridian: then 25 s into it)
+        tracking_since = None
+        while not op.done.done() and time.time() < culm_s + 150:
+            if op.phase.label == "tracking" and tracking_since is None:
+                tracking_since = time.time()
+            if tracking_since is not None and time.time() > max(culm_s + PASS_AFTER_S,
+                                                                 tracking_since + 15) \
+                    and time.time() > tracking_since + 10:
+                break
+            await asyncio.sleep(0.2)
+        doc["pass_op_before_stop"] = op_doc(op)
+        stop_at = time.time()
+        doc["stop_result"] = await t.stop()
+        doc["stop_answered_s"] = time.time() - stop_at
+        doc["stop_sent_s"] = stop_at
+        await asyncio.sleep(4.0)  # the mount must stay at rest: the observer keeps reading
+        doc["pass_op"] = op_doc(op)
+        doc["pass_samples"] = obs.since(k)
+
+        # 6. the driver killed mid-track: a fault, the mount told to stop, nothing resumed.
+        # The track follows the place the mount points at (no slew first: the test is short)
+        from virtualstar.astro.equatorial import jnow_to_icrs
+
+        v = await t.link.read(["axis1_position", "axis2_position"])
+        here_icrs = jnow_to_icrs(math.degrees(v["axis1_position"]) % 360.0,
+                                 math.degrees(v["axis2_position"]), now_us())
+        op = await t.follow_target(IcrsStar(*here_icrs), "the place it points at",
+                                   duration_s=None)
+        await op.begun
+        await asyncio.sleep(3.0)
+        calls_before = len(t.link.calls) and t.link.calls[-1].seq
+        killed = time.time()
+        sim.kill()
+        try:
+            await wait_op(op, 30)
+        except TimeoutError:
+            doc["errors"].append("the operation did not end within 30 s of the kill")
+        doc["kill_op"] = op_doc(op)
+        doc["kill_fault_after_s"] = time.time() - killed
+        # what the VSS sent between the kill and the fault (a command already on its way,
+        # and the stop), and after the fault
+        doc["calls_after_kill"] = [c.role for c in t.link.calls if c.seq > calls_before]
+        calls_before = len(t.link.calls) and t.link.calls[-1].seq
+        obs.close()
+        sim.start()
+        await t.link.wait_connected(60)
+        await asyncio.sleep(3.0)
+        obs = Observer(sim)
+        await asyncio.sleep(2.0)
+        k = obs.mark()
+        await asyncio.sleep(3.0)
+        doc["after_restart"] = {"status": json.loads(json.dumps(
+            (await t.status())["backend"], default=str)), "samples": obs.since(k),
+            "operation": op_doc(t.op) if t.op else None,
+            "calls": [c.role for c in t.link.calls if c.seq > calls_before]}
+
+        doc["final_backend"] = json.loads(json.dumps((await t.status())["backend"], default=str))
+    except Exception:
+        doc["errors"].append(traceback.format_exc())
+    finally:
+        obs.close()
+        await vss.close()
+        sim.stop()
+    return doc
+
+
+async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
+    """`vs plan` a one-star program over the next minutes, then `vs run` it on this VSS."""
+    from virtualstar.astro import iso_utc
+
+    site_file = out_dir / "site.toml"
+    site_file.write_text(
+        f"[site]\nlat_deg = {site.lat_deg}\nlon_deg = {site.lon_deg}\n"
+        f"height_m = {site.height_m}\npressure_hpa = {site.pressure_hpa}\n"
+        f"temperature_c = {site.temperature_c}\nhumidity = {site.humidity}\n")
+    program = out_dir / "program.toml"
+    program.write_text(
+        '[program]\nname = "backend test"\n\n[defaults]\nmin_el_deg = 20\n'
+        "sun_max_el_deg = 90\nmoon_min_sep_deg = 0\n\n"
+        f'[[target]]\nstar = "{star}"\nduration_s = 8\n')
+    start = now_us() + 3_000_000
+    plan = out_dir / "plan.json"
+    run = out_dir / "run.json"
+    p = await asyncio.create_subprocess_exec(
+        str(BIN / "vs"), "plan", str(program), "--from", iso_utc(start), "--to",
+        iso_utc(start + 240_000_000), "--site-file", str(site_file), "-o", str(plan),
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    out, err = await p.communicate()
+    if p.returncode != 0:
+        return {"plan_exit": p.returncode, "stderr": err.decode()[-2000:]}
+    p = await asyncio.create_subprocess_exec(
+        str(BIN / "vs"), "run", str(plan), "--server", url, "-o", str(run),
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    out, err = await asyncio.wait_for(p.communicate(), 400)
+    doc = {"plan_exit": 0, "run_exit": p.returncode, "stderr": err.decode()[-2000:],
+           "plan": json.loads(plan.read_text())}
+    if run.exists():
+        doc["record"] = json.loads(run.read_text())
+    return doc
+
+
+def main() -> None:
+    kind, out_dir = sys.argv[1], Path(sys.argv[2])
+    out_dir.mkdir(parents=True, exist_ok=True)
+    doc = asyncio.run(scenario(kind, out_dir))
+    text = json.dumps(doc, default=str)
+    (out_dir / "scenario.json").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,141 @@
+"""Every value a client can send is checked before the supervisor sees it; no input
+produces `internal` or a traceback; a refused command never ends the running track.
+
+One `vs server --emulator` process (lockstep, paced) serves the module; its stderr is
+kept in a file and must hold no traceback at the end.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import typing
+
+import pytest
+from hostile_peers import OPERATOR, VEGA_NIGHT, login, vs_server
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from virtualstar.server.commands import COMMANDS
+
+NAN, INF = math.nan, math.inf
+HUGE = [1e300, -1e300, 2**70, -(2**70), 10**30]
+# Parameters whose domain has no negative values: durations, counts, times, rates, sequence
+# numbers and the angles that run from 0 (right ascension, azimuth)
+NEVER_NEGATIVE = {"settle_s", "duration_s", "max_wait_s", "max_points", "since", "limit", "id",
+                  "from_us", "to_us", "rate_arcsec_s", "ra_deg", "az_deg"}
+# What a command needs besides the parameter under test, so that only that one is wrong
+NEEDS = {"slew": {"star": "Vega"}, "track": {"star": "Vega"},
+         "pointing_sample": {"star": "Vega"}, "move": {"az_rate_deg_s": 0.5}}
+
+
+def numeric_parameters() -> list[tuple[str, str]]:
+    out = []
+    for cmd, command in sorted(COMMANDS.items()):
+        hints = typing.get_type_hints(command.params)
+        for f in dataclasses.fields(command.params):
+            kinds = typing.get_args(hints[f.name]) or (hints[f.name],)
+            if int in kinds or float in kinds:
+                out.append((cmd, f.name))
+    return out
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    with vs_server(tmp_path_factory.mktemp("vss"), "--speed", "10", "--start",
+                   VEGA_NIGHT) as proc:
+        yield proc
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+
+
+@pytest.fixture(scope="module")
+def tracking(server):
+    """An operator session with Vega being tracked."""
+    op = login(server.url, OPERATOR)
+    reply = op.request("track", {"star": "Vega"})
+    assert reply["ok"], reply
+    yield op, reply["result"]["id"]
+    op.close()
+
+
+def test_the_numeric_parameters_are_those_the_api_documents():
+    found = numeric_parameters()
+    assert len(found) >= 20  # a guard against the table losing its types
+    assert ("pointing_sample", "settle_s") in found and ("log", "since") in found
+
+
+@pytest.mark.parametrize(("cmd", "name"), numeric_parameters())
+def test_nan_infinite_huge_and_impossible_negative_values_are_refused_and_end_nothing(
+        tracking, cmd, name):
+    op, op_id = tracking
+    values: list = [NAN, INF, -INF, *HUGE]
+    if name in NEVER_NEGATIVE:
+        values += [-5, -1e-3] if name not in ("duration_s", "rate_arcsec_s") else [-5, 0]
+    for value in values:
+        params = {**NEEDS.get(cmd, {}), name: value}
+        if cmd in ("slew", "track", "pointing_sample") and name in ("ra_deg", "dec_deg"):
+            params = {"ra_deg": 10.0, "dec_deg": 10.0, name: value}
+        elif cmd in ("slew", "track", "pointing_sample") and name in ("az_deg", "el_deg"):
+            params = {"az_deg": 10.0, "el_deg": 40.0, name: value}
+        # NaN and the infinities leave as the tokens Python writes; JSON has none
+        reply = op.request(cmd, raw=json.dumps({"id": 1, "cmd": cmd, "params": params}))
+        assert reply["ok"] is False, (cmd, name, value, reply)
+        assert reply["error"]["code"] == "bad_request", (cmd, name, value, reply)
+        running = op.request("status")["result"]["operation"]
+        assert running["id"] == op_id and running["phase"] == "tracking", (cmd, name, value)
+
+
+@pytest.mark.parametrize(("frame", "words"), [
+    ('{"id": 1, "cmd": "pointing_sample", "params": {"star": "Vega", "settle_s": 1e12}}',
+     "settle_s"),
+    ('{"id": 2, "cmd": "track", "params": {"star": "Vega", "duration_s": 1e300}}', "duration_s"),
+    ('{"id": 3, "cmd": "errors", "params": {"max_points": -5}}', "max_points"),
+    ('{"id": 4, "cmd": "log", "params": {"since": ' + str(2**70) + "}}", "since"),
+    ("[" * 100_000 + "]" * 100_000, "nests deeper"),
+    ('{"id": ' + "9" * 5000 + ', "cmd": "ping"}', "5000 characters"),
+    ('{"id": 5, "cmd": "ping", "params": {"x": 1e999}}', "beyond the range"),
+    ('{"id": 6, "cmd": "status", "params": {"a": ' + '{"b":' * 1000 + "1" + "}" * 1000 + "}}",
+     "nests deeper"),
+])
+def test_the_values_of_the_issue_are_refused_as_bad_requests_and_the_track_goes_on(
+        tracking, frame, words):
+    op, op_id = tracking
+    reply = op.request("raw", raw=frame)
+    assert reply["ok"] is False and reply["error"]["code"] == "bad_request", reply
+    assert words in reply["error"]["message"]
+    running = op.request("status")["result"]["operation"]
+    assert running["id"] == op_id and running["phase"] == "tracking"
+
+
+# -- fuzz ---------------------------------------------------------------------------------
+NAMES = sorted({f.name for c in COMMANDS.values() for f in dataclasses.fields(c.params)})
+leaves = (st.none() | st.booleans() | st.integers() | st.integers(min_value=2**60)
+          | st.floats() | st.text(max_size=40) | st.sampled_from(["Vega", "10 40", "-1 95"]))
+values = st.recursive(leaves, lambda inner: st.lists(inner, max_size=3)
+                      | st.dictionaries(st.text(max_size=8), inner, max_size=3), max_leaves=8)
+params = st.dictionaries(st.sampled_from(NAMES) | st.text(max_size=8), values, max_size=4)
+ids = st.integers() | st.text(max_size=20) | st.none() | st.floats() | st.booleans()
+commands = st.sampled_from(sorted([*COMMANDS, "auth"])) | st.text(max_size=12)
+documents = st.builds(lambda i, c, p: json.dumps({"id": i, "cmd": c, "params": p}),
+                      ids, commands, params)
+frames = documents | st.text(max_size=300) | values.map(json.dumps)
+
+
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(frame=frames)
+def test_no_frame_gets_internal_and_the_server_keeps_answering(server, frame):
+    op = login(server.url, OPERATOR, timeout_s=30.0)
+    try:
+        reply = op.request("fuzz", raw=frame)
+    except TimeoutError:
+        reply = None  # a command that waits (a slew landing, a wait): not an answer yet
+    finally:
+        op.close()
+    if reply is not None and reply.get("ok") is False:
+        assert reply["error"]["code"] != "internal", (frame, reply)
+    again = login(server.url, OPERATOR)
+    assert again.request("ping")["result"] == {"pong": True}
+    again.request("stop")  # whatever the frame started ends here
+    again.close()

@@ -1,0 +1,245 @@
+"""An INDI telescope as a rate-driven mount: `indi://HOST:PORT/DEVICE`.
+
+INDI drivers run under indiserver and speak XML property vectors; indipyclient (a
+maintained pure-Python INDI client, asyncio-based) keeps the connection and the
+properties, and hands each update over as it arrives. The standard telescope
+properties used (libindi's `INDI::Telescope`):
+
+* ``EQUATORIAL_EOD_COORD`` (RA hours, DEC degrees of date): pushed by the driver
+  at its polling period (the simulator's: 250 ms) whenever the place changes; its
+  state is Busy during a goto. A report is stamped with its arrival.
+* ``ON_COORD_SET`` TRACK + ``EQUATORIAL_EOD_COORD``: the goto; ``TELESCOPE_ABORT_MOTION``.
+* ``TELESCOPE_TRACK_STATE``, ``TELESCOPE_TRACK_MODE`` (TRACK_CUSTOM) and
+  ``TELESCOPE_TRACK_RATE`` (TRACK_RATE_RA, TRACK_RATE_DE, arcsec/s, the simulator's
+  limit ±16 384″/s): the rate actuator. The RA member is the *axis* rate, sidereal
+  included (15.04″/s holds a place of date); a commanded coordinate rate is taken
+  off it. A finer actuator than the four steps of ``TELESCOPE_MOTION_NS/WE``.
+* ``TELESCOPE_PARK``, ``TELESCOPE_PIER_SIDE`` (its presence: a German mount),
+  ``GEOGRAPHIC_COORD`` (the VSS's site is sent when the driver's differs).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from urllib.parse import unquote, urlsplit
+
+from virtualstar.astro import Site
+from virtualstar.astro.constants import SIDEREAL_RATE_ARCSEC_S
+
+from ..exceptions import BadRequest, MountRejected
+from .alpaca import geometry_override
+from .rate_mount import DriverInfo, DriverReport
+
+__all__ = ["IndiDriver", "parse_indi_url"]
+
+CONNECT_TIMEOUT_S = 10.0
+PUSH_WAIT_S = 0.3  # a read waits this long for a new push; silence means "unchanged"
+
+
+def parse_indi_url(url: str) -> tuple[str, int, str]:
+    """Return (host, port, device) of ``indi://HOST:PORT/DEVICE``; BadRequest if malformed."""
+    parts = urlsplit(url)
+    try:
+        port = parts.port or 7624
+    except ValueError:
+        port = -1
+    device = unquote(parts.path.strip("/"))
+    if parts.scheme != "indi" or not parts.hostname or port <= 0 or not device:
+        raise BadRequest(f"mount URL {url!r}: expected indi://HOST:PORT/DEVICE, e.g. "
+                         "indi://127.0.0.1:7624/Telescope%20Simulator")
+    return parts.hostname, port, device
+
+
+def _now_us() -> int:
+    return time.time_ns() // 1000
+
+
+class IndiDriver:
+    """One INDI telescope device, its properties pushed by indiserver."""
+
+    poll_s = 0.0  # pushed: `read` waits for the next push
+
+    def __init__(self, url: str, *, timeout_s: float = 2.0) -> None:
+        self.host, self.port, self.device = parse_indi_url(url)
+        self.url = url
+        self.timeout_s = timeout_s
+        self.geometry = geometry_override(url)
+        self._client = None
+        self._task: asyncio.Task | None = None
+        self._pushed = asyncio.Event()
+        self._place: tuple[float, float, int] | None = None  # ra_h, dec_deg, arrival µs
+        self._read_place: tuple[float, float, int] | None = None
+
+    # ------------------------------------------------------------------ connection
+    async def open(self, site: Site) -> DriverInfo:
+        from indipyclient import IPyClient
+
+        driver = self
+
+        class Client(IPyClient):
+            async def rxevent(self, event) -> None:
+                if getattr(event, "devicename", None) != driver.device:
+                    return
+                if getattr(event, "vectorname", None) == "EQUATORIAL_EOD_COORD" and \
+                        getattr(event, "eventtype", "") in ("Set", "Define"):
+                    driver._take_place(_now_us())
+
+        self._client = Client(indihost=self.host, indiport=self.port)
+        self._client.debug_verbosity(0)
+        self._task = asyncio.get_running_loop().create_task(self._client.asyncrun(),
+                                                            name="indi-client")
+        await self._wait(lambda: self._vector("CONNECTION") is not None, "the device")
+        if self._vector("CONNECTION")["CONNECT"] != "On":
+            await self._send("CONNECTION", {"CONNECT": "On", "DISCONNECT": "Off"})
+        await self._wait(lambda: self._vector("EQUATORIAL_EOD_COORD") is not None
+                         and self._vector("TELESCOPE_TRACK_RATE") is not None,
+                         "its coordinates and track rate")
+        if self._place is None:
+            self._take_place(_now_us())
+        await self._set_site(site)
+        rate = self._vector("TELESCOPE_TRACK_RATE")
+        member = rate.member("TRACK_RATE_RA")
+        max_rate = float(getattr(member, "max", 0.0) or 16384.0)
+        step = float(getattr(member, "step", 0.0) or 0.0) or None
+        geometry = self.geometry or ("german" if self._vector("TELESCOPE_PIER_SIDE") is not None
+                                     else "fork")
+        return DriverInfo(name=self.device, geometry=geometry,
+                          max_rate_deg_s=(max_rate - SIDEREAL_RATE_ARCSEC_S) / 3600.0,
+                          rate_step_arcsec_s=step,
+                          can_park=self._vector("TELESCOPE_PARK") is not None,
+                          can_pulse_guide=self._vector("TELESCOPE_TIMED_GUIDE_NS") is not None,
+                          site=self._site(), slew_rate_deg_s=None)
+
+    def _take_place(self, arrived_us: int) -> None:
+        vector = self._vector("EQUATORIAL_EOD_COORD")
+        self._place = (vector.getfloatvalue("RA"), vector.getfloatvalue("DEC"), arrived_us)
+        self._pushed.set()
+
+    async def close(self) -> None:
+        if self._client is not None:
+            self._client.shutdown()
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await self._task
+        self._client, self._task, self._place, self._read_place = None, None, None, None
+
+    def _vector(self, name: str):
+        client = self._client
+        if client is None or self.device not in client:
+            return None
+        return client[self.device].get(name)
+
+    async def _wait(self, ready, what: str) -> None:
+        deadline = time.monotonic() + CONNECT_TIMEOUT_S
+        while not ready():
+            if self._task is not None and self._task.done():
+                raise OSError(f"INDI {self.host}:{self.port}: the connection ended")
+            if time.monotonic() > deadline:
+                raise OSError(f"INDI {self.host}:{self.port}: device {self.device!r} did not "
+                              f"define {what} within {CONNECT_TIMEOUT_S:g} s")
+            await asyncio.sleep(0.05)
+
+    def _alive(self) -> None:
+        client = self._client
+        if client is None or not client.connected:
+            raise OSError(f"INDI {self.host}:{self.port}: not connected")
+
+    async def _send(self, vector: str, members: dict) -> None:
+        self._alive()
+        if self._vector(vector) is None:
+            raise MountRejected(f"INDI {self.device}: no property {vector}")
+        await self._client.send_newVector(self.device, vector, members=members)
+
+    def _site(self) -> tuple[float, float, float] | None:
+        geo = self._vector("GEOGRAPHIC_COORD")
+        if geo is None:
+            return None
+        lon = geo.getfloatvalue("LONG")
+        return geo.getfloatvalue("LAT"), (lon + 180.0) % 360.0 - 180.0, geo.getfloatvalue("ELEV")
+
+    async def _set_site(self, site: Site) -> None:
+        here = self._site()
+        if here is None:
+            return
+        if abs(here[0] - site.lat_deg) < 1e-6 and abs((here[1] - site.lon_deg + 180) % 360 - 180) \
+                < 1e-6:
+            return
+        await self._send("GEOGRAPHIC_COORD", {"LAT": site.lat_deg,
+                                              "LONG": site.lon_deg % 360.0,
+                                              "ELEV": site.height_m})
+        await self._wait(lambda: self._site() is not None and abs(self._site()[0] - site.lat_deg)
+                         < 1e-6, "the site the VSS sent")
+
+    # ------------------------------------------------------------------ reports
+    async def read(self) -> DriverReport:
+        self._alive()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._pushed.wait(), PUSH_WAIT_S)
+        self._pushed.clear()
+        self._alive()
+        place = self._place
+        if place is None:
+            raise OSError(f"INDI {self.device}: no coordinates yet")
+        fresh = place is not self._read_place
+        self._read_place = place
+        eq = self._vector("EQUATORIAL_EOD_COORD")
+        track = self._vector("TELESCOPE_TRACK_STATE")
+        park = self._vector("TELESCOPE_PARK")
+        pier = self._vector("TELESCOPE_PIER_SIDE")
+        side = -1
+        if pier is not None:
+            side = 0 if pier["PIER_EAST"] == "On" else 1 if pier["PIER_WEST"] == "On" else -1
+        return DriverReport(ra_h=place[0], dec_deg=place[1],
+                            slewing=eq.state == "Busy",
+                            tracking=track is not None and track["TRACK_ON"] == "On",
+                            at_park=park is not None and park["PARK"] == "On",
+                            side_of_pier=side,
+                            # a push describes the moment it arrived; silence: unchanged now
+                            received_us=place[2] if fresh else None)
+
+    # ------------------------------------------------------------------ commands
+    async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
+        await self._send("ON_COORD_SET", {"TRACK": "On", "SLEW": "Off", "SYNC": "Off"})
+        await self._send("EQUATORIAL_EOD_COORD", {"RA": ra_h % 24.0, "DEC": dec_deg})
+        # the driver flags the goto (Busy) when it has taken it
+        await self._wait(lambda: self._vector("EQUATORIAL_EOD_COORD").state == "Busy"
+                         or self._is_close(ra_h, dec_deg), "the goto")
+
+    def _is_close(self, ra_h: float, dec_deg: float) -> bool:
+        p = self._place
+        return p is not None and abs((p[0] - ra_h + 12) % 24 - 12) < 1e-4 and abs(p[1] - dec_deg) < 1e-3
+
+    async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
+        mode = self._vector("TELESCOPE_TRACK_MODE")
+        if not (ra_deg_s or dec_deg_s):
+            # no offset: the mount's own sidereal tracking (libindi refuses a custom rate that
+            # equals sidereal, and keeps the last one: the mount would go on turning)
+            if mode["TRACK_SIDEREAL"] != "On":
+                await self._send("TELESCOPE_TRACK_MODE", {
+                    m: ("On" if m == "TRACK_SIDEREAL" else "Off") for m in mode.members()})
+            return
+        # the axis turns at sidereal minus the place's own rate (arcsec/s)
+        await self._send("TELESCOPE_TRACK_RATE",
+                         {"TRACK_RATE_RA": SIDEREAL_RATE_ARCSEC_S - ra_deg_s * 3600.0,
+                          "TRACK_RATE_DE": dec_deg_s * 3600.0})
+        if mode["TRACK_CUSTOM"] != "On":
+            # the driver's own mode, not a remembered one (a goto or abort may reset it)
+            await self._send("TELESCOPE_TRACK_MODE",
+                             {m: ("On" if m == "TRACK_CUSTOM" else "Off") for m in mode.members()})
+
+    async def set_tracking(self, on: bool) -> None:
+        await self._send("TELESCOPE_TRACK_STATE", {"TRACK_ON": "On" if on else "Off",
+                                                   "TRACK_OFF": "Off" if on else "On"})
+
+    async def abort(self) -> None:
+        await self._send("TELESCOPE_ABORT_MOTION", {"ABORT": "On"})
+
+    async def park(self) -> None:
+        await self._send("TELESCOPE_PARK", {"PARK": "On", "UNPARK": "Off"})
+
+    async def unpark(self) -> None:
+        await self._send("TELESCOPE_PARK", {"PARK": "Off", "UNPARK": "On"})
+

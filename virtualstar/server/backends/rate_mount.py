@@ -1,0 +1,708 @@
+"""A mount driven through a driver's goto and axis rates (ASCOM Alpaca, INDI), spoken in roles.
+
+`RateMountLink` implements the mount-link interface (`link_interface.MountBackend`)
+over a `Driver`, the protocol adapter of one driver family (`alpaca.py`, `indi.py`).
+It keeps the newest *report* of the driver (position, slewing, tracking, park, pier
+side), each stamped with the mount time it describes, and serves the VSS's roles
+from it:
+
+* positions: ``az_position``/``el_position`` are the observed place (refraction from
+  the site's weather) of the reported right ascension and declination of date;
+  ``axis1_position``/``axis2_position`` the native axes themselves (radians);
+  ``report_time`` the mount time of the report; ``mount_time`` the host's UTC (a
+  driver has no mount clock of its own: mount time is UTC on the host, and a report
+  is mapped onto it by when it arrived).
+* ``mount_state``: off (parked), slewing (a goto), manual (moving at commanded rates),
+  tracking (the mount's own sidereal tracking), holding (verified at rest from two
+  reports a driver period apart), fault (the driver stopped answering).
+* functions: ``slew`` (a fixed observed place: gotos until the reports land within
+  `PLACE_TOLERANCE_ARCSEC`, tracking off so the place holds), ``goto_native`` (a place
+  of date, tracking on: the join point of a path), ``set_rates`` (native coordinate
+  rates, rad/s), ``stop``/``traj_reset`` (abort, zero rates, tracking off),
+  ``power_on`` (unpark), ``power_off`` (park), ``reset_faults``.
+
+The report period is measured, not assumed: the driver is polled (or pushes) faster
+than it updates, a change of the reported place marks a new report, and its mount
+time is the middle of the interval in which it appeared (`age` and `period` in
+`describe()`). A driver that stops answering for `STALE_S` is lost: the link tries to
+stop the mount, marks itself lost and reconnects in the background.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import math
+import statistics
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from virtualstar.astro import EarthOrientation, Site
+from virtualstar.astro.constants import ARCSEC_PER_RAD, SIDEREAL_RATE_ARCSEC_S
+from virtualstar.astro.mount_frames import apparent_radec_to_observed, observed_to_apparent_radec
+
+from ..exceptions import MountRejected, MountUnavailable
+from ..link_interface import MountCapabilities
+from ..mapping import STATE_NAMES, RoleMapping
+from ..operations import current_operation
+
+__all__ = ["Driver", "DriverInfo", "DriverReport", "RateLinkConfig", "RateMountLink"]
+
+log = logging.getLogger("virtualstar.server.mount")
+
+STATE_CODES = {name: code for code, name in enumerate(STATE_NAMES)}
+PLACE_TOLERANCE_ARCSEC = 2.0  # a fixed place is reached within this (then held, tracking off)
+GOTO_TOLERANCE_ARCSEC = 15.0  # a fixed place held by a goto mount is verified within this
+REST_TOLERANCE_ARCSEC = 1.0  # two reports this close, a driver period apart: at rest
+STALE_S = 3.0  # wall seconds without an answer from the driver: lost
+CALL_LOG = 4096
+_ROLES = ("az_position", "el_position", "axis1_position", "axis2_position", "report_time",
+          "report_age", "az_state", "el_state", "az_faults", "el_faults", "mount_state",
+          "mount_time", "free_points", "az_error", "el_error", "az_fault_text", "el_fault_text",
+          "az_slew_rate_limit", "el_slew_rate_limit", "az_track_rate_limit",
+          "el_track_rate_limit", "slewing", "side_of_pier", "axis1_rate", "axis2_rate")
+_FUNCTIONS = ("power_on", "power_off", "stop", "slew", "goto_place", "goto_native", "set_rates",
+              "traj_reset", "reset_faults")
+
+
+@dataclass(frozen=True)
+class DriverReport:
+    """One reading of the driver: the place of date (hours, degrees) and its flags."""
+
+    ra_h: float
+    dec_deg: float
+    slewing: bool
+    tracking: bool
+    at_park: bool
+    side_of_pier: int = -1  # ASCOM's numbers: 0 east, 1 west, -1 unknown
+    received_us: int | None = None  # a pushed report: when it arrived (polled: None)
+
+
+@dataclass(frozen=True)
+class DriverInfo:
+    """What a driver says about itself once connected."""
+
+    name: str
+    geometry: str  # "altaz", "german", "fork"
+    max_rate_deg_s: float
+    rate_step_arcsec_s: float | None
+    can_park: bool
+    can_pulse_guide: bool
+    site: tuple[float, float, float] | None  # lat_deg, lon_deg, height_m, if the driver has one
+    slew_rate_deg_s: float | None = None  # the goto speed, when the driver says it
+
+
+class Driver(Protocol):
+    """One driver family's protocol, as `RateMountLink` needs it (all may raise OSError)."""
+
+    url: str
+    poll_s: float  # 0: the driver pushes its reports (`wait_report`), else poll this often
+
+    async def open(self, site: Site) -> DriverInfo: ...
+
+    async def close(self) -> None: ...
+
+    async def read(self) -> DriverReport: ...
+
+    async def goto_radec(self, ra_h: float, dec_deg: float) -> None: ...
+
+    async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
+        """Move the place of date at these rates (the mount's own tracking included)."""
+
+    async def set_tracking(self, on: bool) -> None: ...
+
+    async def abort(self) -> None: ...
+
+    async def park(self) -> None: ...
+
+    async def unpark(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class RateLinkConfig:
+    """Where the driver is and how the VSS treats it."""
+
+    url: str
+    site: Site
+    eop: EarthOrientation
+    timeout_s: float = 2.0
+    backoff_min_s: float = 0.2
+    backoff_max_s: float = 5.0
+    stale_s: float = STALE_S
+    accel_deg_s2: float = 5.0  # the drivers say nothing about it: a cautious figure
+
+
+@dataclass(frozen=True)
+class MountCall:
+    seq: int
+    role: str
+    operation: int | None
+
+
+@dataclass
+class _Report:
+    """A report as the VSS keeps it: the place, when it describes the mount, and flags."""
+
+    ra_rad: float
+    dec_rad: float
+    t_us: int  # mount time the place describes (middle of the interval it appeared in)
+    read_us: int  # when it was last read
+    flags: DriverReport
+    spread_us: int = 0  # half the interval it appeared in: the report time's uncertainty
+
+
+@dataclass
+class ReportStats:
+    """The measured report stream: intervals between new places, request latency."""
+
+    periods_s: deque = field(default_factory=lambda: deque(maxlen=200))
+    latency_s: deque = field(default_factory=lambda: deque(maxlen=200))
+    reports: int = 0
+    reads: int = 0
+
+    def period_s(self) -> float | None:
+        return statistics.median(self.periods_s) if len(self.periods_s) >= 3 else None
+
+
+def _now_us() -> int:
+    return time.time_ns() // 1000
+
+
+class RateMountLink:
+    """The mount link over a rate-driven driver (see the module doc)."""
+
+    def __init__(self, driver: Driver, config: RateLinkConfig, *, backend: str,
+                 on_event: Callable[[str, dict[str, Any]], None] | None = None) -> None:
+        self.driver = driver
+        self.config = config
+        self.backend = backend
+        self.on_event = on_event or (lambda kind, data: None)
+        self.mapping = RoleMapping({r: r for r in _ROLES}, {f: f for f in _FUNCTIONS},
+                                   dict(STATE_CODES), park_az_deg=0.0,
+                                   park_el_deg=abs(config.site.lat_deg), source=backend)
+        self.info: DriverInfo | None = None
+        self.calls: deque[MountCall] = deque(maxlen=CALL_LOG)
+        self._call_seq = itertools.count(1)
+        self.connects = 0
+        self.last_error = ""
+        self.fault_text = ""
+        self.stats = ReportStats()
+        self._lock = asyncio.Lock()
+        self._connected = asyncio.Event()
+        self._changed = asyncio.Condition()
+        self._lost = asyncio.Event()
+        self._task: asyncio.Task | None = None
+        self._report: _Report | None = None
+        self._new_report = asyncio.Event()
+        self._rates_rad_s = (0.0, 0.0)  # the coordinate rates last commanded
+        self._rest: tuple[int, float, float] | None = None  # (t_us, az, el) of a still report
+        self._fresh: deque[bool] = deque(maxlen=40)  # did each read of a moving mount move?
+        self._at_rest = False
+        self.last_error_arcsec: float | None = None  # set by the rate loop (status)
+        # how each driver axis moves the place of date: measured by the rate loop's first
+        # commands (`rate_loop.RateFollower`), kept for the connection
+        self.axis_signs = (1.0, 1.0)
+        self.signs_measured = False
+        self._signs_side: int | None = None  # the pier side the signs were measured on
+        # the place the followed path wants at a mount time (native axes, rad), set by the
+        # rate loop while it follows: each report's error is taken against it on arrival
+        self.demand: Callable[[int], tuple[float, float]] | None = None
+        self.report_listeners: list[Callable[[dict[str, Any]], None]] = []
+
+    # ------------------------------------------------------------------ interface
+    @property
+    def connected(self) -> bool:
+        return self._connected.is_set()
+
+    @property
+    def capabilities(self) -> MountCapabilities:
+        info = self.info
+        if info is None:
+            return MountCapabilities(backend=self.backend, geometry="german", goto=True,
+                                     rate_axes=True)
+        return MountCapabilities(
+            backend=self.backend, geometry=info.geometry, trajectory_buffer=False,
+            rate_axes=True, goto=True, park=info.can_park, guide=True, time_sync=False,
+            error_stream=False, max_rate_deg_s=info.max_rate_deg_s,
+            rate_step_arcsec_s=info.rate_step_arcsec_s, tracks_sidereal=True,
+            goto_tolerance_arcsec=GOTO_TOLERANCE_ARCSEC)
+
+    def describe(self) -> dict[str, Any]:
+        rep = self._report
+        period = self.stats.period_s()
+        out: dict[str, Any] = {
+            "backend": self.backend, "url": self.config.url,
+            "driver": None if self.info is None else self.info.name,
+            "capabilities": self.capabilities.as_dict(),
+            "report_period_s": period,
+            "report_rate_hz": None if not period else 1.0 / period,
+            "poll_period_s": self.driver.poll_s or None,
+            "fresh_reads": self.fresh_reads(),
+            "request_latency_s": (statistics.median(self.stats.latency_s)
+                                  if self.stats.latency_s else None),
+            "reports": self.stats.reports,
+            "commanded_rates_arcsec_s": [r * ARCSEC_PER_RAD for r in self._rates_rad_s],
+            "error_arcsec": self.last_error_arcsec,
+            "fault": self.fault_text or None,
+        }
+        if rep is not None:
+            out["reported"] = {"ra_deg": math.degrees(rep.ra_rad) % 360.0,
+                               "dec_deg": math.degrees(rep.dec_rad),
+                               "t_us": rep.t_us, "age_s": (_now_us() - rep.t_us) / 1e6,
+                               "time_uncertainty_s": rep.spread_us / 1e6,
+                               "slewing": rep.flags.slewing, "tracking": rep.flags.tracking,
+                               "at_park": rep.flags.at_park,
+                               "side_of_pier": {0: "east", 1: "west"}.get(
+                                   rep.flags.side_of_pier, "unknown")}
+        if self.info is not None and self.info.site is not None:
+            lat, lon, h = self.info.site
+            s = self.config.site
+            out["driver_site"] = {"lat_deg": lat, "lon_deg": lon, "height_m": h}
+            out["site_mismatch"] = abs(lat - s.lat_deg) > 1e-3 or abs(
+                (lon - s.lon_deg + 180) % 360 - 180) > 1e-3
+        return out
+
+    def start(self) -> None:
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._manage(),
+                                                                name=f"{self.backend}-link")
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+        with contextlib.suppress(Exception):
+            await self.driver.close()
+        self._connected.clear()
+
+    async def wait_connected(self, timeout_s: float | None = None) -> None:
+        try:
+            await asyncio.wait_for(self._connected.wait(), timeout_s)
+        except TimeoutError:
+            raise MountUnavailable(f"no connection to the mount at {self.config.url} "
+                                   f"({self.last_error or 'still trying'})") from None
+
+    async def wait_reconnected(self, connects_before: int, timeout_s: float) -> None:
+        async def newer() -> None:
+            async with self._changed:
+                await self._changed.wait_for(
+                    lambda: self.connected and self.connects > connects_before)
+
+        try:
+            await asyncio.wait_for(newer(), timeout_s)
+        except TimeoutError:
+            raise MountUnavailable(f"the mount at {self.config.url} did not come back within "
+                                   f"{timeout_s:g} s ({self.last_error or 'still trying'})") from None
+
+    def mark_lost(self) -> None:
+        self._lost.set()
+
+    def scale(self, role: str) -> float:
+        return 1.0
+
+    # ------------------------------------------------------------------ connection
+    async def _manage(self) -> None:
+        delay = self.config.backoff_min_s
+        while True:
+            try:
+                self.info = await asyncio.wait_for(self.driver.open(self.config.site),
+                                                   self.config.timeout_s * 5)
+                await self._first_report()
+                # whatever moved before (a VSS that crashed, a restarted driver): at rest
+                await self._halt_driver()
+            except (OSError, MountRejected, TimeoutError) as exc:
+                self._failed(str(exc) or type(exc).__name__)
+                with contextlib.suppress(Exception):
+                    await self.driver.close()
+                await asyncio.sleep(delay)
+                delay = min(2 * delay, self.config.backoff_max_s)
+                continue
+            delay = self.config.backoff_min_s
+            self._lost.clear()
+            self.fault_text = ""
+            self.axis_signs, self.signs_measured = (1.0, 1.0), False
+            self.connects += 1
+            self._connected.set()
+            await self._notify()
+            log.info("%s mount connected at %s (%s)", self.backend, self.config.url,
+                     self.info.name)
+            self.on_event("mount_connected", {"url": self.config.url, "connects": self.connects,
+                                              "backend": self.backend})
+            poller = asyncio.get_running_loop().create_task(self._poll(), name="rate-mount-poll")
+            try:
+                done, _ = await asyncio.wait({poller, asyncio.ensure_future(self._lost.wait())},
+                                             return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                poller.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await poller
+            reason = self.last_error or "connection lost"
+            self.fault_text = f"the driver stopped answering ({reason})"
+            # tell it to stop, should it still listen (a rate once sent keeps the mount moving)
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(self._halt_driver(), self.config.timeout_s)
+            self._connected.clear()
+            await self._notify()
+            with contextlib.suppress(Exception):
+                await self.driver.close()
+            log.warning("%s mount lost: %s", self.backend, reason)
+            self.on_event("mount_disconnected", {"url": self.config.url, "reason": reason,
+                                                 "backend": self.backend})
+
+    async def _notify(self) -> None:
+        async with self._changed:
+            self._changed.notify_all()
+
+    def _failed(self, reason: str) -> None:
+        if reason != self.last_error:
+            log.warning("cannot connect to the %s mount at %s: %s", self.backend,
+                        self.config.url, reason)
+            self.on_event("mount_connect_failed", {"url": self.config.url, "reason": reason})
+        self.last_error = reason
+
+    async def _first_report(self) -> None:
+        self._report = None
+        self._rest = None
+        self._at_rest = False
+        await self._take(await self._driver_read())
+
+    async def _driver_read(self) -> tuple[DriverReport, int, int]:
+        before = _now_us()
+        rep = await asyncio.wait_for(self.driver.read(), self.config.timeout_s)
+        after = _now_us()
+        if rep.received_us is not None:  # pushed: it describes the moment it arrived
+            before = after = rep.received_us
+        self.stats.reads += 1
+        self.stats.latency_s.append((after - before) / 1e6)
+        return rep, before, after
+
+    async def _poll(self) -> None:
+        """Read the driver as fast as it updates (or take its pushes) until it stops answering."""
+        last_ok = time.monotonic()
+        failures = 0
+        while True:
+            try:
+                got = await self._driver_read()
+            except (OSError, TimeoutError, MountRejected) as exc:
+                failures += 1
+                # lost: no answer for `stale_s`, and more than one try (a host that stalled
+                # this loop for seconds makes one request time out, not the driver)
+                if failures >= 3 and time.monotonic() - last_ok > self.config.stale_s:
+                    self.last_error = (f"no answer for {self.config.stale_s:g} s: "
+                                       f"{exc or type(exc).__name__}")
+                    return
+                await asyncio.sleep(0.05)
+                continue
+            failures = 0
+            last_ok = time.monotonic()
+            await self._take(got)
+            if self.driver.poll_s:
+                await asyncio.sleep(self.driver.poll_s)
+
+    async def _take(self, got: tuple[DriverReport, int, int]) -> None:
+        rep, before, after = got
+        mid = (before + after) // 2
+        ra = math.radians(rep.ra_h * 15.0)
+        dec = math.radians(rep.dec_deg)
+        old = self._report
+        moved = old is None or (ra, dec) != (old.ra_rad, old.dec_rad)
+        moving = self._rates_rad_s != (0.0, 0.0) or rep.slewing
+        if moving:
+            self._fresh.append(moved)
+        if moved:
+            if old is None or self.fresh_reads() or rep.received_us is not None:
+                # the driver answers with where the mount is when asked
+                t_us, spread = mid, (after - before) // 2
+            else:
+                # a new place appeared between the previous reading and this one
+                t_us, spread = (old.read_us + mid) // 2, (mid - old.read_us) // 2
+            if old is not None and old.t_us < t_us:
+                self.stats.periods_s.append((t_us - old.t_us) / 1e6)
+            self._report = _Report(ra, dec, t_us, mid, rep, spread)
+            self.stats.reports += 1
+            self._new_report.set()
+            self._new_report = asyncio.Event()
+            self._tell(self._report, after - before if rep.received_us is None else 0)
+        else:
+            old.read_us = mid
+            old.flags = rep
+            if self._rates_rad_s == (0.0, 0.0) and (rep.tracking or rep.at_park):
+                # a place that stands still on the sky describes now as well (with tracking
+                # off the place of date moves: a silent driver's report is then just old)
+                old.t_us, old.spread_us = mid, 0
+                self._new_report.set()
+                self._new_report = asyncio.Event()
+                self._tell(old, after - before if rep.received_us is None else 0)
+        self._update_rest()
+
+    def _tell(self, rep: _Report, latency_us: int) -> None:
+        """Hand a new report to the listeners (the recorder's signals), with its error."""
+        if not self.report_listeners:
+            return
+        az, el = self._observed(rep.ra_rad, rep.dec_rad, rep.t_us)
+        row: dict[str, Any] = {
+            "t_us": rep.t_us, "report.ra_deg": math.degrees(rep.ra_rad) % 360.0,
+            "report.dec_deg": math.degrees(rep.dec_rad), "report.az_deg": math.degrees(az),
+            "report.el_deg": math.degrees(el), "report.age_s": latency_us / 2e6,
+            "report.time_uncertainty_s": rep.spread_us / 1e6,
+            "rate.axis1_arcsec_s": self._rates_rad_s[0] * ARCSEC_PER_RAD,
+            "rate.axis2_arcsec_s": self._rates_rad_s[1] * ARCSEC_PER_RAD}
+        if self.demand is not None:
+            d1, d2 = self.demand(rep.t_us)
+            e1 = ((d1 - rep.ra_rad + math.pi) % (2 * math.pi) - math.pi) * math.cos(rep.dec_rad)
+            e2 = d2 - rep.dec_rad
+            row.update({"error.axis1_arcsec": e1 * ARCSEC_PER_RAD,
+                        "error.axis2_arcsec": e2 * ARCSEC_PER_RAD,
+                        "error.sky_arcsec": math.hypot(e1, e2) * ARCSEC_PER_RAD})
+        for listener in self.report_listeners:
+            try:
+                listener(row)
+            except Exception:  # a listener never breaks the link
+                log.exception("report listener failed")
+
+    def fresh_reads(self) -> bool:
+        """Measured: nearly every read of a moving mount gave a new place (the driver answers
+        with the place at the request, not at an update of its own)."""
+        return len(self._fresh) >= 10 and sum(self._fresh) >= 0.9 * len(self._fresh)
+
+    def _update_rest(self) -> None:
+        """At rest: not slewing, no rates, and the observed place still over a driver period."""
+        rep = self._report
+        if rep is None:
+            return
+        f = rep.flags
+        if f.slewing or f.tracking or self._rates_rad_s != (0.0, 0.0):
+            self._rest, self._at_rest = None, False
+            return
+        az, el = self._observed(rep.ra_rad, rep.dec_rad, rep.read_us)
+        period_us = int((self.stats.period_s() or 0.25) * 1e6)
+        if self._rest is None:
+            self._rest = (rep.read_us, az, el)
+            return
+        t0, az0, el0 = self._rest
+        moved = math.hypot((az - az0) * math.cos(el), el - el0) * ARCSEC_PER_RAD
+        if moved > REST_TOLERANCE_ARCSEC:
+            self._rest, self._at_rest = (rep.read_us, az, el), False
+        elif rep.read_us - t0 >= period_us:
+            self._at_rest = True
+
+    def _observed(self, ra_rad: float, dec_rad: float, t_us: int) -> tuple[float, float]:
+        az, el = apparent_radec_to_observed(np.array([ra_rad]), np.array([dec_rad]),
+                                            np.array([t_us], np.int64), self.config.site,
+                                            self.config.eop)
+        return float(az[0]), float(el[0])
+
+    # ------------------------------------------------------------------ roles
+    def _require(self) -> _Report:
+        if not self.connected or self._report is None:
+            raise MountUnavailable(f"the {self.backend} mount at {self.config.url} is not "
+                                   f"connected ({self.last_error or 'connecting'}); the server "
+                                   "keeps retrying")
+        return self._report
+
+    def state_name(self) -> str:
+        rep = self._report
+        if self.fault_text and not self.connected:
+            return "fault"
+        if rep is None:
+            return "off"
+        f = rep.flags
+        if f.at_park:
+            return "off"
+        if self._rates_rad_s != (0.0, 0.0):
+            return "manual"
+        if f.slewing:
+            return "slewing"
+        if f.tracking:
+            return "tracking"
+        return "holding" if self._at_rest else "stopping"
+
+    async def read(self, roles: Sequence[str]) -> dict[str, Any]:
+        """Serve roles from the newest report (no request to the driver)."""
+        rep = self._require()
+        out: dict[str, Any] = {}
+        observed = None
+        info = self.info
+        max_rate = math.radians(info.max_rate_deg_s if info else 1.0)
+        state = STATE_CODES[self.state_name()]
+        for role in roles:
+            if role in ("az_position", "el_position"):
+                if observed is None:
+                    observed = self._observed(rep.ra_rad, rep.dec_rad, rep.t_us)
+                out[role] = observed[0] if role == "az_position" else observed[1]
+            elif role == "axis1_position":
+                out[role] = rep.ra_rad
+            elif role == "axis2_position":
+                out[role] = rep.dec_rad
+            elif role == "report_time":
+                out[role] = rep.t_us
+            elif role == "report_age":
+                out[role] = (_now_us() - rep.t_us) / 1e6
+            elif role == "mount_time":
+                out[role] = _now_us()
+            elif role == "mount_state":
+                out[role] = state
+            elif role in ("az_state", "el_state"):
+                out[role] = STATE_CODES["off"] if rep.flags.at_park else STATE_CODES["holding"]
+            elif role in ("az_faults", "el_faults"):
+                out[role] = 0
+            elif role in ("az_fault_text", "el_fault_text"):
+                out[role] = self.fault_text
+            elif role == "free_points":
+                out[role] = 0
+            elif role in ("az_error", "el_error"):
+                out[role] = 0.0
+            elif role in ("az_slew_rate_limit", "el_slew_rate_limit", "az_track_rate_limit",
+                          "el_track_rate_limit"):
+                out[role] = max_rate
+            elif role == "slewing":
+                out[role] = rep.flags.slewing
+            elif role == "side_of_pier":
+                out[role] = rep.flags.side_of_pier
+            elif role in ("axis1_rate", "axis2_rate"):
+                out[role] = self._rates_rad_s[0 if role == "axis1_rate" else 1]
+            else:
+                raise MountRejected(f"the {self.backend} mount has no {role!r}")
+        return out
+
+    async def wait_report(self, after_us: int, timeout_s: float) -> None:
+        """Wait (wall time) for a report newer than `after_us`."""
+        deadline = time.monotonic() + timeout_s
+        while self._report is None or self._report.t_us <= after_us:
+            left = deadline - time.monotonic()
+            if left <= 0 or not self.connected:
+                return
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._new_report.wait(), left)
+
+    def report_spread_us(self) -> int:
+        return 0 if self._report is None else self._report.spread_us
+
+    async def call(self, role: str, *args: Any) -> Any:
+        self.calls.append(MountCall(next(self._call_seq), role, current_operation.get()))
+        self._require()
+        fn = getattr(self, f"_do_{role}", None)
+        if fn is None:
+            raise MountRejected(f"the {self.backend} mount cannot do {role!r}: it has no "
+                                "trajectory buffer (capabilities: rate axes and goto)")
+        async with self._lock:
+            try:
+                return await asyncio.wait_for(fn(*args), self.config.timeout_s * 30)
+            except (OSError, TimeoutError) as exc:
+                self.last_error = f"{role}: {exc or type(exc).__name__}"
+                raise MountUnavailable(f"the {self.backend} driver did not answer {role}: "
+                                       f"{exc or type(exc).__name__}") from None
+
+    async def _send(self, coro) -> None:
+        await asyncio.wait_for(coro, self.config.timeout_s)
+
+    async def _halt_driver(self) -> None:
+        """Abort a goto, zero the rates, tracking off (a parked mount refuses them: it is at rest)."""
+        self._rates_rad_s = (0.0, 0.0)
+        for step in (self.driver.abort, lambda: self.driver.set_rates(0.0, 0.0),
+                     lambda: self.driver.set_tracking(False)):
+            with contextlib.suppress(MountRejected):
+                await self._send(step())
+        self._rest, self._at_rest = None, False
+
+    async def _do_stop(self) -> None:
+        await self._halt_driver()
+
+    async def _do_traj_reset(self) -> None:
+        await self._halt_driver()
+
+    async def _do_reset_faults(self) -> None:
+        self.fault_text = ""
+
+    async def _do_power_on(self) -> None:
+        if self._report is not None and self._report.flags.at_park:
+            await self._send(self.driver.unpark())
+            await self._send(self.driver.set_tracking(False))
+
+    async def _do_power_off(self) -> None:
+        await self._halt_driver()
+        await self._send(self.driver.park())
+
+    async def _do_set_rates(self, axis1_rad_s: float, axis2_rad_s: float) -> None:
+        """Move the place of date at these coordinate rates (rad/s) beside sidereal tracking."""
+        max_rate = math.radians(self.info.max_rate_deg_s) if self.info else 0.0
+        a1 = float(np.clip(axis1_rad_s, -max_rate, max_rate))
+        a2 = float(np.clip(axis2_rad_s, -max_rate, max_rate))
+        if self._report is not None and not self._report.flags.tracking:
+            await self._send(self.driver.set_tracking(True))
+        s1, s2 = self.axis_signs
+        await self._send(self.driver.set_rates(s1 * math.degrees(a1), s2 * math.degrees(a2)))
+        self._rates_rad_s = (a1, a2)
+
+    async def _do_goto_native(self, ra_rad: float, dec_rad: float) -> None:
+        """Goto a place of date and hold it there with the mount's tracking (a join point).
+
+        A German mount may land on the other side of its pier, where its declination axis
+        turns the other way: the axis signs are then measured again.
+        """
+        self._rates_rad_s = (0.0, 0.0)
+        await self._send(self.driver.set_rates(0.0, 0.0))
+        await self._send(self.driver.set_tracking(True))
+        await self._goto_and_wait(ra_rad, dec_rad)
+        side = self._require().flags.side_of_pier
+        if side != self._signs_side or side not in (0, 1):
+            self.signs_measured = False
+        self._signs_side = side
+
+    async def _do_goto_place(self, az_deg: float, el_deg: float) -> None:
+        """One goto to a fixed observed place (a waypoint round a zone), tracking off."""
+        await self._do_slew(az_deg, el_deg, attempts=1)
+
+    async def _do_slew(self, az_deg: float, el_deg: float, attempts: int = 3) -> None:
+        """Go to a fixed observed place and stay there (tracking off): gotos to where that
+        place is on the sky when the mount lands, until the reports agree within
+        `PLACE_TOLERANCE_ARCSEC` or a goto no longer gets closer (the driver's accuracy)."""
+        self._rates_rad_s = (0.0, 0.0)
+        await self._send(self.driver.set_rates(0.0, 0.0))
+        await self._send(self.driver.set_tracking(False))
+        az, el = math.radians(az_deg % 360.0), math.radians(el_deg)
+        speed = math.radians((self.info.slew_rate_deg_s if self.info else None) or 5.0)
+        last = math.inf
+        for _attempt in range(attempts):
+            rep = self._require()
+            here_az, here_el = self._observed(rep.ra_rad, rep.dec_rad, _now_us())
+            dist = math.acos(max(-1.0, min(1.0, math.sin(el) * math.sin(here_el) + math.cos(el)
+                                           * math.cos(here_el) * math.cos(az - here_az))))
+            if dist * ARCSEC_PER_RAD <= PLACE_TOLERANCE_ARCSEC or dist >= 0.7 * last:
+                break
+            last = dist
+            land_us = _now_us() + int((dist / speed + 2 * (self.stats.period_s() or 0.25)) * 1e6)
+            ra, dec = observed_to_apparent_radec(np.array([az]), np.array([el]),
+                                                 np.array([land_us], np.int64),
+                                                 self.config.site, self.config.eop)
+            await self._goto_and_wait(float(ra[0]), float(dec[0]))
+            await self._send(self.driver.set_tracking(False))
+            await self.wait_report(_now_us(), 2.0)
+        self._rest, self._at_rest = None, False
+
+    async def _goto_and_wait(self, ra_rad: float, dec_rad: float) -> None:
+        ra_h = math.degrees(ra_rad) % 360.0 / 15.0
+        await self._send(self.driver.goto_radec(ra_h, math.degrees(dec_rad)))
+        self._rest, self._at_rest = None, False
+        sent = _now_us()
+        # a driver that flags the goto a little later than it accepted it: see it start first
+        await self.wait_report(sent, 1.0)
+        while True:
+            rep = self._require()
+            if not rep.flags.slewing and rep.read_us > sent:
+                return
+            await asyncio.sleep(max(self.driver.poll_s, 0.02))
+
+
+def sidereal_rate_rad_s() -> float:
+    """The sky's turn, radians per second (for drivers whose rates include it)."""
+    return SIDEREAL_RATE_ARCSEC_S / ARCSEC_PER_RAD

@@ -1,0 +1,380 @@
+"""Follow a path on a mount that takes axis rates: goto a point ahead, then a closed rate loop.
+
+For a mount whose capabilities have ``rate_axes`` and no trajectory buffer (ASCOM
+Alpaca ``MoveAxis``, INDI ``TELESCOPE_TRACK_RATE``), the VSS closes the loop itself:
+
+1. **Join** (`join_by_goto`): goto (the driver's own slew) to where the path will be
+   at a join instant ahead, chosen from the distance and the driver's rate, and hold
+   there with the mount's own tracking (an equatorial mount keeps its place of date).
+2. **Signs**: once per connection and pier side, a short probe at a small rate on each
+   axis measures which way each driver axis moves the place (drivers and pier sides
+   differ): measured, not assumed.
+3. **Loop** (`RateFollower.run`): at every new report of the driver (its period is
+   measured by the backend), the place the mount will have when the next command takes
+   effect is predicted from the report and the rates in force; the command for the next
+   report period is the feed-forward (the path's mean rate over that period) plus a
+   fraction `gain` of the predicted error per period, within the driver's rate limit.
+   Rates too close to the last to matter are not sent, so a sidereal target on an
+   equatorial mount is left to the mount's own tracking.
+
+Every report is compared with the path *at that report's own mount time* (the middle
+of the interval in which it appeared): that error goes to the tracking-error history,
+and the time's uncertainty × the path's rate is kept beside it. Paths are in the
+VSS's encoder frame (observed az/el); `NativeFrame` turns them into the mount's axes
+(right ascension and declination of date for an equatorial mount).
+
+Safety: a German mount's track stops before the target crosses the meridian (it would
+need a flip, which is never done in the middle of a track); a report older than
+`STALE_REPORTS` periods, or a driver that does not take a command, ends the operation
+with `MountFault` after telling the mount to stop (a rate once sent keeps it moving).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from virtualstar.astro import EarthOrientation, Site
+from virtualstar.astro.constants import ARCSEC_PER_RAD
+from virtualstar.astro.mount_frames import hour_angle_rad, observed_to_apparent_radec
+
+from .exceptions import (
+    MountFault,
+    MountUnavailable,
+    NotArrived,
+    OperationAborted,
+    TargetUnreachable,
+)
+from .link_interface import MountCapabilities
+from .trajectories import Path, Points
+
+__all__ = ["FollowStats", "NativeFrame", "RateFollower", "RateJoin"]
+
+log = logging.getLogger("virtualstar.server")
+
+GAIN = 0.6  # fraction of the predicted error removed per report period
+RATE_STEP_H_S = 0.2  # mount seconds between the two samples that give the path's rate
+STALE_REPORTS = 12  # reports missed (or 3 s, the larger) before the driver counts as lost
+PROBE_RATE_ARCSEC_S = 60.0  # the sign probe: small, a few arcseconds of motion
+PROBE_S = 0.4  # wall seconds each axis moves in the probe (at least 2.5 driver periods)
+MIN_RATE_CHANGE_ARCSEC_S = 0.05  # a smaller change of rate is not sent
+MERIDIAN_LIMIT_DEG = 0.0  # how far past the meridian a German mount may track (hour angle)
+
+
+class NativeFrame:
+    """Sample a path in the mount's native axes: (az, el) or (RA, Dec) of date, rad and rad/s."""
+
+    def __init__(self, caps: MountCapabilities, site: Site, eop: EarthOrientation) -> None:
+        self.caps = caps
+        self.site = site
+        self.eop = eop
+
+    def place(self, path: Path, t_us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = path.sample(np.asarray(t_us, np.int64))
+        if not self.caps.equatorial:
+            return p.az_rad, p.el_rad
+        return observed_to_apparent_radec(p.az_rad, p.el_rad, p.t_us, self.site, self.eop)
+
+    def sample(self, path: Path, t_us: np.ndarray) -> Points:
+        """Native places at `t_us` and their rates (central differences of ±RATE_STEP_H_S/2)."""
+        t = np.asarray(t_us, np.int64)
+        h = int(RATE_STEP_H_S * 1e6)
+        a1, a2 = self.place(path, np.concatenate([t, t - h // 2, t + h // 2]))
+        n = len(t)
+        d1 = _wrap(a1[2 * n:] - a1[n:2 * n])
+        d2 = a2[2 * n:] - a2[n:2 * n]
+        return Points(t, a1[:n], a2[:n], d1 / (h / 1e6), d2 / (h / 1e6))
+
+    def hour_angle(self, ra_rad: np.ndarray, t_us: np.ndarray) -> np.ndarray:
+        return hour_angle_rad(ra_rad, t_us, self.site, self.eop)
+
+    def sky_error_arcsec(self, d1: float, d2: float, axis2_rad: float) -> tuple[float, float]:
+        """(first axis × cos second, second axis) errors on the sky, arcsec."""
+        return _wrap(d1) * math.cos(axis2_rad) * ARCSEC_PER_RAD, d2 * ARCSEC_PER_RAD
+
+
+def _wrap(x):
+    return (np.asarray(x) + math.pi) % (2 * math.pi) - math.pi if not isinstance(x, float) \
+        else (x + math.pi) % (2 * math.pi) - math.pi
+
+
+@dataclass
+class FollowStats:
+    """What the rate loop did (the rate-mount counterpart of the feeder's statistics)."""
+
+    reports: int = 0
+    commands: int = 0
+    skipped: int = 0  # commands not sent: too close to the rates in force
+    clipped: int = 0  # commands at the driver's rate limit
+    first_point_us: int = 0
+    last_point_us: int = 0  # the mount time the last command was meant to last until
+    max_report_age_s: float = 0.0
+    signs: tuple[float, float] = (1.0, 1.0)
+    ended: str = ""
+    last_error_arcsec: float | None = None
+    last_error_uncertainty_arcsec: float = 0.0
+
+    def as_dict(self) -> dict:
+        return {"reports": self.reports, "commands": self.commands, "skipped": self.skipped,
+                "clipped": self.clipped, "max_report_age_s": self.max_report_age_s,
+                "axis_signs": list(self.signs), "ended": self.ended}
+
+
+@dataclass(frozen=True)
+class RateJoin:
+    """Where a rate-driven mount joins a path: the join instant and the path (RampIn's shape)."""
+
+    path: Path
+    join_us: int
+    begin_us: int
+
+    @property
+    def end_us(self) -> int | None:
+        return self.path.end_us
+
+    def sample(self, t_us: np.ndarray) -> Points:
+        return self.path.sample(t_us)
+
+
+class RateFollower:
+    """Hold a rate-driven mount on a path from `join_us` (see the module doc)."""
+
+    def __init__(self, link, frame: NativeFrame, path: Path, join_us: int, *, errors,
+                 gain: float = GAIN, note_rates=None) -> None:
+        self.link = link
+        self.frame = frame
+        self.path = path
+        self.join_us = int(join_us)
+        self.errors = errors
+        self.gain = gain
+        self.note_rates = note_rates
+        self.stats = FollowStats(first_point_us=self.join_us)
+        self.done = False
+        self._rates = (0.0, 0.0)
+        self._side: float | None = None  # the sign of the hour angle at the join (German)
+        caps = link.capabilities
+        self.max_rate = math.radians(caps.max_rate_deg_s or 1.0)
+        # rates closer than this to those in force are not sent: a star is left to the
+        # mount's own tracking (its place of date moves by hundredths of an arcsecond a second)
+        step = max(caps.rate_step_arcsec_s or 0.0, MIN_RATE_CHANGE_ARCSEC_S)
+        self.deadband = step / ARCSEC_PER_RAD
+
+    # ------------------------------------------------------------------ the loop
+    async def run(self) -> None:
+        try:
+            await self._run()
+        finally:
+            if hasattr(self.link, "demand"):
+                self.link.demand = None
+
+    def _demand(self, t_us: int) -> tuple[float, float]:
+        """The path's native place at a mount time (the link's per-report error)."""
+        p = self.frame.sample(self.path, np.array([max(t_us, self.join_us)], np.int64))
+        return float(p.az_rad[0]), float(p.el_rad[0])
+
+    async def _run(self) -> None:
+        if not getattr(self.link, "signs_measured", True):
+            await self._probe_signs()
+        if hasattr(self.link, "demand"):
+            self.link.demand = self._demand
+        self.stats.signs = tuple(getattr(self.link, "axis_signs", (1.0, 1.0)))
+        last_t = 0
+        last_cycle = time.monotonic()
+        while not self.done:
+            period = self._period_s()
+            stale_s = max(3.0, STALE_REPORTS * period)
+            await self.link.wait_report(last_t, stale_s)
+            v = await self.link.read(["axis1_position", "axis2_position", "report_time",
+                                      "mount_time", "mount_state"])
+            t_rep, now = int(v["report_time"]), int(v["mount_time"])
+            age_s = (now - t_rep) / 1e6
+            self.stats.max_report_age_s = max(self.stats.max_report_age_s, age_s)
+            stalled = time.monotonic() - last_cycle > stale_s + 1.0
+            last_cycle = time.monotonic()
+            if t_rep <= last_t:
+                # a report this old while rates are commanded: the driver froze (a host that
+                # stalled this loop is not the driver's fault: the next report decides)
+                if age_s > stale_s and not stalled:
+                    await self._stop(f"no report from the driver for {age_s:.1f} s")
+                continue
+            last_t = t_rep
+            self._check_state(int(v["mount_state"]))
+            started = time.monotonic()
+            await self._cycle(float(v["axis1_position"]), float(v["axis2_position"]), t_rep, now,
+                              period)
+            # at most one command per driver period (a still place is reported at every poll)
+            await self._sleep(max(0.0, 0.8 * period - (time.monotonic() - started)))
+
+    def _period_s(self) -> float:
+        stats = getattr(self.link, "stats", None)
+        period = stats.period_s() if stats is not None else None
+        return period or 0.25
+
+    def _check_state(self, state: int) -> None:
+        codes = self.link.mapping.state_codes
+        if state == codes["fault"]:
+            raise MountFault(f"the mount faulted while following: {self.link.fault_text}")
+        if state == codes["off"]:
+            raise OperationAborted("the mount was parked outside the VSS while following")
+
+    async def _cycle(self, a1: float, a2: float, t_rep: int, now: int, period_s: float) -> None:
+        period_us = int(period_s * 1e6)
+        end = self.path.end_us
+        if t_rep >= self.join_us:
+            self._record(a1, a2, t_rep)
+        # the place the mount will have when this command takes effect, and the path then
+        t_a = now + period_us // 4
+        if end is not None and t_a >= end:
+            await self._set((0.0, 0.0))
+            self.done, self.stats.ended = True, "path ended"
+            return
+        waiting = t_a + period_us < self.join_us
+        t_b = t_a + period_us
+        # waiting at the join point (the mount's own tracking holds it): keep it on that point
+        at = [self.join_us, self.join_us] if waiting else [t_a, t_b]
+        native = self.frame.sample(self.path, np.array(at, np.int64))
+        self._guard_meridian(native, t_b)
+        p1 = a1 + self._rates[0] * (t_a - t_rep) / 1e6
+        p2 = a2 + self._rates[1] * (t_a - t_rep) / 1e6
+        e1 = float(_wrap(native.az_rad[0] - p1))
+        e2 = float(native.el_rad[0] - p2)
+        # feed-forward: the path's mean rate over the next period (its chord)
+        f1 = float(_wrap(native.az_rad[1] - native.az_rad[0])) / period_s
+        f2 = float(native.el_rad[1] - native.el_rad[0]) / period_s
+        r = (f1 + self.gain * e1 / period_s, f2 + self.gain * e2 / period_s)
+        if self.note_rates is not None:
+            self.note_rates(native)
+        self.stats.last_point_us = t_b
+        log.debug("rate loop: report %d now %d e=(%.2f, %.2f)″ ff=(%.2f, %.2f)″/s cmd=(%.2f, %.2f)″/s",
+                  t_rep, now, e1 * ARCSEC_PER_RAD, e2 * ARCSEC_PER_RAD, f1 * ARCSEC_PER_RAD,
+                  f2 * ARCSEC_PER_RAD, r[0] * ARCSEC_PER_RAD, r[1] * ARCSEC_PER_RAD)
+        await self._set(r)
+
+    def _record(self, a1: float, a2: float, t_rep: int) -> None:
+        d = self.frame.sample(self.path, np.array([t_rep], np.int64))
+        err1, err2 = self.frame.sky_error_arcsec(float(d.az_rad[0]) - a1,
+                                                 float(d.el_rad[0]) - a2, a2)
+        self.errors.add(np.array([t_rep], np.int64), np.array([err1 / max(math.cos(a2), 1e-9)]),
+                        np.array([err2]), np.array([a2]))
+        self.stats.reports += 1
+        err = math.hypot(err1, err2)
+        rate = math.hypot(float(d.az_rate_rad_s[0]) * math.cos(a2), float(d.el_rate_rad_s[0]))
+        spread = getattr(self.link, "report_spread_us", lambda: 0)()
+        self.stats.last_error_arcsec = err
+        self.stats.last_error_uncertainty_arcsec = rate * ARCSEC_PER_RAD * spread / 1e6
+        if hasattr(self.link, "last_error_arcsec"):
+            self.link.last_error_arcsec = err
+
+    def _guard_meridian(self, native: Points, t_b: int) -> None:
+        if self.frame.caps.geometry != "german":
+            return
+        ha = self.frame.hour_angle(native.az_rad, native.t_us)
+        if self._side is None:
+            self._side = 1.0 if ha[0] >= 0 else -1.0
+            return
+        limit = math.radians(MERIDIAN_LIMIT_DEG)
+        if self._side < 0 and float(ha[-1]) > limit:
+            raise TargetUnreachable(
+                "the target reaches the meridian: a German mount must flip to follow it "
+                "further, which is never done in the middle of a track (slew again to go on "
+                "from the other side of the pier)")
+
+    async def _set(self, r: tuple[float, float]) -> None:
+        r = (float(np.clip(r[0], -self.max_rate, self.max_rate)),
+             float(np.clip(r[1], -self.max_rate, self.max_rate)))
+        if abs(r[0]) == self.max_rate or abs(r[1]) == self.max_rate:
+            self.stats.clipped += 1
+        if abs(r[0] - self._rates[0]) < self.deadband and abs(r[1] - self._rates[1]) < self.deadband:
+            self.stats.skipped += 1
+            return
+        try:
+            await self.link.call("set_rates", r[0], r[1])
+        except MountUnavailable as exc:
+            await self._stop(str(exc))
+        self._rates = r
+        self.stats.commands += 1
+
+    async def _stop(self, why: str) -> None:
+        """Tell the mount to stop (it may not listen) and end with a fault."""
+        with contextlib.suppress(Exception):
+            await self.link.call("stop")
+        self.done, self.stats.ended = True, f"fault: {why}"
+        raise MountFault(f"the {self.frame.caps.backend} driver stopped answering while the "
+                         f"mount was moving at commanded rates ({why}); the mount was told to "
+                         "stop, and nothing more is sent")
+
+    async def halt_rates(self) -> None:
+        """Zero the rates (the mount's own tracking holds the place): the path stopped early."""
+        with contextlib.suppress(Exception):
+            await self._set((0.0, 0.0))
+
+    # ------------------------------------------------------------------ signs and checks
+    async def _probe_signs(self) -> None:
+        """Move each axis at a small rate for two report periods and see which way it went."""
+        period = self._period_s()
+        rate = PROBE_RATE_ARCSEC_S / ARCSEC_PER_RAD
+        signs = [1.0, 1.0]
+        self.link.axis_signs = (1.0, 1.0)
+        for axis in (0, 1):
+            before = await self._fresh_place()
+            r = (rate, 0.0) if axis == 0 else (0.0, rate)
+            await self.link.call("set_rates", *r)
+            await self._sleep(max(2.5 * period, PROBE_S))
+            await self.link.call("set_rates", 0.0, 0.0)
+            after = await self._fresh_place()
+            moved = _wrap(after[axis] - before[axis]) if axis == 0 else after[1] - before[1]
+            if abs(moved) * ARCSEC_PER_RAD < 0.2 * PROBE_RATE_ARCSEC_S * PROBE_S:
+                raise MountFault(f"the {self.frame.caps.backend} mount did not move its "
+                                 f"{('first', 'second')[axis]} axis when told to "
+                                 f"({moved * ARCSEC_PER_RAD:.2f}″ in "
+                                 f"{max(2.5 * period, PROBE_S):.2f} s)")
+            signs[axis] = 1.0 if moved > 0 else -1.0
+        self.link.axis_signs = (signs[0], signs[1])
+        self.link.signs_measured = True
+        log.info("%s mount: axis signs measured %s", self.frame.caps.backend, signs)
+
+    async def _fresh_place(self) -> tuple[float, float]:
+        v = await self.link.read(["report_time"])
+        await self.link.wait_report(int(v["report_time"]), 3.0)
+        await self.link.wait_report(int((await self.link.read(["report_time"]))["report_time"]),
+                                    3.0)
+        v = await self.link.read(["axis1_position", "axis2_position"])
+        return float(v["axis1_position"]), float(v["axis2_position"])
+
+    @staticmethod
+    async def _sleep(s: float) -> None:
+        import asyncio
+
+        await asyncio.sleep(s)
+
+    def settle_s(self, settle_s: float) -> float:
+        """How long after the join to verify: the loop needs a few reports to take up a rate
+        step (8 report periods, at least `settle_s`)."""
+        return max(settle_s, 8.0 * self._period_s())
+
+    async def verify(self, tolerance_arcsec: float, what: str) -> float:
+        """The last measured error (arcsec); NotArrived beyond tolerance + its time uncertainty.
+
+        Waits (wall time, at most `max(3 s, STALE_REPORTS` periods)) for the first report
+        after the join: on a loaded host the sign probe may still be running at the join.
+        """
+        deadline = time.monotonic() + max(3.0, STALE_REPORTS * self._period_s())
+        while self.stats.last_error_arcsec is None and time.monotonic() < deadline \
+                and not self.done:
+            await self._sleep(0.05)
+        err = self.stats.last_error_arcsec
+        if err is None:
+            raise NotArrived(f"{what}: no report from the mount since the join", math.inf)
+        allowed = tolerance_arcsec + self.stats.last_error_uncertainty_arcsec
+        if err > allowed:
+            raise NotArrived(f"{what}: the reported place is {err:.1f}″ from the path at the "
+                             f"report's time (tolerance {tolerance_arcsec:g}″ + "
+                             f"{self.stats.last_error_uncertainty_arcsec:.1f}″ for the report "
+                             "time's uncertainty)", err)
+        return err
+
