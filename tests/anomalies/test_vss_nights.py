@@ -11,11 +11,14 @@ recorded once for this module (~15 s of CPU each)."""
 from __future__ import annotations
 
 import json
+from dataclasses import astuple
+from pathlib import Path
 
 import numpy as np
 import pytest
+from anomaly_helpers import made_once
 from typer.testing import CliRunner
-from vss_nights import DEGRADATIONS, injections, make_plan, moments, record_night
+from vss_nights import DEGRADATIONS, Moments, injections, make_plan, moments, record_night
 
 from virtualstar.anomalies import detect_anomalies
 from virtualstar.anomalies.live import LiveAnomalies
@@ -33,16 +36,20 @@ pytestmark = pytest.mark.timeout(1800)
 
 @pytest.fixture(scope="module")
 def nights(tmp_path_factory):
-    """{"clean", "slew", "pass"}: store paths; "moments": when the faults were injected."""
-    work = tmp_path_factory.mktemp("vss-nights")
-    plan = make_plan(work / "plan")
-    clean = work / "clean"
-    record_night(plan, clean)
-    when = moments(clean)
-    out = {"clean": clean, "moments": when}
-    for name, at_us in (("slew", when.slew_us), ("pass", when.pass_us)):
-        record_night(plan, work / name, injections(at_us))
-        out[name] = work / name
+    """{"clean", "slew", "pass"}: store paths; "moments": when the faults were injected.
+    Recorded once per session, whichever workers run this module's tests."""
+
+    def build(work):
+        plan = make_plan(work / "plan")
+        record_night(plan, work / "clean")
+        when = moments(work / "clean")
+        for name, at_us in (("slew", when.slew_us), ("pass", when.pass_us)):
+            record_night(plan, work / name, injections(at_us))
+        return {"work": str(work), "moments": list(astuple(when))}
+
+    made = made_once(tmp_path_factory, "vss-nights", build)
+    out = {name: Path(made["work"]) / name for name in ("clean", "slew", "pass")}
+    out["moments"] = Moments(*made["moments"])
     return out
 
 
