@@ -77,7 +77,7 @@ def _state_at(store, t_us: int) -> str:
 def test_a_clean_vss_night_with_slews_and_passes_raises_no_anomaly(nights):
     report, _ = _detect(nights["clean"])
     assert report.anomalies == [], [a.as_dict() for a in report.anomalies]
-    assert report.phase_s["slewing"] > 60 and report.phase_s["tracking"] > 1200
+    assert report.phase_s["slewing"] > 60 and report.phase_s["tracking"] > 900
     # not vacuous: slews and satellite rates were scored, not skipped
     scored = {(c.detector, c.axis): [k for k, note in c.classes.items()
                                      if not note.startswith("not scored")]

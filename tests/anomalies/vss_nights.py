@@ -2,14 +2,16 @@
 in lockstep (`vs run --emulator --record` as a library call), recorded at 1 kHz, with the
 emulator's and the VSS's events in the store.
 
-The night (2021-07-21, 01:20–01:56 UTC at the default site, 38 minutes of mount time with
-the two minutes the mount stands powered off before the first block): seven 2-minute
-blocks of stars — one at 20° elevation, one 1.8° from the zenith — two satellite passes
-(ERS-1, culminating at 30°, inside the automatic 15-minute reference; AJISAI at 78°,
-after it) and the slews between them. Fault injections are timed from the clean run:
-in the middle of the first slew after the reference, and three minutes into the
-satellite pass after it (the runs are deterministic, so the faulty night moves exactly
-as the clean one until the fault begins).
+The night (2021-07-21, 01:20–01:48 UTC at the default site, 28 minutes of mount time, of
+which the mount stands powered off for the first two): 2-minute blocks of three stars
+(Rasalhague at 20° elevation) and of a point 1.8° from the zenith, two satellite passes (ERS-1, culminating at 30°, inside
+the automatic 15-minute reference; AJISAI at 78°, after it, cut by the window's end about
+4.5 minutes after its fault) and the slews between them. The window ends where the
+program's blocks would go on the same (a later end only adds blocks after it), and every
+fault of the tests is flagged within two minutes of its injection. Fault injections are
+timed from the clean run: in the middle of the first slew after the reference, and three
+minutes into the satellite pass after it (the runs are deterministic, so the faulty night
+moves exactly as the clean one until the fault begins).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from virtualstar.recorder.parquet_store import ParquetStoreReader
 SIGNALS = tuple(f"axis.{ax}.{s}" for ax in ("az", "el")
                 for s in ("position", "current", "error_arcsec", "temperature"))
 RATE_HZ = 1000.0
-WINDOW = ("2021-07-21T01:20:00Z", "2021-07-21T01:56:00Z")
+WINDOW = ("2021-07-21T01:20:00Z", "2021-07-21T01:48:00Z")
 PROGRAM = """
 [program]
 name = "anomaly test night"

@@ -57,8 +57,10 @@ class VibrationDetector(Detector):
         # count q, n samples a segment) into whichever band the count rate's harmonics
         # alias to, and the count rate follows the speed — a tone that comes and goes
         # with the target, a hundredfold between two stars. A band is flagged only when
-        # louder than twice that bound, and the reference's spread (which such tones
-        # inflate) widens the limit at most up to it.
+        # louder than that bound, and the reference's spread (which such tones inflate)
+        # widens the limit at most up to it. (Twice the bound, as before, hid resonance
+        # growth that the bound alone lets through without a false flag on the
+        # benchmark's tuning nights.)
         step = chunk.seg.features.get(f"{self.axis}.position_step_rad")
         # one count: the smallest step of segments that move by less than a count a
         # sample (a low percentile: faster segments step by several counts)
