@@ -27,7 +27,9 @@ current detector's last changes, so they count as tuning now); the other set
 (720 minutes, seed 100); its run time is printed beside reading every sample of the
 store once with pyarrow (the I/O floor), in the same run.
 
-    .venv/bin/python benchmarks/bench_anomalies.py [--patterns 5] [--night DIR] [--keep DIR]
+    .venv/bin/python benchmarks/bench_anomalies.py [--patterns 5] [--sets tuning,check,night]
+        [--night DIR] [--keep DIR]
+    .venv/bin/python benchmarks/bench_anomalies.py --rescore DIR   # kept stores, scored again
 """
 
 from __future__ import annotations
