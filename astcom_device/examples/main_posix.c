@@ -7,7 +7,7 @@
  *
  * Limits: --max-clients --max-pending --auth-timeout --max-frame-bytes --max-depth
  * --max-array-len --max-str-bytes --max-messages --max-names --max-streams
- * --ring-ticks --max-reply-bytes --link-channels. Password attempts (§8): --auth-first-delay
+ * --ring-ticks --max-reply-bytes --link-channels. Password attempts (§10): --auth-first-delay
  * --auth-max-delay --auth-lockout-failures --auth-lockout --auth-forget --auth-rate
  * --auth-burst --auth-max-hold --auth-addresses. ASTCOM_PASSWORD sets --password.
  * Every wrong password is logged on stderr: "auth: wrong password from ADDRESS (...)".
@@ -40,7 +40,7 @@ static void usage(void)
           "--rt-priority N runs the tick thread SCHED_FIFO at priority N (1..99), as a\n"
           "controller's loop should run on Linux (needs CAP_SYS_NICE or an rtprio limit).\n"
           "Password attempts are throttled per address and overall (docs/astcom-protocol.md\n"
-          "§8; defaults 0.25 s doubling to 30 s, 20 failures lock out for 300 s, 5/s after\n"
+          "§10; defaults 0.25 s doubling to 30 s, 20 failures lock out for 300 s, 5/s after\n"
           "a burst of 10, held at most 5 s, 64 addresses remembered); each wrong password\n"
           "is logged on stderr as 'auth: wrong password from ADDRESS (N in a row...)'.\n",
           stderr);

@@ -124,7 +124,7 @@ typedef struct ad_config {
     uint32_t max_pending_calls;    /* deferred INVOKEs at once (ERR 429 beyond) */
     double flush_interval_s;       /* samples per packet ~ this much time (0.02) */
     uint32_t max_arg_bytes;        /* array arguments sent as msgpack arrays (0: 2 frames) */
-    /* Password attempts (docs/astcom-protocol.md §8; the reference endpoint's
+    /* Password attempts (docs/astcom-protocol.md §10; the reference endpoint's
      * astcom_client/throttle.py), per peer address and over the whole device: the n-th
      * consecutive failure from an address puts auth_first_delay_s × 2^(n-1) (at most
      * auth_max_delay_s) before its next check; the auth_lockout_failures-th locks it out for
@@ -222,7 +222,7 @@ int ad_wants_close(const ad_session *s, int *code, const char **reason);
 /* The peer is gone: free its session, its streams and its messages. */
 void ad_close(ad_device *dev, ad_session *s);
 /* Stop reading from a peer whose sink cannot take a reply now (back-pressure), whose
- * deferred call runs, or whose AUTH is held (§8). */
+ * deferred call runs, or whose AUTH is held (§10). */
 int ad_can_receive(const ad_device *dev, const ad_session *s);
 /* The largest frame the peer may send now (smaller before it has authenticated): a
  * transport that reads a length first refuses a larger one with ad_refuse_oversize(). */

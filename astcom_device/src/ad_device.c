@@ -35,7 +35,7 @@ void ad_config_defaults(ad_config *c)
     c->max_samplers = 64;
     c->max_pending_calls = 8;
     c->flush_interval_s = 0.02;
-    /* password attempts: the reference endpoint's ThrottlePolicy (§8) */
+    /* password attempts: the reference endpoint's ThrottlePolicy (§10) */
     c->auth_first_delay_s = 0.25;
     c->auth_max_delay_s = 30.0;
     c->auth_lockout_failures = 20;
@@ -1467,7 +1467,7 @@ static int cmd_auth(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
             return 400;
         }
     }
-    /* Throttled (§8): refused unchecked, or checked now and answered at its turn (the
+    /* Throttled (§10): refused unchecked, or checked now and answered at its turn (the
      * session reads nothing meanwhile); the outcome counts when the answer goes out. */
     if (reserve_auth(dev, s, why, wl)) return 429;
     /* every role's MAC is computed and compared, so the time does not say which came close */

@@ -114,7 +114,7 @@ enum ad_role { AD_ROLE_NONE, AD_ROLE_OBSERVER, AD_ROLE_OPERATOR };
 struct ad_session {
     uint8_t used, state, role, call_pending;
     uint8_t slot;
-    uint8_t auth_held;        /* an AUTH checked and held until auth_due_us (§8) */
+    uint8_t auth_held;        /* an AUTH checked and held until auth_due_us (§10) */
     uint8_t auth_granted;     /* its outcome: the role, AD_ROLE_NONE for a wrong password */
     uint16_t auth_addr;       /* its address's entry in the throttle table */
     uint32_t id;
@@ -135,7 +135,7 @@ struct ad_session {
     ad_call call;
 };
 
-/* Password attempts per address and overall (§8), the rules of the reference endpoint's
+/* Password attempts per address and overall (§10), the rules of the reference endpoint's
  * astcom_client/throttle.py in a fixed table (ad_throttle.c). Times are the
  * communication side's now_us. */
 typedef struct ad_addr_state {

@@ -366,7 +366,7 @@ static int dispatch(ad_link *l, uint8_t *f, size_t n)
         if ((!ad_can_receive(l->dev, s) && !ad_wants_close(s, NULL, NULL)) || chan_parked(l, chan)) {
             if (!park(l, chan, body, len)) break; /* the other channels go on */
             if (!l->park_cap && s->auth_held) {
-                /* an unauthenticated peer must not hold the link for its held AUTH (§8):
+                /* an unauthenticated peer must not hold the link for its held AUTH (§10):
                  * the device drops that AUTH and closes the channel */
                 ad_receive(l->dev, s, body, len, l->now_us);
                 break;

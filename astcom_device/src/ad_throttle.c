@@ -1,4 +1,4 @@
-/* Password attempts throttled per address and overall (§8): the rules of the reference
+/* Password attempts throttled per address and overall (§10): the rules of the reference
  * endpoint (astcom_client/throttle.py) in a fixed table, without I/O or a clock.
  *
  * cmd_auth() asks ad_throttle_reserve() before it checks a password and holds the answer

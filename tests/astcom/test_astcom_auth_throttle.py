@@ -1,13 +1,13 @@
-"""Password attempts are throttled per address and overall (docs/astcom-protocol.md §8), on
+"""Password attempts are throttled per address and overall (docs/astcom-protocol.md §10), on
 every device implementation: the Python endpoint, the C device over TCP, and the C device
 behind the Relay (which tells the device each client's address in the link's OPEN).
 
 The guessers connect from distinct loopback addresses (127.0.0.k) and speak the protocol
 by hand: HELLO, then AUTH with a MAC computed from the spec (§5), right or wrong. The
-numbers asserted are the spec's (0.25 s doubling, a hold of at most 5 s, 5 checks a second
-after a burst of 10, lockout after 20 failures) or a policy the test sets; the device's
-own clock decides, and a slower host only makes the waits the device computes shorter,
-never the counts different.
+numbers asserted are the spec's (0.25 s doubling, a hold of at most 5 s) or those of a
+policy the test sets (a lockout after 3 failures, an overall rate it can outrun), since
+the spec's 20 failures would take minutes; the device's own clock decides, and a slower
+host only makes the waits the device computes shorter, never the counts different.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from device_impls import ALL_IMPLS, serve_impl
 
 from astcom_client.throttle import ThrottlePolicy
 
-# the spec's defaults (§8): what the devices run with unless told otherwise
+# the spec's defaults (§10): what the devices run with unless told otherwise
 SPEC = ThrottlePolicy()
 CLIENT_LABEL = b"ASTCom-1 client\x00"  # §5: 15 ASCII bytes and a zero byte
 WRONG_PASSWORD_RE = re.compile(r"auth: wrong password from (\S+) \((\d+) in a row")

@@ -76,7 +76,7 @@ async def _session(monitor: str) -> dict:
             raise AssertionError(f"the firmware does not answer ({line.strip()}); it needs "
                                  f"an arena of {arena} and a link of {link} bytes "
                                  "(FW_ARENA_BYTES, FW_LINK_BYTES in firmware.mk)")
-        # a wrong password first: its ERR 401 comes from the throttle's path (§8), and the
+        # a wrong password first: its ERR 401 comes from the throttle's path (§10), and the
         # right one after it is held 0.25 s and answered from the firmware's poll loop
         try:
             await (await Client.connect(url, password="not-" + PASSWORD, timeout_s=10)).close()

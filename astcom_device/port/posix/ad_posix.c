@@ -335,7 +335,7 @@ static conn *conn_new(int fd, const ad_config *cfg, const ad_posix_opts *o)
     return c;
 }
 
-/* "a.b.c.d:port" or "[v6]:port": password attempts are throttled per address (§8) */
+/* "a.b.c.d:port" or "[v6]:port": password attempts are throttled per address (§10) */
 static void peer_text(const struct sockaddr_storage *sa, socklen_t len, char *out, size_t cap)
 {
     char host[INET6_ADDRSTRLEN] = "?";
