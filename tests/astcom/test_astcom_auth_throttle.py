@@ -128,7 +128,7 @@ def test_guesses_from_many_addresses_are_throttled_per_address_and_each_failure_
             async def guesser(source: str) -> list[tuple[int, str]]:
                 return [await attempt(dut.url, source) for _ in range(12)]
 
-            codes = dict(zip(sources, await asyncio.gather(*map(guesser, sources))))
+            codes = dict(zip(sources, await asyncio.gather(*map(guesser, sources)), strict=True))
             legit = (await attempt(dut.url, "127.0.0.20", PASSWORDS["operator"]))[0]
         return codes, legit, log
 
