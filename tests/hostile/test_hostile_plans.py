@@ -70,6 +70,12 @@ SPOILED_PLANS = [  # (where, value, a word the refusal must hold)
     (("blocks", 0, "constraints"), [1, 2], "constraints"),
     (("program_spec",), "not a program", "program_spec"),
     (("program_spec", "targets"), 7, "target"),
+    (("program_spec", "targets", 0), 5, "target"),
+    (("program_spec", "targets", 0, "min_el_deg"), "low", "min_el_deg"),
+    (("program_spec", "targets", 1, "duration_s"), -60, "duration_s"),
+    (("program_spec", "targets", 1, "window_us"), [10**30, 10**31], "window_us"),
+    (("program_spec", "targets", 2, "kind"), "comet", "kind"),
+    (("program_spec", "targets", 2, "closed_loop"), "yes", "closed_loop"),
 ]
 
 
