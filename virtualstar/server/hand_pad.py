@@ -53,7 +53,7 @@ MOVE_LOOKAHEAD_S = 3600.0  # a move at rates is checked against the limits and z
 MOVE_CHECK_STEP_DEG = 0.1  # ... on a grid of mount time that moves at most this far a step
 LIMIT_MARGIN_DEG = 0.5  # a move at rates comes to rest this far inside an axis limit
 MOVE_HOLD_S = 1.0  # at rest after the run-out, still following the buffer, then told to stop
-START_REQUESTS = 4  # requests between reading the mount time and traj_start (margin each)
+START_REQUESTS = 3  # requests after reading the mount time, traj_start included (margin each)
 ZERO_RATES = "the hand pad's rates were set to 0"
 RESTART_NOTE = ("the mount's mapping has no traj_replace function: a move starts after the "
                 "start lead with a run-up, and a new move ends this one and starts again")

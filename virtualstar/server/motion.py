@@ -209,14 +209,17 @@ class Motion:
                                           on_points=on_points)
 
     async def start_following(self, path: Path, first_us: int, feeder_config: FeederConfig, *,
-                              latest_us: int, on_points=None) -> Feeder | None:
+                              latest_us: int, on_points=None,
+                              initialised: bool = False) -> Feeder | None:
         """Initialise the buffer, prime it with `path` from `first_us`, start following.
 
         The axes hold until `first_us`. Returns None, leaving the mount holding, when a
         point was refused or the mount time read before priming was past `latest_us`
         (the rest of the start would come too late: the caller plans again).
+        `initialised`: the caller already called `traj_init` (one request less to wait for).
         """
-        await self.link.call("traj_init")
+        if not initialised:
+            await self.link.call("traj_init")
         feeder = Feeder(self.link, self.clock, feeder_config, path, first_us,
                         fault_code=self.codes["fault"], tracking_code=self.codes["tracking"],
                         on_points=on_points)

@@ -364,6 +364,9 @@ async def _start_move(t: Station, op: Operation, pad: HandPad) -> Feeder:
     mode = t.steering.mode
     margin_us = mode.margin_us
     for _attempt in range(MOVE_START_ATTEMPTS):
+        # the buffer emptied before the mount time is read: three requests to wait for
+        # after it (the feeder's read, its first push, traj_start), not four
+        await t.link.call("traj_init")
         here = await t.motion.held_place()
         if pad.replace:  # from the minimum lead, at the axes' acceleration limits
             lead_us = mode.min_lead_us + START_REQUESTS * margin_us
@@ -383,7 +386,7 @@ async def _start_move(t: Station, op: Operation, pad: HandPad) -> Feeder:
             config = dataclasses.replace(config, min_lead_s=min(config.min_lead_s,
                                                                 lead_us / 2e6))
         feeder = await t.motion.start_following(pad.path, from_us, config, latest_us=latest_us,
-                                                on_points=t.note_points)
+                                                on_points=t.note_points, initialised=True)
         if feeder is not None:
             return feeder
         margin_us = max(2 * margin_us, 5_000)
