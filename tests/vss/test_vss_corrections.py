@@ -8,13 +8,11 @@ emulator's geometry is perfect and no pointing model is loaded, so encoder = obs
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 from signal_recording import recording
 from sky_truth import iss_truth, radec_truth, sky_sep_arcsec
-from vss_rig import run_lockstep_scenario
+from vss_rig import mapping_without, run_lockstep_scenario
 
 from virtualstar.astro import load_site
 from virtualstar.vss_client import VssRequestError
@@ -161,14 +159,8 @@ def test_stop_ends_everything_and_leaves_no_offset_behind():
 
 
 def test_a_controller_without_replace_from_falls_back_to_appending_and_says_so(tmp_path):
-    from importlib import resources
-
     site = load_site()
-    doc = json.loads(resources.files("virtualstar").joinpath(
-        "data/emulator-mapping.json").read_text("utf-8"))
-    del doc["functions"]["traj_replace"]
-    mapping = tmp_path / "append-only.json"
-    mapping.write_text(json.dumps(doc))
+    mapping = mapping_without(tmp_path, "traj_replace")
 
     async def scenario(vss, clock):
         c = vss.client()

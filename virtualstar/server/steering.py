@@ -18,6 +18,7 @@ from .corrections import CorrectionMode, Corrections
 from .estimator import FilterConfig
 from .exceptions import BadRequest, NoCamera, NotTracking
 from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, pulse_change
+from .hand_pad import HandPad
 from .offsets import AXES, OPERATIONS, OffsetLimits
 from .operations import TERMINAL, Operation, Phase
 
@@ -46,6 +47,7 @@ class Steering:
         self.limits = OffsetLimits(cfg.offset_rate_arcsec_s, cfg.offset_accel_arcsec_s2)
         self.min_lead_us = DEFAULT_MIN_LEAD_US
         self._current: tuple[int, Corrections] | None = None
+        self._pad: tuple[int, HandPad] | None = None  # the running move's (hand_pad.py)
         self.camera: CameraLink | None = None  # a guide camera for closed loops (camera_link.py)
         self.filter_config = FilterConfig()
 
@@ -63,6 +65,17 @@ class Steering:
                                                 math.radians(self.t.config.site.lat_deg),
                                                 limits=self.limits))
         return self._current[1]
+
+    def hand_pad(self, op: Operation | None) -> HandPad | None:
+        """The hand pad of a running move, None for any other operation."""
+        if op is None or op.finished or self._pad is None or self._pad[0] != op.id:
+            return None
+        return self._pad[1]
+
+    def keep_hand_pad(self, op: Operation, pad: HandPad) -> None:
+        """Remember the pad of a move just started (a move that took new rates keeps its own)."""
+        if self.hand_pad(op) is None:
+            self._pad = (op.id, pad)
 
     def need_camera(self, what: str) -> None:
         """Refuse a closed loop without a guide camera (NoCamera, naming the option)."""
