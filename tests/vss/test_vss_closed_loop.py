@@ -176,3 +176,64 @@ def test_a_closed_loop_without_a_camera_is_refused_naming_the_option():
 
     err = run_lockstep_scenario("2024-05-18T22:00:00Z", scenario)
     assert err.code == "no_camera" and "--camera" in err.message
+
+
+PLAN_START, PLAN_END = "2024-05-18T19:51:00Z", "2024-05-18T19:53:00Z"  # the ISS from 10° to 23°
+
+
+def _closed_loop_plan(tmp_path) -> dict:
+    """One ISS block with `closed_loop = true`, the pass cut short by the plan's window."""
+    from virtualstar.planning import PlanRequest, load_program, plan_program
+
+    (tmp_path / "stations.tle").write_text(sample_tle_path("stations").read_text())
+    (tmp_path / "program.toml").write_text("""
+[[target]]
+name = "ISS"
+tle_file = "stations.tle"
+sat = "ISS"
+min_el_deg = 15
+sun_max_el_deg = 90
+closed_loop = true
+""")
+    req = PlanRequest(load_program(tmp_path / "program.toml"), _us(PLAN_START),
+                      _us(PLAN_END), load_site())
+    return plan_program(req).as_dict()
+
+
+def test_a_plan_block_with_closed_loop_runs_locked_on_the_true_iss(tmp_path):
+    site = load_site()
+    iss = _iss()
+    plan = _closed_loop_plan(tmp_path)
+    [block] = plan["blocks"]
+    assert block["target"] == "ISS" and block["kind"] == "satellite"
+    camera = satellite_camera(iss.line1, iss.line2, site, along_s=2.0, across_arcsec=40.0,
+                              at_us=block["start_us"], config=CameraConfig(seed=7))
+
+    async def scenario(vss, clock):
+        c = vss.client()
+        async with recording(vss, ENCODERS, rate_hz=10.0, clock=clock) as rec:
+            result = await c.request("run_plan", {"plan": plan, "wait": True})
+        status = await c.request("status")
+        return result, rec, status
+
+    result, rec, status = run_lockstep_scenario(PLAN_START, scenario, camera=camera)
+    [r] = result["records"]
+    assert r["outcome"] == "done", r
+    op = status["operation"]
+    assert op["id"] == r["operation_id"]  # the block's own track ...
+    loop = op["info"]["closed_loop"]  # ... ran with the loop, locked on the camera's frames
+    assert loop["kind"] == "satellite" and loop["state"] == "locked", loop
+    assert loop["accepted"] > 300 and loop["refused"] == 0
+    join = op["info"]["tracking_from_us"]
+    t = rec.t_us
+    measured = (t >= join + 20_000_000) & (t <= r["end_us"])
+    assert measured.sum() >= 300  # 10 Hz over at least 30 s of the block
+    enc_az = np.degrees(rec["axis.az.position"][measured]) % 360
+    enc_el = np.degrees(rec["axis.el.position"][measured])
+    true_us = rec["time.true_us"][measured].astype(np.int64)
+    truth = satellite_truth(camera.truth.satrec, true_us, site)
+    err = sky_sep_arcsec(enc_az, enc_el, *truth)
+    assert np.sqrt(np.mean(err**2)) < 2.0, (np.sqrt(np.mean(err**2)), err.max())
+    # the nominal elements alone (what the block would have followed open loop) are far off
+    nominal = satellite_truth((iss.line1, iss.line2), true_us, site)
+    assert sky_sep_arcsec(*nominal, *truth).min() > 500.0
