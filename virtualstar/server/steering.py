@@ -108,9 +108,11 @@ class Steering:
         if self.t.op is not op:
             raise NotTracking(f"offset: operation {op.id} ended while the offset was sent")
         doc = self._answer(op, corr, record)
+        asked = {"axis": axis, "op": operation,
+                 **{k: v for k, v in (("arcsec", arcsec), ("seconds", seconds)) if v is not None}}
         self._log(op, f"offset {axis} {operation}"
                   + ("" if operation == "reset" else f" {_value_text(axis, arcsec, seconds)}"),
-                  doc)
+                  doc, asked)
         return doc
 
     async def guide(self, north_arcsec: float, east_arcsec: float,
@@ -152,8 +154,11 @@ class Steering:
                 "reached_utc": iso_utc(record["reached_us"], 3), "mode": self.mode.as_dict()["mode"],
                 "offsets": corr.status(record["from_us"])}
 
-    def _log(self, op: Operation, text: str, doc: dict[str, Any]) -> None:
-        fields = {"id": op.id, "from_us": doc["from_us"], "lead_ms": doc["lead_ms"],
+    def _log(self, op: Operation, text: str, doc: dict[str, Any],
+             asked: dict[str, Any]) -> None:
+        """Log and push an offset: what was asked (axis, op, arcsec or seconds), and when and
+        how it reaches the mount."""
+        fields = {"id": op.id, **asked, "from_us": doc["from_us"], "lead_ms": doc["lead_ms"],
                   "sent": doc["sent"]}
         self.t.log_event("info", "offset", f"operation {op.id}: {text} (from "
                          f"{doc['from_utc']}, {doc['lead_ms']:.0f} ms after acceptance, "
