@@ -41,7 +41,7 @@ import contextlib
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -77,6 +77,7 @@ MERIDIAN_LIMIT_DEG = 0.0  # how far past the meridian a German mount may track (
 RUN_UP_MIN_S = 1.5  # the run-up lasts at least this long ...
 RUN_UP_PERIODS = 8  # ... and this many report periods (the loop removes 60 % per period)
 SETTLE_PERIODS = 8  # report periods from the join to the landing check
+LANDING_REPORTS = 4  # the landing check takes the median of this many last reports
 
 
 def run_up_s(period_s: float | None) -> float:
@@ -171,6 +172,8 @@ class FollowStats:
     ended: str = ""
     last_error_arcsec: float | None = None
     last_error_uncertainty_arcsec: float = 0.0
+    recent_errors: list[tuple[float, float]] = field(default_factory=list)  # (error, its
+    # time's uncertainty × rate) of the last `LANDING_REPORTS` reports, arcsec
 
     def as_dict(self) -> dict:
         return {"reports": self.reports, "commands": self.commands, "skipped": self.skipped,
@@ -321,6 +324,8 @@ class RateFollower:
         spread = getattr(self.link, "report_spread_us", lambda: 0)()
         self.stats.last_error_arcsec = err
         self.stats.last_error_uncertainty_arcsec = rate * ARCSEC_PER_RAD * spread / 1e6
+        self.stats.recent_errors = (self.stats.recent_errors + [
+            (err, self.stats.last_error_uncertainty_arcsec)])[-LANDING_REPORTS:]
         if hasattr(self.link, "last_error_arcsec"):
             self.link.last_error_arcsec = err
 
@@ -416,23 +421,27 @@ class RateFollower:
         return max(settle_s, SETTLE_PERIODS * self._period_s())
 
     async def verify(self, tolerance_arcsec: float, what: str) -> float:
-        """The last measured error (arcsec); NotArrived beyond tolerance + its time uncertainty.
+        """The landing error (arcsec): the median of the last `LANDING_REPORTS` reports'
+        errors; NotArrived beyond tolerance + their time uncertainty × the path's rate.
 
-        Waits (wall time, at most `max(3 s, STALE_REPORTS` periods)) for the first report
-        after the join: on a loaded host the sign probe may still be running at the join.
+        The median, because one report stamped late by a stalled host (a push handled
+        20 ms late is 70″ at 1°/s) says nothing about where the mount is. Waits (wall time,
+        at most `max(3 s, STALE_REPORTS` periods)) for the first report after the join: on
+        a loaded host the sign probe may still be running at the join.
         """
         deadline = time.monotonic() + max(3.0, STALE_REPORTS * self._period_s())
         while self.stats.last_error_arcsec is None and time.monotonic() < deadline \
                 and not self.done:
             await self._sleep(0.05)
-        err = self.stats.last_error_arcsec
-        if err is None:
+        if self.stats.last_error_arcsec is None:
             raise NotArrived(f"{what}: no report from the mount since the join", math.inf)
-        allowed = tolerance_arcsec + self.stats.last_error_uncertainty_arcsec
+        recent = self.stats.recent_errors
+        err = float(np.median([e for e, _u in recent]))
+        unc = float(np.median([u for _e, u in recent]))
+        allowed = tolerance_arcsec + unc
         if err > allowed:
             raise NotArrived(f"{what}: the reported place is {err:.1f}″ from the path at the "
-                             f"report's time (tolerance {tolerance_arcsec:g}″ + "
-                             f"{self.stats.last_error_uncertainty_arcsec:.1f}″ for the report "
+                             f"report's time (median of the last {len(recent)} reports; "
+                             f"tolerance {tolerance_arcsec:g}″ + {unc:.1f}″ for the report "
                              "time's uncertainty)", err)
         return err
-
