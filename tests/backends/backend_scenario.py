@@ -47,6 +47,7 @@ BIN = Path(sys.executable).parent
 INDI_PORT = 7624
 INDI_DEVICE = "Telescope Simulator"
 STAR_TRACK_S = 8.0
+OFFSET_ARCSEC = 60.0  # the declination offset applied during a track
 PASS_JOIN_S = 35.0  # the followed stretch of the pass begins about this long after the command
 PASS_TRACK_S = 12.0  # ... and is stopped this long after the landing check (mid-pass)
 START_TIMEOUT_S = 120.0  # a loaded host takes long to start a simulator (FastAPI, indiserver)
@@ -321,6 +322,19 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     # 2. vs run of a small plan: one block of the same star, planned and run by the CLI
     doc["run"] = await run_small_plan(url, site, star.name, out_dir)
     doc["steps_s"]["run"] = time.monotonic() - t0
+
+    # 2b. a PWI4-style offset during a track: the rate loop follows the offset path
+    op = await t.follow_target(IcrsStar.from_catalog(star), star.name, duration_s=None)
+    await op.begun
+    k = obs.mark()
+    await asyncio.sleep(2.0)
+    answer = await t.steering.offset("dec", "add", arcsec=OFFSET_ARCSEC)
+    await asyncio.sleep(5.0)
+    doc["offset"] = {"answer": json.loads(json.dumps(answer, default=str)),
+                     "samples": obs.since(k), "arcsec": OFFSET_ARCSEC,
+                     "op_before_stop": op_doc(op)}
+    await t.stop()
+    doc["steps_s"]["offset"] = time.monotonic() - t0
 
     # 3. the Sun: refused before anything moves
     try:

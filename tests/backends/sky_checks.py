@@ -21,7 +21,8 @@ __all__ = ["test_the_backend_reads_geometry_and_rates_from_the_driver",
            "test_the_sun_is_refused_before_anything_moves",
            "test_a_slew_past_the_sun_goes_round_its_zone",
            "test_vs_run_of_a_small_plan_on_the_simulator",
-           "test_the_recorder_records_the_backends_reports_rates_and_errors"]
+           "test_the_recorder_records_the_backends_reports_rates_and_errors",
+           "test_an_offset_during_a_track_moves_the_mount_by_that_much"]
 
 
 def test_the_backend_reads_geometry_and_rates_from_the_driver(seen):
@@ -109,3 +110,27 @@ def test_the_recorder_records_the_backends_reports_rates_and_errors(seen):
     assert np.median(sky) < 3.0, sky
     # the error signal is the VSS's own measure of the same thing, while it follows
     assert np.isfinite(err).mean() > 0.8 and np.nanmedian(err) < 3.0, err
+
+
+def test_an_offset_during_a_track_moves_the_mount_by_that_much(seen):
+    """`offset dec add 60″` (PWI4-style, issue 28) on a rate mount: the loop follows the
+    offset path, so the simulator's reported place is 60″ north of astropy's star once
+    the offset is reached (and the loop has taken it up), and on the star before it."""
+    off = seen["offset"]
+    answer = off["answer"]
+    assert answer["offsets"]["axes"]["dec"]["goal_arcsec"] == pytest.approx(off["arcsec"])
+    s = np.asarray(off["samples"], float)
+    ra, dec = star_apparent(seen["star"], s[:, 0], seen)
+    d_ra = ((s[:, 1] * 15.0 - ra + 180.0) % 360.0 - 180.0) * np.cos(np.radians(dec)) * 3600
+    d_dec = (s[:, 2] - dec) * 3600
+    from_s, reached_s = answer["from_us"] / 1e6, answer["reached_us"] / 1e6
+    tracking_s = off["op_before_stop"]["info"]["tracking_from_us"] / 1e6
+    before = (s[:, 0] >= tracking_s) & (s[:, 0] < from_s)
+    # the loop takes a step up in about 8 report periods (60 % of the error per period):
+    # judged from 10 periods after the offset is reached
+    period_s = 1.0 / seen["final_backend"]["report_rate_hz"]
+    after = s[:, 0] > reached_s + max(1.0, 10 * period_s)
+    assert before.sum() >= 3 and after.sum() >= 5, (before.sum(), after.sum())
+    assert np.abs(d_dec[before]).max() < 3.0 and np.abs(d_ra[before]).max() < 3.0
+    assert np.abs(d_dec[after] - off["arcsec"]).max() < 3.0, np.round(d_dec[after], 2)
+    assert np.abs(d_ra[after]).max() < 3.0, np.round(d_ra[after], 2)

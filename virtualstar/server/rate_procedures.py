@@ -95,8 +95,15 @@ def route_estimate_s(t: Station, here, legs: list[tuple[float, float]]) -> float
 
 async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
                            not_before_us: int | None = None, end_us: int | None = None,
-                           allow_sun: bool = False) -> tuple[RateJoin, RateFollower]:
-    """Goto a point ahead on `path`, then return the join and the follower that takes over."""
+                           allow_sun: bool = False,
+                           corrections=None) -> tuple[RateJoin, RateFollower]:
+    """Goto a point ahead on `path`, then return the join and the follower that takes over.
+
+    Offsets (`corrections`, PWI4-style, guide pulses) need nothing more on a rate mount:
+    the loop samples the offset path at every report, so a change is followed from the
+    next report on. Changes made before the join start at the join (the goto aims at the
+    place the offsets had when it was planned).
+    """
     require_rates(t)
     frame = frame_of(t)
     stats = getattr(t.link, "stats", None)
@@ -119,6 +126,8 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
                                     f"{(end_us - here.t_us) / 1e6:.0f} s from now")
         # the goto goes to the start of the run-up (a few degrees before the join point
         # at most, on the line the path arrives along): that place is checked and routed
+        if corrections is not None:
+            corrections.hold_until(join_us)
         start = run_up_start(frame, path, join_us, run_up_us)
         az, el = frame.observed(start, join_us - run_up_us)
         t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(az) % 360.0,
@@ -139,6 +148,8 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
         if landed_us < join_us - run_up_us - probe_us - 500_000:
             join_us = _sooner_if_still(frame, path, join_us,
                                        landed_us + probe_us + run_up_us + 500_000)
+            if corrections is not None:
+                corrections.hold_until(join_us)
             if join_us - landed_us > 5e6:
                 t.supervisor.phase(op, Phase.WAITING, join_us=join_us)
             follower = RateFollower(t.link, frame, path, join_us, errors=t.errors,
