@@ -46,27 +46,36 @@ class AlpacaRig:
             t.Connected = True
         return t
 
+    def on_loop(self, fn, *args):
+        """Call `fn(*args)` on the rig's loop and wait for it: a change of the clock made from
+        the test's thread has taken effect when this returns (a call merely scheduled could
+        still be pending when the next block reads the clock)."""
+        async def call():
+            return fn(*args)
+
+        return self.rig.run(call())
+
     @contextlib.contextmanager
     def frozen(self):
         """Mount time stands still inside the block (a check right after a command sees the
         operation as it began, however slow the host): the rig's clock, frozen on its loop."""
         clock = self.rig.clock
-        self.rig.loop.call_soon_threadsafe(clock.freeze)
+        self.on_loop(clock.freeze)
         try:
             yield
         finally:
-            self.rig.loop.call_soon_threadsafe(clock.thaw)
+            self.on_loop(clock.thaw)
 
     @contextlib.contextmanager
     def paced(self, pace: float):
         """Mount time at most `pace` × wall time inside the block (room for a stalled host)."""
         clock = self.rig.clock
-        before = clock.pace
-        self.rig.loop.call_soon_threadsafe(clock.set_pace, pace)
+        before = self.on_loop(lambda: clock.pace)
+        self.on_loop(clock.set_pace, pace)
         try:
             yield
         finally:
-            self.rig.loop.call_soon_threadsafe(clock.set_pace, before)
+            self.on_loop(clock.set_pace, before)
 
     def close(self) -> None:
         self.rig.run(self.service.close())

@@ -77,6 +77,16 @@ def stars_file(stars, tmp_path):
     return plan
 
 
+@pytest.fixture
+def short_stars_file(tmp_path):
+    """The same stars for 30 s each: for the runs that cross process boundaries, where the
+    mount time simulated (10 kHz) is what the test costs."""
+    plan = tmp_path / "short-plan.json"
+    plan.write_text(json.dumps(_plan(tmp_path, STARS_PROGRAM.replace(
+        "duration_s = 120", "duration_s = 30"), "2024-05-18T21:22:00Z", "2024-05-18T21:30:00Z")))
+    return plan
+
+
 def test_a_plan_runs_block_by_block_with_the_mount_on_each_target(night):
     site = load_site()
 
@@ -228,23 +238,25 @@ def test_a_wrong_plan_is_refused_and_the_server_keeps_serving(plan, expected):
     assert pong == {"pong": True}
 
 
-def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(stars, stars_file, tmp_path):
+def test_vs_run_on_the_emulator_prints_the_blocks_and_writes_json_and_png(short_stars_file,
+                                                                         tmp_path):
     out, png = tmp_path / "run.json", tmp_path / "run.png"
-    result = CliRunner().invoke(app, ["run", str(stars_file), "--emulator", "--speed", "max",
+    result = CliRunner().invoke(app, ["run", str(short_stars_file), "--emulator", "--speed", "max",
                                       "-o", str(out), "--png", str(png)])
     assert result.exit_code == 0, result.output
     doc = json.loads(out.read_text())
-    assert doc["state"] == "done" and doc["summary"]["done"] == len(stars["blocks"])
+    planned = json.loads(short_stars_file.read_text())["blocks"]
+    assert doc["state"] == "done" and doc["summary"]["done"] == len(planned) == 3
     assert all(r["target"] in result.stdout for r in doc["records"])
     assert png.read_bytes()[:4] == b"\x89PNG"
 
 
-def test_vs_run_records_the_chosen_signals_for_every_block(stars_file, tmp_path):
+def test_vs_run_records_the_chosen_signals_for_every_block(short_stars_file, tmp_path):
     from virtualstar.recorder import ParquetStoreReader
 
     out, store = tmp_path / "run.json", tmp_path / "store"
     signals = ["axis.az.position_deg", "axis.el.position_deg", "axis.az.error_arcsec"]
-    args = ["run", str(stars_file), "--emulator", "-o", str(out), "--record-rate", "10",
+    args = ["run", str(short_stars_file), "--emulator", "-o", str(out), "--record-rate", "10",
             "--store", f"parquet:{store}"]
     for name in signals:
         args += ["--record", name]
@@ -266,7 +278,7 @@ def test_vs_run_records_the_chosen_signals_for_every_block(stars_file, tmp_path)
         assert np.abs(w.columns["axis.az.error_arcsec"]).max() <= r["encoder_peak_arcsec"] + 0.05
 
 
-def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars_file, tmp_path):
+def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(short_stars_file, tmp_path):
     """The server path end to end: `vs server --emulator` in its own process (lockstep paced
     at ×50), `vs run --server` following it, the recorder on the emulator's ASTCom URL."""
     import re
@@ -275,11 +287,11 @@ def test_vs_run_on_a_running_server_records_from_the_mount_endpoint(stars_file, 
 
     out, store = tmp_path / "run.json", tmp_path / "store"
     with vs_server_process("--emulator", "--speed", "50", "--start",
-                           "2024-05-18T21:12:00Z") as server:
+                           "2024-05-18T21:21:30Z") as server:
         mount = re.search(r"endpoint for other clients: (\S+)\)", server.line)
         assert mount, server.line
         result = CliRunner().invoke(app, [
-            "run", str(stars_file), "--server", server.url, "-o", str(out), "--record",
+            "run", str(short_stars_file), "--server", server.url, "-o", str(out), "--record",
             "axis.az.error_arcsec", "--record-rate", "10", "--mount", mount.group(1),
             "--store", f"parquet:{store}"])
     assert result.exit_code == 0, result.output
