@@ -61,7 +61,7 @@ async def inner(kind: str, part: str, sidereal_s: float, window_s: float, out_di
     doc["site"] = {k: getattr(site, k) for k in ("lat_deg", "lon_deg", "height_m",
                                                  "pressure_hpa", "temperature_c", "humidity",
                                                  "wavelength_um")}
-    sim = Simulator(kind, out_dir / part)
+    sim = Simulator(kind, out_dir)
     sim.start()
     vss = build_server(mount_url=sim.url, site=site)
     await vss.start("ws://127.0.0.1:0")
