@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import logging
 import math
 import os
 import subprocess
@@ -263,6 +264,9 @@ def report_pass(doc: dict, window_s: float) -> None:
           f"({step:g}″/s): {bound:.3f}″ RMS; loop / bound = {loop_rms / bound:.1f} "
           f"{'✔' if loop_rms <= 2 * bound else '✘'} (goal ≤ 2); a report's time is known to "
           f"±{unc * 1000:.1f} ms, {unc * float(np.sqrt(np.mean(rate**2))):.2f}″ RMS at the pass's rate")
+    floor = math.hypot(bound, unc * float(np.sqrt(np.mean(rate**2))))
+    print(f"[{kind}]   with the report time's uncertainty the floor is {floor:.2f}″ RMS: "
+          f"loop / floor = {loop_rms / floor:.1f}")
 
 
 def loop_failed(doc: dict, kind: str) -> bool:
@@ -286,6 +290,10 @@ def main() -> None:
     if args.inner:
         out = Path(os.environ.get("BENCH_OUT", "/tmp")) / f"{args.inner}-{args.part}"
         out.mkdir(parents=True, exist_ok=True)
+        log = logging.FileHandler(out / "vss.log")  # the rate loop's every cycle
+        log.setFormatter(logging.Formatter("%(created).3f %(name)s %(levelname)s %(message)s"))
+        logging.getLogger("virtualstar").addHandler(log)
+        logging.getLogger("virtualstar").setLevel(logging.DEBUG)
         doc = asyncio.run(inner(args.inner, args.part, args.sidereal_s, args.window_s, out))
         print(json.dumps(doc, default=str))
         return

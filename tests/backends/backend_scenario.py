@@ -32,7 +32,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 import traceback
 from pathlib import Path
@@ -71,6 +70,7 @@ class Simulator:
     def __init__(self, kind: str, out_dir: Path) -> None:
         self.kind = kind
         self.port = free_port() if kind == "alpaca" else INDI_PORT
+        self.out_dir = out_dir
         self.log = open(out_dir / f"{kind}-simulator.log", "ab")  # noqa: SIM115
         self.proc: subprocess.Popen | None = None
 
@@ -111,77 +111,86 @@ class Simulator:
 
 
 class Observer:
-    """An independent client recording every reported place: (t_s, ra_h, dec_deg)."""
+    """An independent client recording every reported place: (t_s, ra_h, dec_deg).
+
+    It runs in a process of its own (this script with ``--observe``), so the time it
+    stamps on each place is not delayed by the VSS's work in this process (the GIL); it
+    writes one line per place, which `mark` and `since` read back.
+    """
 
     def __init__(self, sim: Simulator) -> None:
         self.sim = sim
-        self.samples: list[tuple[float, float, float]] = []
-        self.lock = threading.Lock()
-        self.stopping = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        self.path = sim.out_dir / f"observed-{time.time_ns()}.txt"
+        self.path.touch()
+        self.proc = subprocess.Popen(
+            [sys.executable, __file__, "--observe", sim.kind, str(sim.port), str(self.path)],
+            stdout=sim.log, stderr=sim.log)
 
-    def _run(self) -> None:
-        try:
-            if self.sim.kind == "alpaca":
-                self._alpaca()
-            else:
-                asyncio.run(self._indi())
-        except Exception:  # the simulator killed on purpose ends this observer
-            pass
-
-    def _alpaca(self) -> None:
-        from alpaca.telescope import Telescope
-
-        tel = Telescope(f"127.0.0.1:{self.sim.port}", 0)
-        while not self.stopping.is_set():
-            try:
-                t0 = time.time()
-                ra = tel.RightAscension
-                dec = tel.Declination
-                t1 = time.time()
-            except Exception:
-                time.sleep(0.2)
-                continue
-            # the simulator answers each with where the mount is when asked (~1 ms apart)
-            with self.lock:
-                self.samples.append(((t0 + t1) / 2, float(ra), float(dec)))
-            time.sleep(0.05)
-
-    async def _indi(self) -> None:
-        from indipyclient import IPyClient
-
-        obs = self
-
-        class Client(IPyClient):
-            async def rxevent(self, event) -> None:
-                if (event.devicename == INDI_DEVICE and event.vectorname == "EQUATORIAL_EOD_COORD"
-                        and event.eventtype == "Set"):
-                    t = time.time()  # a push describes the moment it is sent
-                    v = self[INDI_DEVICE]["EQUATORIAL_EOD_COORD"]
-                    with obs.lock:
-                        obs.samples.append((t, v.getfloatvalue("RA"), v.getfloatvalue("DEC")))
-
-            async def hardware(self) -> None:
-                while not obs.stopping.is_set():
-                    await asyncio.sleep(0.1)
-                self.shutdown()
-
-        client = Client(indihost="127.0.0.1", indiport=self.sim.port)
-        client.debug_verbosity(0)
-        await client.asyncrun()
+    def _lines(self) -> list[str]:
+        lines = self.path.read_text().split("\n")
+        return lines[:-1]  # the last is empty, or a line still being written
 
     def mark(self) -> int:
-        with self.lock:
-            return len(self.samples)
+        return len(self._lines())
 
     def since(self, k: int) -> list[tuple[float, float, float]]:
-        with self.lock:
-            return list(self.samples[k:])
+        return [tuple(float(x) for x in line.split()) for line in self._lines()[k:]]
 
     def close(self) -> None:
-        self.stopping.set()
-        self.thread.join(10)
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+def observe(kind: str, port: int, path: Path) -> None:
+    """The observer process: append every place the simulator reports to `path`."""
+    with open(path, "a", buffering=1) as out:
+        def put(t: float, ra_h: float, dec_deg: float) -> None:
+            out.write(f"{t:.6f} {ra_h!r} {dec_deg!r}\n")
+
+        while True:
+            try:
+                if kind == "alpaca":
+                    _observe_alpaca(port, put)
+                else:
+                    asyncio.run(_observe_indi(port, put))
+            except Exception:  # the simulator killed on purpose: try again
+                time.sleep(0.2)
+
+
+def _observe_alpaca(port: int, put) -> None:
+    from alpaca.telescope import Telescope
+
+    tel = Telescope(f"127.0.0.1:{port}", 0)
+    while True:
+        t0 = time.time()
+        ra = tel.RightAscension
+        dec = tel.Declination
+        t1 = time.time()
+        # the simulator answers each with where the mount is when asked (~1 ms apart)
+        put((t0 + t1) / 2, float(ra), float(dec))
+        time.sleep(0.05)
+
+
+async def _observe_indi(port: int, put) -> None:
+    from indipyclient import IPyClient
+
+    class Client(IPyClient):
+        async def rxevent(self, event) -> None:
+            if (event.devicename == INDI_DEVICE and event.vectorname == "EQUATORIAL_EOD_COORD"
+                    and event.eventtype == "Set"):
+                t = time.time()  # a push describes the moment it is sent
+                v = self[INDI_DEVICE]["EQUATORIAL_EOD_COORD"]
+                put(t, v.getfloatvalue("RA"), v.getfloatvalue("DEC"))
+
+    client = Client(indihost="127.0.0.1", indiport=port)
+    client.debug_verbosity(0)
+    await client.asyncrun()
+    raise ConnectionError("the INDI server closed")
 
 
 def daytime_site(sun_hour_angle_deg: float = -37.5):
@@ -519,6 +528,9 @@ async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
 
 
 def main() -> None:
+    if sys.argv[1] == "--observe":
+        observe(sys.argv[2], int(sys.argv[3]), Path(sys.argv[4]))
+        return
     kind, part, out_dir = sys.argv[1], sys.argv[2], Path(sys.argv[3])
     out_dir.mkdir(parents=True, exist_ok=True)
     log = logging.FileHandler(out_dir / "vss.log")  # the rate loop's every cycle, for a post-mortem

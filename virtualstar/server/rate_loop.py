@@ -37,6 +37,7 @@ with `MountFault` after telling the mount to stop (a rate once sent keeps it mov
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import math
@@ -243,6 +244,9 @@ class RateFollower:
         last_t = 0
         last_cycle = time.monotonic()
         while not self.done:
+            task = asyncio.current_task()
+            if task is not None and task.cancelling():
+                raise asyncio.CancelledError  # a cancellation swallowed on the way (3.11)
             period = self._period_s()
             stale_s = max(3.0, STALE_REPORTS * period)
             await self.link.wait_report(last_t, stale_s)
@@ -411,8 +415,6 @@ class RateFollower:
 
     @staticmethod
     async def _sleep(s: float) -> None:
-        import asyncio
-
         await asyncio.sleep(s)
 
     def settle_s(self, settle_s: float) -> float:
