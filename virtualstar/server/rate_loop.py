@@ -362,7 +362,14 @@ class RateFollower:
         try:
             await self.link.call("set_rates", r[0], r[1])
         except MountUnavailable as exc:
-            await self._stop(str(exc))
+            if not getattr(exc, "timed_out", False):
+                await self._stop(str(exc))  # refused or gone: a killed driver ends here
+            # one request timed out while the driver still reports (a loaded host): once more
+            log.warning("%s: %s; sending the rates once more", self.frame.caps.backend, exc)
+            try:
+                await self.link.call("set_rates", r[0], r[1])
+            except MountUnavailable as again:
+                await self._stop(str(again))
         self._rates = r
         self.stats.commands += 1
 

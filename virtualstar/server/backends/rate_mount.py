@@ -174,6 +174,15 @@ class ReportStats:
     def period_s(self) -> float | None:
         return statistics.median(self.periods_s) if len(self.periods_s) >= 3 else None
 
+    def jitter_s(self) -> float:
+        """How irregularly new places arrive: the median absolute deviation of the last 20
+        intervals from their median (a loaded host handles a push late by this much)."""
+        last = list(self.periods_s)[-20:]
+        if len(last) < 3:
+            return 0.0
+        mid = statistics.median(last)
+        return statistics.median(abs(x - mid) for x in last)
+
 
 def _now_us() -> int:
     return time.time_ns() // 1000
@@ -260,7 +269,7 @@ class RateMountLink:
             out["reported"] = {"ra_deg": math.degrees(rep.ra_rad) % 360.0,
                                "dec_deg": math.degrees(rep.dec_rad),
                                "t_us": rep.t_us, "age_s": (_now_us() - rep.t_us) / 1e6,
-                               "time_uncertainty_s": rep.spread_us / 1e6,
+                               "time_uncertainty_s": self.report_spread_us() / 1e6,
                                "slewing": rep.flags.slewing, "tracking": rep.flags.tracking,
                                "at_park": rep.flags.at_park,
                                "side_of_pier": {0: "east", 1: "west"}.get(
@@ -602,7 +611,13 @@ class RateMountLink:
                 waiter.cancel()
 
     def report_spread_us(self) -> int:
-        return 0 if self._report is None else self._report.spread_us
+        """The uncertainty of the newest report's time: half the interval it appeared in
+        (polled), or for a push the jitter of the pushes' arrival (its handling delay)."""
+        if self._report is None:
+            return 0
+        if self._report.flags.received_us is not None:
+            return max(self._report.spread_us, int(self.stats.jitter_s() * 1e6))
+        return self._report.spread_us
 
     async def call(self, role: str, *args: Any) -> Any:
         self.calls.append(MountCall(next(self._call_seq), role, current_operation.get()))
@@ -616,8 +631,11 @@ class RateMountLink:
                 return await asyncio.wait_for(fn(*args), self.config.timeout_s * 30)
             except (OSError, TimeoutError) as exc:
                 self.last_error = f"{role}: {exc or type(exc).__name__}"
-                raise MountUnavailable(f"the {self.backend} driver did not answer {role}: "
-                                       f"{exc or type(exc).__name__}") from None
+                err = MountUnavailable(f"the {self.backend} driver did not answer {role}: "
+                                       f"{exc or type(exc).__name__}")
+                # slow (a loaded host), not gone: the caller may try once more
+                err.timed_out = isinstance(exc, TimeoutError) and self.connected
+                raise err from None
 
     async def _send(self, coro) -> None:
         await asyncio.wait_for(coro, self.config.timeout_s)
