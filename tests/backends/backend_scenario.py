@@ -45,7 +45,7 @@ from synthetic_pass import synthetic_pass_tle  # noqa: E402
 BIN = Path(sys.executable).parent
 INDI_PORT = 7624
 INDI_DEVICE = "Telescope Simulator"
-STAR_TRACK_S = 8.0
+STAR_TRACK_S = 10.0
 OFFSET_ARCSEC = 60.0  # the declination offset applied during a track
 PASS_JOIN_S = 35.0  # the followed stretch of the pass begins about this long after the command
 PASS_TRACK_S = 12.0  # ... and is stopped this long after the landing check (mid-pass)
@@ -333,9 +333,9 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     doc["steps_s"]["run"] = time.monotonic() - t0
 
     # 2b. a PWI4-style offset during a track: the rate loop follows the offset path
+    k = obs.mark()  # from the slew on: INDI pushes nothing while the star is held still
     op = await t.follow_target(IcrsStar.from_catalog(star), star.name, duration_s=None)
     await op.begun
-    k = obs.mark()
     await asyncio.sleep(2.0)
     answer = await t.steering.offset("dec", "add", arcsec=OFFSET_ARCSEC)
     await asyncio.sleep(5.0)

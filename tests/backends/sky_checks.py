@@ -47,7 +47,9 @@ def test_a_star_is_reached_and_tracked_on_astropys_place(seen):
     info = op["info"]
     samples = [s for s in seen["star_samples"]
                if s[0] * 1e6 >= info["tracking_from_us"] and s[0] * 1e6 <= info["tracking_to_us"]]
-    assert len(samples) >= 10
+    # Alpaca is read 20 times a second; INDI pushes a place only when it has changed (a
+    # well-held star: every second or two)
+    assert len(samples) >= 4
     t = np.array([s[0] for s in samples])
     err = sky_errors_arcsec(samples, star_apparent(seen["star"], t, seen))
     assert np.sqrt(np.mean(err**2)) < 3.0 and err.max() < 15.0, err
@@ -125,12 +127,15 @@ def test_an_offset_during_a_track_moves_the_mount_by_that_much(seen):
     d_dec = (s[:, 2] - dec) * 3600
     from_s, reached_s = answer["from_us"] / 1e6, answer["reached_us"] / 1e6
     tracking_s = off["op_before_stop"]["info"]["tracking_from_us"] / 1e6
-    before = (s[:, 0] >= tracking_s) & (s[:, 0] < from_s)
+    # on the star before: the places reported since the landing check (INDI pushes a place
+    # only when it changed, so the last one before the offset stands for the time since)
+    last_s = s[s[:, 0] < from_s, 0].max() if (s[:, 0] < from_s).any() else from_s
+    before = (s[:, 0] < from_s) & (s[:, 0] >= min(tracking_s, last_s))
     # the loop takes a step up in about 8 report periods (60 % of the error per period):
     # judged from 10 periods after the offset is reached
     period_s = 1.0 / seen["final_backend"]["report_rate_hz"]
     after = s[:, 0] > reached_s + max(1.0, 10 * period_s)
-    assert before.sum() >= 3 and after.sum() >= 5, (before.sum(), after.sum())
+    assert before.sum() >= 1 and after.sum() >= 3, (before.sum(), after.sum())
     assert np.abs(d_dec[before]).max() < 3.0 and np.abs(d_ra[before]).max() < 3.0
     assert np.abs(d_dec[after] - off["arcsec"]).max() < 3.0, np.round(d_dec[after], 2)
     assert np.abs(d_ra[after]).max() < 3.0, np.round(d_ra[after], 2)

@@ -70,7 +70,8 @@ log = logging.getLogger("virtualstar.server")
 
 GAIN = 0.6  # fraction of the predicted error removed per report period
 RATE_STEP_H_S = 0.2  # mount seconds between the two samples that give the path's rate
-STALE_REPORTS = 12  # reports missed (or 3 s, the larger) before the driver counts as lost
+STALE_REPORTS = 12  # reports missed (or STALE_MIN_S, the larger) before the driver counts as lost
+STALE_MIN_S = 5.0  # a loaded host (load average 20+ on 2 cores) was seen to leave 3 s without a push
 PROBE_RATE_ARCSEC_S = 60.0  # the sign probe: small, a few arcseconds of motion
 PROBE_S = 0.4  # wall seconds each axis moves in the probe (at least 2.5 driver periods)
 MIN_RATE_CHANGE_ARCSEC_S = 0.05  # a smaller change of rate is not sent
@@ -248,7 +249,7 @@ class RateFollower:
             if task is not None and task.cancelling():
                 raise asyncio.CancelledError  # a cancellation swallowed on the way (3.11)
             period = self._period_s()
-            stale_s = max(3.0, STALE_REPORTS * period)
+            stale_s = max(STALE_MIN_S, STALE_REPORTS * period)
             await self.link.wait_report(last_t, stale_s)
             v = await self.link.read(["axis1_position", "axis2_position", "report_time",
                                       "mount_time", "mount_state"])
