@@ -41,6 +41,8 @@ JOIN_MARGIN_S = 5.0  # mount seconds between landing and the run-up's start (the
 # probe runs meanwhile: about 2 s)
 PROBE_ALLOWANCE_US = 4_000_000  # the axis-sign probe: about 2 s at 4 reports a second
 STILL_ARCSEC = 2.0  # a path that moves less than this (native axes) may be joined sooner
+SOONER_MARGIN_US = 3_000_000  # ... this long after the goto landed, for the loop to take up
+# the goto's residual (a loaded host: at 0.5 s an Alpaca star landed 288″ off at the check)
 GOTO_SETTLE_S = 1.5  # a goto's end is seen a few reports after the driver lands
 MAX_JOIN_PLANS = 6
 POLE_RATE_FRACTION = 0.9  # the right-ascension axis may use this much of its rate limit
@@ -147,7 +149,7 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
         probe_us = 0 if getattr(t.link, "signs_measured", True) else PROBE_ALLOWANCE_US
         if landed_us < join_us - run_up_us - probe_us - 500_000:
             join_us = _sooner_if_still(frame, path, join_us,
-                                       landed_us + probe_us + run_up_us + 500_000)
+                                       landed_us + probe_us + run_up_us + SOONER_MARGIN_US)
             if corrections is not None:
                 corrections.hold_until(join_us)
             if join_us - landed_us > 5e6:
