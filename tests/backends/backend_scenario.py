@@ -338,7 +338,7 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     await op.begun
     await asyncio.sleep(2.0)
     answer = await t.steering.offset("dec", "add", arcsec=OFFSET_ARCSEC)
-    await asyncio.sleep(5.0)
+    await asyncio.sleep(6.0)
     doc["offset"] = {"answer": json.loads(json.dumps(answer, default=str)),
                      "samples": obs.since(k), "arcsec": OFFSET_ARCSEC,
                      "op_before_stop": op_doc(op)}

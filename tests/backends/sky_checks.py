@@ -132,9 +132,9 @@ def test_an_offset_during_a_track_moves_the_mount_by_that_much(seen):
     last_s = s[s[:, 0] < from_s, 0].max() if (s[:, 0] < from_s).any() else from_s
     before = (s[:, 0] < from_s) & (s[:, 0] >= min(tracking_s, last_s))
     # the loop takes a step up in about 8 report periods (60 % of the error per period):
-    # judged from 10 periods after the offset is reached
+    # judged from 10 periods (at least 2.5 s: a loaded host delays it) after it is reached
     period_s = 1.0 / seen["final_backend"]["report_rate_hz"]
-    after = s[:, 0] > reached_s + max(1.0, 10 * period_s)
+    after = s[:, 0] > reached_s + max(2.5, 10 * period_s)
     assert before.sum() >= 1 and after.sum() >= 3, (before.sum(), after.sum())
     assert np.abs(d_dec[before]).max() < 3.0 and np.abs(d_ra[before]).max() < 3.0
     assert np.abs(d_dec[after] - off["arcsec"]).max() < 3.0, np.round(d_dec[after], 2)

@@ -80,6 +80,7 @@ RUN_UP_MIN_S = 1.5  # the run-up lasts at least this long ...
 RUN_UP_PERIODS = 8  # ... and this many report periods (the loop removes 60 % per period)
 SETTLE_PERIODS = 8  # report periods from the join to the landing check
 LANDING_REPORTS = 4  # the landing check takes the median of this many last reports
+LANDING_GRACE_PERIODS = 12  # ... and may wait this many more periods for them to come within
 
 
 def run_up_s(period_s: float | None) -> float:
@@ -360,11 +361,17 @@ class RateFollower:
         if abs(r[0] - self._rates[0]) < self.deadband and abs(r[1] - self._rates[1]) < self.deadband:
             self.stats.skipped += 1
             return
+        before_us = int((await self.link.read(["report_time"]))["report_time"])
         try:
             await self.link.call("set_rates", r[0], r[1])
         except MountUnavailable as exc:
-            if not getattr(exc, "timed_out", False):
-                await self._stop(str(exc))  # refused or gone: a killed driver ends here
+            try:
+                newer = int((await self.link.read(["report_time"]))["report_time"]) > before_us
+            except Exception:  # noqa: BLE001 - no report at all: the driver is gone
+                newer = False
+            if not getattr(exc, "timed_out", False) or not newer:
+                # refused or gone, or silent since the command was sent (a killed driver)
+                await self._stop(str(exc))
             # one request timed out while the driver still reports (a loaded host): once more
             log.warning("%s: %s; sending the rates once more", self.frame.caps.backend, exc)
             try:
@@ -445,10 +452,18 @@ class RateFollower:
             await self._sleep(0.05)
         if self.stats.last_error_arcsec is None:
             raise NotArrived(f"{what}: no report from the mount since the join", math.inf)
-        recent = self.stats.recent_errors
-        err = float(np.median([e for e, _u in recent]))
-        unc = float(np.median([u for _e, u in recent]))
-        allowed = tolerance_arcsec + unc
+        # a host that stalled the reports for a while (seen: 3 s without an INDI push under
+        # load 18) leaves the loop converging at the check: it may take LANDING_GRACE_PERIODS
+        # more report periods (at least 3 s) to come within tolerance
+        grace = time.monotonic() + max(3.0, LANDING_GRACE_PERIODS * self._period_s())
+        while True:
+            recent = self.stats.recent_errors
+            err = float(np.median([e for e, _u in recent]))
+            unc = float(np.median([u for _e, u in recent]))
+            allowed = tolerance_arcsec + unc
+            if err <= allowed or time.monotonic() > grace or self.done:
+                break
+            await self._sleep(self._period_s())
         if err > allowed:
             raise NotArrived(f"{what}: the reported place is {err:.1f}″ from the path at the "
                              f"report's time (median of the last {len(recent)} reports; "
