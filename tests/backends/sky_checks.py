@@ -135,7 +135,8 @@ def test_an_offset_during_a_track_moves_the_mount_by_that_much(seen):
     # judged from 10 periods (at least 2.5 s: a loaded host delays it) after it is reached
     period_s = 1.0 / seen["final_backend"]["report_rate_hz"]
     after = s[:, 0] > reached_s + max(2.5, 10 * period_s)
-    assert before.sum() >= 1 and after.sum() >= 3, (before.sum(), after.sum())
+    # (INDI pushes nothing once the mount holds the offset place: its last push stands)
+    assert before.sum() >= 1 and after.sum() >= 1, (before.sum(), after.sum())
     assert np.abs(d_dec[before]).max() < 3.0 and np.abs(d_ra[before]).max() < 3.0
     assert np.abs(d_dec[after] - off["arcsec"]).max() < 3.0, np.round(d_dec[after], 2)
     assert np.abs(d_ra[after]).max() < 3.0, np.round(d_ra[after], 2)
