@@ -91,12 +91,14 @@ class StatusProbe:
 
 
 def window(op: Session, seconds: float) -> tuple[float, float]:
-    """Wait `seconds` of tracking; return (peak, rms) error in arcsec over that window."""
+    """Wait `seconds` of tracking; return the (peak, rms) on-target error in arcsec over that
+    window: the boresight against the target's true place (issue 26), not the following
+    error."""
     t0 = int(op.request("status")["result"]["mount_time_us"])
     time.sleep(seconds)
     t1 = int(op.request("status")["result"]["mount_time_us"])
     stats = op.request("errors", {"from_us": t0, "to_us": t1})["result"]["stats"]
-    return float(stats["peak_arcsec"]), float(stats["rms_arcsec"])
+    return float(stats["on_target_peak_arcsec"]), float(stats["on_target_rms_arcsec"])
 
 
 def interruptions(op: Session, op_id: int) -> int:

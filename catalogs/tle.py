@@ -293,6 +293,8 @@ def read_element_text(path: str | Path) -> str:
         raise ElementFileError(f"{path}: no such file") from None
     except OSError as exc:
         raise ElementFileError(f"{path}: cannot open: {exc.strerror or exc}") from None
+    except ValueError:  # a NUL in the name: no file can have it
+        raise ElementFileError(f"{str(path)!r}: a path cannot hold a NUL character") from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):

@@ -69,13 +69,17 @@ def store_events(reader) -> list[Event]:
 
 async def follow_vss(url: str, flt: EventFilter, on_event: Callable[[Event], None], *,
                      password: str | None = None, history: bool = True, follow: bool = True,
-                     duration_s: float | None = None) -> int:
+                     duration_s: float | None = None,
+                     on_dropped: Callable[[dict[str, int]], None] | None = None) -> int:
     """Hand on a VSS's events that pass `flt` (polling `log`); return how many passed.
 
     `history` also hands on what the log already holds. Without `follow`, reads the log
     once, to its newest event, and returns. With it, keeps polling until `duration_s`
-    wall seconds have passed (None: until cancelled).
+    wall seconds have passed (None: until cancelled). `on_dropped` gets the server's count
+    of events its rings dropped, by kind, whenever it changes (a reader must know what it
+    cannot see).
     """
+    dropped_seen: dict[str, int] = {}
     from virtualstar.vss_client import VssClient
 
     passed = 0
@@ -86,6 +90,10 @@ async def follow_vss(url: str, flt: EventFilter, on_event: Callable[[Event], Non
             since = int((await client.request("log", {"since": 0, "limit": 1}))["last_seq"])
         while True:
             doc = await client.request("log", {"since": since, "limit": LOG_PAGE_EVENTS})
+            dropped = {str(k): int(v) for k, v in dict(doc.get("dropped") or {}).items() if v}
+            if on_dropped is not None and dropped != dropped_seen:
+                dropped_seen = dropped
+                on_dropped(dropped)
             for d in doc["events"]:
                 e = Event.from_dict(d)
                 since = max(since, e.seq)

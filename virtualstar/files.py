@@ -30,6 +30,8 @@ def read_text_file(path: str | Path, *, max_bytes: int, what: str = "file") -> s
         fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
         raise FileRefused(f"{what} {name}: {exc.strerror or exc}") from None
+    except ValueError:  # a NUL in the name: no file can have it
+        raise FileRefused(f"{what} {name!r}: a path cannot hold a NUL character") from None
     try:
         info = os.fstat(fd)  # what was opened, not what the name pointed at a moment before
         if not stat.S_ISREG(info.st_mode):

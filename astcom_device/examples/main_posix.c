@@ -7,7 +7,10 @@
  *
  * Limits: --max-clients --max-pending --auth-timeout --max-frame-bytes --max-depth
  * --max-array-len --max-str-bytes --max-messages --max-names --max-streams
- * --ring-ticks --max-reply-bytes --link-channels. ASTCOM_PASSWORD sets --password.
+ * --ring-ticks --max-reply-bytes --link-channels. Password attempts (§10): --auth-first-delay
+ * --auth-max-delay --auth-lockout-failures --auth-lockout --auth-forget --auth-rate
+ * --auth-burst --auth-max-hold --auth-addresses. ASTCOM_PASSWORD sets --password.
+ * Every wrong password is logged on stderr: "auth: wrong password from ADDRESS (...)".
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -26,13 +29,20 @@ static void usage(void)
           "       [--max-depth N] [--max-array-len N] [--max-str-bytes N] [--max-messages N]\n"
           "       [--max-names N] [--max-streams N] [--ring-ticks N] [--max-reply-bytes N]\n"
           "       [--link-channels N]\n"
+          "       [--auth-first-delay S] [--auth-max-delay S] [--auth-lockout-failures N]\n"
+          "       [--auth-lockout S] [--auth-forget S] [--auth-rate PER_S] [--auth-burst N]\n"
+          "       [--auth-max-hold S] [--auth-addresses N]\n"
           "Serves the example controller (the Python example device's names plus a two-axis\n"
           "trajectory follower) over ASTCom: TCP, and/or the framed link on a tty/pty for\n"
           "`astcom relay`. Without a password authentication is off (loopback tests only).\n"
           "--stats FILE writes the tick loop's lateness (p50/p99/p99.9/max, the first\n"
           "--warmup S seconds left out), dropped and skipped counts as JSON at exit.\n"
           "--rt-priority N runs the tick thread SCHED_FIFO at priority N (1..99), as a\n"
-          "controller's loop should run on Linux (needs CAP_SYS_NICE or an rtprio limit).\n",
+          "controller's loop should run on Linux (needs CAP_SYS_NICE or an rtprio limit).\n"
+          "Password attempts are throttled per address and overall (docs/astcom-protocol.md\n"
+          "§10; defaults 0.25 s doubling to 30 s, 20 failures lock out for 300 s, 5/s after\n"
+          "a burst of 10, held at most 5 s, 64 addresses remembered); each wrong password\n"
+          "is logged on stderr as 'auth: wrong password from ADDRESS (N in a row...)'.\n",
           stderr);
 }
 
@@ -44,6 +54,25 @@ static unsigned long number(const char *opt, const char *v)
     return n;
 }
 
+static double seconds(const char *opt, const char *v)
+{
+    char *end;
+    double x = strtod(v, &end);
+    if (!*v || *end || !(x > 0)) { fprintf(stderr, "%s: expected a number > 0, got '%s'\n", opt, v); exit(2); }
+    return x;
+}
+
+/* The device's log of wrong passwords (the Python endpoint's on_auth_failure warning). */
+static void log_auth_failure(void *user, const char *address, const ad_auth_failure *f)
+{
+    (void)user;
+    fprintf(stderr, "auth: wrong password from %s (%u in a row", address, (unsigned)f->failures);
+    if (f->locked_s > 0) fprintf(stderr, "; locked out for %g s", f->locked_s);
+    if (f->refused) fprintf(stderr, "; %u refused unchecked before", (unsigned)f->refused);
+    fputs(")\n", stderr);
+    fflush(stderr);
+}
+
 int main(int argc, char **argv)
 {
     ad_config cfg;
@@ -52,6 +81,7 @@ int main(int argc, char **argv)
     ad_config_defaults(&cfg);
     memset(&o, 0, sizeof o);
     cfg.name = "example";
+    cfg.on_auth_failure = log_auth_failure;
     cfg.operator_password = getenv("ASTCOM_PASSWORD");
     if (cfg.operator_password && !*cfg.operator_password) cfg.operator_password = NULL;
     for (int i = 1; i < argc; i++) {
@@ -84,6 +114,15 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--ring-ticks")) cfg.ring_ticks = (uint32_t)number(a, v);
         else if (!strcmp(a, "--max-reply-bytes")) cfg.max_reply_bytes = (uint32_t)number(a, v);
         else if (!strcmp(a, "--link-channels")) o.link_channels = (uint32_t)number(a, v);
+        else if (!strcmp(a, "--auth-first-delay")) cfg.auth_first_delay_s = seconds(a, v);
+        else if (!strcmp(a, "--auth-max-delay")) cfg.auth_max_delay_s = seconds(a, v);
+        else if (!strcmp(a, "--auth-lockout-failures")) cfg.auth_lockout_failures = (uint32_t)number(a, v);
+        else if (!strcmp(a, "--auth-lockout")) cfg.auth_lockout_s = seconds(a, v);
+        else if (!strcmp(a, "--auth-forget")) cfg.auth_forget_s = seconds(a, v);
+        else if (!strcmp(a, "--auth-rate")) cfg.auth_rate_per_s = seconds(a, v);
+        else if (!strcmp(a, "--auth-burst")) cfg.auth_burst = (uint32_t)number(a, v);
+        else if (!strcmp(a, "--auth-max-hold")) cfg.auth_max_hold_s = seconds(a, v);
+        else if (!strcmp(a, "--auth-addresses")) cfg.auth_max_addresses = (uint32_t)number(a, v);
         else { fprintf(stderr, "unknown option %s\n", a); usage(); return 2; }
     }
     if (!o.tcp && !o.serial) { fputs("give --tcp HOST:PORT and/or --serial PATH\n", stderr); usage(); return 2; }

@@ -9,7 +9,7 @@
  *
  *     control loop (ISR or RT thread)          communication loop (main loop / thread)
  *     ------------------------------           ---------------------------------------
- *     compute the tick                         s = ad_open(dev, sink)       a peer arrived
+ *     compute the tick                         s = ad_open(dev, sink, peer) a peer arrived
  *     ad_tick(dev, tick, t_us)  O(traced)      ad_receive(dev, s, frame, n) a whole frame
  *                                              ad_poll(dev, now_us)         streams, timeouts
  *                                              ad_close(dev, s)             the peer left
@@ -96,6 +96,13 @@ typedef struct ad_fn {
 
 /* ---- configuration and memory --------------------------------------------------------- */
 
+/* What a wrong password cost its address (on_auth_failure). */
+typedef struct ad_auth_failure {
+    uint32_t failures;  /* consecutive failures from the address, this one included */
+    double locked_s;    /* > 0: this failure locked the address out for so long */
+    uint32_t refused;   /* attempts from the address refused unchecked since its last failure */
+} ad_auth_failure;
+
 typedef struct ad_config {
     const char *name;              /* HELLO's server name */
     double loop_rate_hz;           /* the control loop's rate */
@@ -117,7 +124,25 @@ typedef struct ad_config {
     uint32_t max_pending_calls;    /* deferred INVOKEs at once (ERR 429 beyond) */
     double flush_interval_s;       /* samples per packet ~ this much time (0.02) */
     uint32_t max_arg_bytes;        /* array arguments sent as msgpack arrays (0: 2 frames) */
+    /* Password attempts (docs/astcom-protocol.md §10; the reference endpoint's
+     * astcom_client/throttle.py), per peer address and over the whole device: the n-th
+     * consecutive failure from an address puts auth_first_delay_s × 2^(n-1) (at most
+     * auth_max_delay_s) before its next check; the auth_lockout_failures-th locks it out for
+     * auth_lockout_s; a right password forgets it, so does auth_forget_s of quiet. Over all
+     * addresses at most auth_rate_per_s checks a second after a burst of auth_burst. An
+     * AUTH is held (its answer, not the loop) until its turn, at most auth_max_hold_s;
+     * one that would wait longer, or comes from a locked-out address, is answered ERR 429
+     * unchecked. The table remembers auth_max_addresses addresses (at least max_pending + 1;
+     * the least recently seen go first). */
+    double auth_first_delay_s, auth_max_delay_s, auth_lockout_s, auth_forget_s;
+    double auth_rate_per_s, auth_max_hold_s;
+    uint32_t auth_lockout_failures, auth_burst, auth_max_addresses;
+    /* Called for every wrong password (the application logs it), with what it cost the
+     * address; NULL: not reported (ad_get_stats still counts them). */
+    void (*on_auth_failure)(void *user, const char *address, const ad_auth_failure *f);
+    void *auth_user;
 } ad_config;
+
 
 /* Fill `cfg` with the defaults of the spec (and of the Python endpoint) for a host. */
 void ad_config_defaults(ad_config *cfg);
@@ -170,9 +195,13 @@ typedef struct ad_sink {
 
 typedef struct ad_session ad_session;
 
-/* A peer connected. Returns its session, or NULL when refused (the ERR 429 frame has
- * then been sent to `sink`; close the transport). `now_us` starts its auth timeout. */
-ad_session *ad_open(ad_device *dev, ad_sink sink, int64_t now_us);
+/* A peer connected from `peer` (its address as text, "host:port" or "[v6]:port": what
+ * follows the last ':' is left out; password attempts are throttled per address; "" or
+ * NULL: an address of its own shared by every peer without one). Returns its session, or
+ * NULL when refused (the ERR 429 frame has then been sent to `sink`; close the transport).
+ * `now_us` (the communication side's monotonic clock, as for ad_receive and ad_poll)
+ * starts its auth timeout. */
+ad_session *ad_open(ad_device *dev, ad_sink sink, const char *peer, int64_t now_us);
 /* One whole frame from the peer (the transport cut it out of its byte stream). */
 void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len,
                 int64_t now_us);
@@ -192,7 +221,8 @@ int64_t ad_poll_delay_us(const ad_device *dev, int64_t now_us, int64_t max_us);
 int ad_wants_close(const ad_session *s, int *code, const char **reason);
 /* The peer is gone: free its session, its streams and its messages. */
 void ad_close(ad_device *dev, ad_session *s);
-/* Stop reading from a peer whose sink cannot take a reply now (back-pressure). */
+/* Stop reading from a peer whose sink cannot take a reply now (back-pressure), whose
+ * deferred call runs, or whose AUTH is held (§10). */
 int ad_can_receive(const ad_device *dev, const ad_session *s);
 /* The largest frame the peer may send now (smaller before it has authenticated): a
  * transport that reads a length first refuses a larger one with ad_refuse_oversize(). */
@@ -253,6 +283,9 @@ typedef struct ad_stats {
     int64_t t_us;
     uint64_t dropped_samples;     /* all clients since start */
     uint64_t ring_lost_samples;   /* lost because the ring was overrun */
+    /* password attempts since start: checked, refused unchecked (ERR 429), wrong */
+    uint64_t auth_checked, auth_refused, auth_failures;
+    uint32_t auth_addresses;      /* addresses the throttle remembers now */
 } ad_stats;
 void ad_get_stats(const ad_device *dev, ad_stats *out);
 

@@ -35,12 +35,22 @@ void ad_config_defaults(ad_config *c)
     c->max_samplers = 64;
     c->max_pending_calls = 8;
     c->flush_interval_s = 0.02;
+    /* password attempts: the reference endpoint's ThrottlePolicy (§10) */
+    c->auth_first_delay_s = 0.25;
+    c->auth_max_delay_s = 30.0;
+    c->auth_lockout_failures = 20;
+    c->auth_lockout_s = 300.0;
+    c->auth_forget_s = 900.0;
+    c->auth_rate_per_s = 5.0;
+    c->auth_burst = 10;
+    c->auth_max_hold_s = 5.0;
+    c->auth_max_addresses = 64;
 }
 
 /* ---- arena ------------------------------------------------------------------------------ */
 typedef struct layout {
-    size_t vrt, traced, ring, sessions, msg_pool, samplers, scratch, stage, argbuf, total;
-    uint32_t row_bytes, n_traced, stage_bytes, msg_pool_bytes, argbuf_bytes, n_sessions;
+    size_t vrt, traced, ring, sessions, msg_pool, samplers, scratch, stage, argbuf, addrs, total;
+    uint32_t row_bytes, n_traced, stage_bytes, msg_pool_bytes, argbuf_bytes, n_sessions, n_addrs;
 } layout;
 
 static size_t up8(size_t n) { return (n + 7u) & ~(size_t)7u; }
@@ -78,6 +88,8 @@ static void plan(const ad_config *c, const ad_var *vars, size_t nv, size_t nf, l
     L->scratch = off; off += up8(c->max_reply_bytes);
     L->stage = off; off += L->stage_bytes;
     L->argbuf = off; off += L->argbuf_bytes;
+    L->n_addrs = ad_throttle_entries(c, L->n_sessions);
+    L->addrs = off; off += up8(L->n_addrs * sizeof(ad_addr_state));
     L->total = off;
 }
 
@@ -184,6 +196,13 @@ ad_device *ad_init(void *arena, size_t arena_bytes, const ad_config *cfg, const 
                  "max_reply_bytes >= 256, max_depth >= 2, max_frame_bytes >= 64)");
         return NULL;
     }
+    if (!(cfg->auth_first_delay_s > 0 && cfg->auth_max_delay_s > 0 && cfg->auth_lockout_s > 0
+          && cfg->auth_forget_s > 0 && cfg->auth_rate_per_s > 0 && cfg->auth_max_hold_s > 0
+          && cfg->auth_lockout_failures >= 1 && cfg->auth_burst >= 1)) {
+        ad_snprintf(why, why_len, "password throttle out of range (auth_*_s and auth_rate_per_s "
+                 "> 0, auth_lockout_failures and auth_burst >= 1)");
+        return NULL;
+    }
     plan(cfg, vars, n_vars, n_fns, &L);
     if (arena_bytes < L.total) {
         ad_snprintf(why, why_len, "the arena holds %zu bytes; this configuration needs %zu",
@@ -211,6 +230,7 @@ ad_device *ad_init(void *arena, size_t arena_bytes, const ad_config *cfg, const 
     dev->stage_bytes = L.stage_bytes;
     dev->argbuf = base + L.argbuf;
     dev->argbuf_bytes = L.argbuf_bytes;
+    ad_throttle_init(&dev->throttle, cfg, (ad_addr_state *)(base + L.addrs), L.n_addrs);
     dev->tick_us = 1e6 / cfg->loop_rate_hz;
     dev->next_msg = 1;
     dev->next_client_id = 1;
@@ -336,7 +356,22 @@ static const char *admit_refusal(const ad_device *dev, char *buf, size_t len)
     return NULL;
 }
 
-ad_session *ad_open(ad_device *dev, ad_sink sink, int64_t now_us)
+/* The throttle's key: the peer's text without what follows its last ':' (the port), as
+ * the reference endpoint does; bytes that are not printable ASCII become '?'. */
+static void peer_address(const char *peer, char out[AD_ADDR_BYTES])
+{
+    size_t n = peer ? strlen(peer) : 0;
+    for (size_t k = n; k > 0; k--)
+        if (peer[k - 1] == ':') { if (k > 1) n = k - 1; break; }
+    if (n > AD_ADDR_BYTES - 1) n = AD_ADDR_BYTES - 1;
+    for (size_t k = 0; k < n; k++) {
+        char c = peer[k];
+        out[k] = c >= 0x20 && c < 0x7f ? c : '?';
+    }
+    out[n] = 0;
+}
+
+ad_session *ad_open(ad_device *dev, ad_sink sink, const char *peer, int64_t now_us)
 {
     char why[200];
     uint32_t a, p;
@@ -368,6 +403,7 @@ ad_session *ad_open(ad_device *dev, ad_sink sink, int64_t now_us)
     s->sink = sink;
     s->opened_us = now_us;
     s->id = dev->next_client_id++;
+    peer_address(peer, s->addr);
     return s;
 }
 
@@ -381,7 +417,7 @@ int ad_wants_close(const ad_session *s, int *code, const char **reason)
 
 int ad_can_receive(const ad_device *dev, const ad_session *s)
 {
-    return s->used && !s->wants_close && !s->call_pending
+    return s->used && !s->wants_close && !s->call_pending && !s->auth_held
            && s->sink.room(s->sink.ctx) >= dev->cfg.max_reply_bytes;
 }
 
@@ -454,6 +490,8 @@ void ad_close(ad_device *dev, ad_session *s)
         off += rec_bytes(m.n);
     }
     if (s->call_pending && dev->pending_calls) dev->pending_calls--;
+    if (s->auth_held) ad_throttle_cancelled(&dev->throttle, s->auth_addr); /* never answered */
+    s->auth_held = 0;
     dev->dropped_closed += s->dropped_samples;
     s->used = 0;
     s->state = AD_CLOSED;
@@ -1242,6 +1280,10 @@ void ad_get_stats(const ad_device *dev, ad_stats *o)
     o->t_us = t_us;
     o->dropped_samples += dev->dropped_closed;
     o->ring_lost_samples = dev->ring_lost;
+    o->auth_checked = dev->throttle.checked;
+    o->auth_refused = dev->throttle.refused;
+    o->auth_failures = dev->throttle.failures;
+    o->auth_addresses = ad_throttle_tracked(&dev->throttle, dev->now_us);
 }
 
 /* packets go to the transport at once: its buffer is the queue */
@@ -1363,6 +1405,50 @@ static int cmd_hello(ad_device *dev, ad_session *s, req *r, char *why, size_t wl
     return 0;
 }
 
+/* Answer a held AUTH (its turn has come) and report its outcome to the throttle; `why`
+ * is the caller's buffer (the MCU's stack is small). */
+AD_NOINLINE static void answer_auth(ad_device *dev, ad_session *s, int64_t now_us, char *why, size_t wl)
+{
+    s->auth_held = 0;
+    if (s->auth_granted == AD_ROLE_NONE) {
+        ad_auth_failure f;
+        ad_throttle_failed(&dev->throttle, s->auth_addr, now_us, &f);
+        fail(dev, s, 1, s->auth_seq, 401, "authentication failed: wrong password", 1);
+        if (dev->cfg.on_auth_failure) dev->cfg.on_auth_failure(dev->cfg.auth_user, s->addr, &f);
+        return;
+    }
+    const char *refusal = admit_refusal(dev, why, wl);
+    if (refusal) { /* no client slot: not a guess */
+        ad_throttle_cancelled(&dev->throttle, s->auth_addr);
+        fail(dev, s, 1, s->auth_seq, 429, refusal, 1);
+        return;
+    }
+    ad_throttle_succeeded(&dev->throttle, s->auth_addr);
+    s->role = s->auth_granted;
+    s->state = AD_READY;
+    ad_wr w;
+    begin(dev, &w);
+    ok_head(&w, s->auth_seq, 2);
+    ad_wr_str(&w, "role"); ad_wr_str(&w, ROLE_NAMES[s->role]);
+    ad_wr_str(&w, "proof"); ad_wr_bin(&w, s->nonce, 32);
+    ad_send_frame(dev, s, &w);
+}
+
+/* Ask the throttle (in a frame of its own, gone before the HMAC's deep stack): nonzero and
+ * the refusal in why[] when the attempt is refused unchecked; else its entry and turn. */
+AD_NOINLINE static int reserve_auth(ad_device *dev, ad_session *s, char *why, size_t wl)
+{
+    ad_verdict v = ad_throttle_reserve(&dev->throttle, s->addr, dev->now_us);
+    if (v.refused) {
+        s->state = AD_CLOSED;
+        ad_throttle_message(&v, s->addr, why, wl);
+        return 1;
+    }
+    s->auth_addr = v.entry;
+    s->auth_due_us = dev->now_us + v.wait_us;
+    return 0;
+}
+
 static int cmd_auth(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
 {
     field f[] = {{"cnonce", F_BIN, 1, 0, {0}, {0}}, {"mac", F_BIN, 1, 0, {0}, {0}},
@@ -1381,6 +1467,9 @@ static int cmd_auth(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
             return 400;
         }
     }
+    /* Throttled (§10): refused unchecked, or checked now and answered at its turn (the
+     * session reads nothing meanwhile); the outcome counts when the answer goes out. */
+    if (reserve_auth(dev, s, why, wl)) return 429;
     /* every role's MAC is computed and compared, so the time does not say which came close */
     const char *passwords[3] = {NULL, dev->cfg.observer_password, dev->cfg.operator_password};
     int granted = AD_ROLE_NONE;
@@ -1395,22 +1484,11 @@ static int cmd_auth(ad_device *dev, ad_session *s, req *r, char *why, size_t wl)
         }
     }
     if (granted > requested) granted = requested;
-    if (granted == AD_ROLE_NONE) {
-        s->state = AD_CLOSED;
-        ad_snprintf(why, wl, "authentication failed: wrong password");
-        return 401;
-    }
-    char buf[160];
-    const char *refusal = admit_refusal(dev, buf, sizeof buf);
-    if (refusal) { s->state = AD_CLOSED; ad_snprintf(why, wl, "%s", refusal); return 429; }
-    s->role = (uint8_t)granted;
-    s->state = AD_READY;
-    ad_wr w;
-    begin(dev, &w);
-    ok_head(&w, r->seq, 2);
-    ad_wr_str(&w, "role"); ad_wr_str(&w, ROLE_NAMES[granted]);
-    ad_wr_str(&w, "proof"); ad_wr_bin(&w, proof, 32);
-    ad_send_frame(dev, s, &w);
+    s->auth_held = 1;
+    s->auth_granted = (uint8_t)granted;
+    s->auth_seq = r->seq;
+    if (granted != AD_ROLE_NONE) memcpy(s->nonce, proof, 32); /* the nonce is spent */
+    if (s->auth_due_us <= dev->now_us) answer_auth(dev, s, dev->now_us, why, wl);
     return 0;
 }
 
@@ -1477,8 +1555,16 @@ void ad_receive(ad_device *dev, ad_session *s, const uint8_t *frame, size_t len,
     char why[AD_WHY_BYTES];
     ad_limits lim = {dev->cfg.max_frame_bytes, dev->cfg.max_depth, dev->cfg.max_array_len,
                      dev->cfg.max_str_bytes};
-    (void)now_us;
+    dev->now_us = now_us;
     if (!s->used || s->state == AD_CLOSED || s->wants_close) return;
+    if (s->auth_held) {
+        /* a transport that reads while ad_can_receive() says no (a link without a park):
+         * the held AUTH is dropped unanswered rather than hold the link */
+        ad_throttle_cancelled(&dev->throttle, s->auth_addr);
+        s->auth_held = 0;
+        fail(dev, s, 0, 0, 429, "a frame before the AUTH was answered", 1);
+        return;
+    }
     int has_seq = 0;
     uint64_t seq = 0;
     if (pre_auth(dev, s)) {
@@ -1585,10 +1671,16 @@ void ad_poll(ad_device *dev, int64_t now_us)
 {
     char why[160];
     int64_t limit_us = (int64_t)(dev->cfg.auth_timeout_s * 1e6);
+    dev->now_us = now_us;
     for (uint32_t i = 0; i < dev->n_sessions; i++) {
         ad_session *s = &dev->sessions[i];
         if (!s->used || s->wants_close || s->state == AD_READY || s->state == AD_CLOSED) continue;
-        if (now_us - s->opened_us >= limit_us) {
+        int64_t deadline_us = s->opened_us + limit_us;
+        if (s->auth_held && s->auth_due_us <= now_us && s->auth_due_us < deadline_us) {
+            answer_auth(dev, s, now_us, why, sizeof why);
+        } else if (now_us >= deadline_us) {
+            if (s->auth_held) ad_throttle_cancelled(&dev->throttle, s->auth_addr);
+            s->auth_held = 0;
             ad_snprintf(why, sizeof why, "not authenticated within %g s", dev->cfg.auth_timeout_s);
             fail(dev, s, 0, 0, 408, why, 1);
         }
@@ -1606,6 +1698,7 @@ int64_t ad_poll_delay_us(const ad_device *dev, int64_t now_us, int64_t max_us)
         const ad_session *s = &dev->sessions[i];
         if (!s->used || s->wants_close || s->state == AD_READY || s->state == AD_CLOSED) continue;
         int64_t left = s->opened_us + limit_us - now_us;
+        if (s->auth_held && s->auth_due_us - now_us < left) left = s->auth_due_us - now_us;
         if (left < delay) delay = left;
     }
     int64_t streams = ad_stream_delay_us((ad_device *)dev);

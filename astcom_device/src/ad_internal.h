@@ -15,6 +15,9 @@
 #define AD_VARLEN 0xff         /* ndim of "f64[]" */
 #define AD_MAX_SEGMENTS 8      /* clock segments remembered by the ring */
 #define AD_MAX_SESSIONS 64     /* holders and subscribers are 64-bit masks */
+#ifndef AD_ADDR_BYTES
+#define AD_ADDR_BYTES 48       /* a peer's address, NUL included ("[IPv6]": 47) */
+#endif
 
 /* A parsed type: a scalar, a fixed array (ndim 1..4), a variable array, or a struct
  * (its fields are read from the type text when needed: ad_struct_next). */
@@ -111,13 +114,19 @@ enum ad_role { AD_ROLE_NONE, AD_ROLE_OBSERVER, AD_ROLE_OPERATOR };
 struct ad_session {
     uint8_t used, state, role, call_pending;
     uint8_t slot;
+    uint8_t auth_held;        /* an AUTH checked and held until auth_due_us (§10) */
+    uint8_t auth_granted;     /* its outcome: the role, AD_ROLE_NONE for a wrong password */
+    uint16_t auth_addr;       /* its address's entry in the throttle table */
     uint32_t id;
     int close_code;
     int wants_close;
     char close_reason[128];
     ad_sink sink;
     int64_t opened_us;
-    uint8_t nonce[32];
+    int64_t auth_due_us;
+    uint64_t auth_seq;
+    uint8_t nonce[32];        /* HELLO's nonce; after the check, the held AUTH's proof */
+    char addr[AD_ADDR_BYTES]; /* the peer's address without its port (ad_open) */
     char name[65];
     uint32_t protocol_errors;
     uint32_t frames_before_auth;
@@ -125,6 +134,47 @@ struct ad_session {
     uint64_t dropped_samples, dropped_packets;
     ad_call call;
 };
+
+/* Password attempts per address and overall (§10), the rules of the reference endpoint's
+ * astcom_client/throttle.py in a fixed table (ad_throttle.c). Times are the
+ * communication side's now_us. */
+typedef struct ad_addr_state {
+    char addr[AD_ADDR_BYTES];   /* "" : a free entry */
+    uint16_t failures;          /* consecutive wrong passwords */
+    uint16_t pending;           /* attempts reserved and not yet reported */
+    uint32_t refused;           /* refused unchecked since the last failure */
+    int64_t next_us;            /* the next attempt is not checked before this */
+    int64_t locked_until_us;
+    int64_t seen_us;
+} ad_addr_state;
+
+typedef struct ad_throttle {
+    ad_addr_state *table;
+    uint32_t n;                 /* entries of the table */
+    int64_t first_delay_us, max_delay_us, lockout_us, forget_us, interval_us, max_hold_us;
+    uint32_t lockout_failures, burst;
+    int64_t tat_us;             /* the overall limit's theoretical arrival time */
+    uint64_t checked, refused, failures;
+} ad_throttle;
+
+enum { AD_WHY_NONE = 0, AD_WHY_ADDRESS = 1, AD_WHY_LOCKED = 2, AD_WHY_OVERALL = 3 };
+typedef struct ad_verdict {
+    int64_t wait_us;
+    uint8_t refused, reason;    /* reason: AD_WHY_* */
+    uint16_t entry;             /* the address's entry (when not refused) */
+} ad_verdict;
+
+/* The table's entries for `cfg` (at least max_pending + 1, so an entry whose attempt is
+ * pending is never the one evicted). */
+uint32_t ad_throttle_entries(const ad_config *cfg, uint32_t n_sessions);
+void ad_throttle_init(ad_throttle *t, const ad_config *cfg, ad_addr_state *table, uint32_t n);
+ad_verdict ad_throttle_reserve(ad_throttle *t, const char *addr, int64_t now_us);
+void ad_throttle_failed(ad_throttle *t, uint16_t entry, int64_t now_us, ad_auth_failure *out);
+void ad_throttle_succeeded(ad_throttle *t, uint16_t entry);
+void ad_throttle_cancelled(ad_throttle *t, uint16_t entry);
+uint32_t ad_throttle_tracked(const ad_throttle *t, int64_t now_us);
+/* "... not checked; try again in N s" for a refused verdict */
+void ad_throttle_message(const ad_verdict *v, const char *addr, char *out, size_t len);
 
 typedef struct ad_segment {
     uint64_t row0;     /* first ring row of the segment */
@@ -172,6 +222,8 @@ struct ad_device {
     uint32_t argbuf_bytes, argbuf_used;
     uint32_t pending_calls;
     uint64_t dropped_closed, ring_lost;
+    ad_throttle throttle;         /* password attempts (ad_throttle.c) */
+    int64_t now_us;               /* the communication side's clock at its last call */
 };
 
 /* The whole type of variable `i`. */

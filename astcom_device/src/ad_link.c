@@ -321,6 +321,21 @@ static void close_channel(ad_link *l, uint8_t chan, int code, const char *reason
 }
 
 /* Act on one decoded link frame; returns 0, or 1 when it must wait (held). */
+/* A client arrived on `chan`; `body` is its address as the relay saw it. In a frame of its
+ * own, kept off the link's deeper paths (the MCU's stack is small). */
+AD_NOINLINE static void open_channel(ad_link *l, uint8_t chan, const uint8_t *body, size_t len)
+{
+    close_channel(l, chan, 1001, "", 0);
+    /* queue_depths: 0 here; a relayed client's packets wait in the Relay's queue */
+    ad_sink sink = {sink_room, sink_send, &l->ctx[chan], sink_begin, sink_part, sink_end, NULL};
+    char peer[65];
+    size_t peer_len = len < sizeof peer - 1 ? len : sizeof peer - 1;
+    memcpy(peer, body, peer_len);
+    peer[peer_len] = 0;
+    l->chan[chan] = ad_open(l->dev, sink, peer, l->now_us);
+    if (!l->chan[chan]) close_channel(l, chan, 429, "refused", 1);
+}
+
 static int dispatch(ad_link *l, uint8_t *f, size_t n)
 {
     uint8_t chan = f[0], kind = f[1];
@@ -339,15 +354,9 @@ static int dispatch(ad_link *l, uint8_t *f, size_t n)
     case AD_LINK_PING:
         send_link(l, 0, AD_LINK_PONG, body, len > 8 ? 8 : len, 0);
         break;
-    case AD_LINK_OPEN: {
-        if (!chan) break;
-        close_channel(l, chan, 1001, "", 0);
-        /* queue_depths: 0 here; a relayed client's packets wait in the Relay's queue */
-        ad_sink sink = {sink_room, sink_send, &l->ctx[chan], sink_begin, sink_part, sink_end, NULL};
-        l->chan[chan] = ad_open(l->dev, sink, l->now_us);
-        if (!l->chan[chan]) close_channel(l, chan, 429, "refused", 1);
+    case AD_LINK_OPEN:
+        if (chan) open_channel(l, chan, body, len);
         break;
-    }
     case AD_LINK_CLOSE:
         if (chan) close_channel(l, chan, 1000, "", 1); /* the answer frees the channel */
         break;
@@ -356,6 +365,12 @@ static int dispatch(ad_link *l, uint8_t *f, size_t n)
         if (!s) break; /* a late frame of a closed channel */
         if ((!ad_can_receive(l->dev, s) && !ad_wants_close(s, NULL, NULL)) || chan_parked(l, chan)) {
             if (!park(l, chan, body, len)) break; /* the other channels go on */
+            if (!l->park_cap && s->auth_held) {
+                /* an unauthenticated peer must not hold the link for its held AUTH (§10):
+                 * the device drops that AUTH and closes the channel */
+                ad_receive(l->dev, s, body, len, l->now_us);
+                break;
+            }
             if (!l->park_cap) return 1;           /* no park (a small MCU): the link waits */
             /* a client that sends more than the park holds while its call runs is cut off,
              * rather than let it hold the link (and every other client) */

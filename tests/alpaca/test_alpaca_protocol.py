@@ -214,8 +214,10 @@ def test_alpycas_broadcast_discovery_finds_the_device_inside_a_private_network_n
     assert "127.0.0.1:11124" in out.stdout
 
 
-def raw_put(rig, member: str, body: bytes, content_type: str | None) -> tuple[int, str]:
-    """A PUT with exactly these body bytes and Content-Type (None: no header); (status, text)."""
+def raw_put(rig, member: str, body: bytes, content_type: str | None,
+            encoding: str | None = None) -> tuple[int, str]:
+    """A PUT with exactly these body bytes and Content-Type (None: no header), and a
+    Content-Encoding if given; (status, text)."""
     import http.client
 
     conn = http.client.HTTPConnection(rig.address, timeout=60)
@@ -223,6 +225,8 @@ def raw_put(rig, member: str, body: bytes, content_type: str | None) -> tuple[in
         headers = {"Content-Length": str(len(body))}
         if content_type is not None:
             headers["Content-Type"] = content_type
+        if encoding is not None:
+            headers["Content-Encoding"] = encoding
         conn.request("PUT", f"/api/v1/telescope/0/{member}", body=body, headers=headers)
         resp = conn.getresponse()
         return resp.status, resp.read().decode("utf-8", errors="replace")
@@ -268,6 +272,23 @@ def test_a_malformed_put_body_of_any_kind_is_http_400_saying_why(night, body, co
     status, text = raw_put(night, "targetdeclination", good + b"--XyZ--\r\n", MULTIPART)
     assert status == 200 and json.loads(text)["ErrorNumber"] == 0
     assert call(night, "GET", "targetdeclination")[1]["Value"] == 21.5
+
+
+@pytest.mark.parametrize("content_type", [FORM, MULTIPART, None])
+@pytest.mark.parametrize("encoding", ["gzip", "deflate", "br"])
+def test_a_body_whose_content_encoding_does_not_decode_is_http_400(night, encoding,
+                                                                   content_type):
+    status, text = raw_put(night, "targetdeclination", b"TargetDeclination=12 not compressed",
+                           content_type, encoding)
+    assert status == 400, text
+    assert "cannot be read" in text or "encoding" in text.lower(), text
+    # and a form that is what its Content-Encoding says is read
+    import gzip
+
+    good = gzip.compress(b"TargetDeclination=23.25")
+    status, text = raw_put(night, "targetdeclination", good, FORM, "gzip")
+    assert status == 200 and json.loads(text)["ErrorNumber"] == 0, text
+    assert call(night, "GET", "targetdeclination")[1]["Value"] == 23.25
 
 
 def test_a_put_without_a_content_type_is_read_as_a_form(night):

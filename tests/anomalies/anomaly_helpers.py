@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import asyncio
+import fcntl
+import json
+import os
+from collections.abc import Callable
 from pathlib import Path
 
 from virtualstar.anomalies.scoring import InjectedFault
@@ -10,6 +14,28 @@ from virtualstar.recorder.experiment import Injection, SineExperiment, run_sine_
 
 MINUTES = 30.0
 AT_S = 960.0  # injections 16 minutes in: after the 15-minute reference stretch
+
+
+def made_once(tmp_path_factory, name: str, build: Callable[[Path], object]):
+    """`build(directory)`'s JSON value, built once per test session even when pytest-xdist
+    spreads the tests that need it over several workers (`-n 2` without `--dist
+    loadscope` sends a module's tests to both): the workers share the session's base
+    directory, and the first to take the lock builds while the others wait for it."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the session's directory, above each worker's own
+    directory = root / "made-once" / name
+    directory.mkdir(parents=True, exist_ok=True)
+    done = directory / "value.json"
+    with open(directory / "lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            if not done.exists():
+                (directory / "data").mkdir(exist_ok=True)
+                done.write_text(json.dumps(build(directory / "data")))
+            return json.loads(done.read_text())
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def record(out: Path, injections: tuple[Injection, ...], *, minutes: float = MINUTES,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
-from anomaly_helpers import AT_S, MINUTES
+from anomaly_helpers import AT_S
 
 from virtualstar.anomalies.live import LiveAnomalies
 from virtualstar.recorder.experiment import Injection, SineExperiment, run_sine_experiment
@@ -12,7 +12,8 @@ from virtualstar.recorder.parquet_store import ParquetStoreReader
 
 
 def test_a_live_recording_logs_each_anomaly_once_after_the_injection(tmp_path):
-    exp = SineExperiment(hours=MINUTES / 60, injections=(
+    # 20 minutes: the winding fault is flagged within a window of its injection at 16 min
+    exp = SineExperiment(hours=20 / 60, injections=(
         Injection(AT_S, "axis.az.inject_winding_fault", 0.25),))
     result = asyncio.run(run_sine_experiment(exp, tmp_path, plots=False, detect=True))
     events = [e for e in ParquetStoreReader(result.store).events() if e.kind == "anomaly"]
@@ -29,6 +30,8 @@ def test_live_detection_on_a_clean_recording_reports_nothing(clean_recording):
     names = [s.name for s in reader.signals()]
     found = []
     live = LiveAnomalies(names, 1000.0, found.append)
+    live.feed_events(reader.events())
     for block in reader.iter_blocks(batch_rows=7_777):  # odd sizes: segments span blocks
         live.feed(block)
-    assert found == [] and live.active
+    live.finish()
+    assert found == [] and live.active and live.detection.fitted

@@ -105,6 +105,17 @@ def device_args(*, passwords: dict[str, str] | None = PASSWORDS, loop_rate_hz: f
              "max_names_per_message": "--max-names", "max_streams_per_client": "--max-streams",
              "max_pending_frame_bytes": "--max-pending-frame-bytes",
              "max_pending_frames": "--max-pending-frames"}
+    throttle = config.pop("throttle", None)
+    if throttle is not None:  # an astcom_client.throttle.ThrottlePolicy
+        args += ["--auth-first-delay", f"{throttle.first_delay_s:g}",
+                 "--auth-max-delay", f"{throttle.max_delay_s:g}",
+                 "--auth-lockout-failures", str(throttle.lockout_failures),
+                 "--auth-lockout", f"{throttle.lockout_s:g}",
+                 "--auth-forget", f"{throttle.forget_s:g}",
+                 "--auth-rate", f"{throttle.global_rate_per_s:g}",
+                 "--auth-burst", str(throttle.global_burst),
+                 "--auth-max-hold", f"{throttle.max_hold_s:g}",
+                 "--auth-addresses", str(min(throttle.max_addresses, 1024))]
     for key, value in config.items():
         if key not in names:
             raise TypeError(f"the C device has no option for {key}")
@@ -199,6 +210,8 @@ class DeviceUnderTest:
     def __init__(self, impl: str, url: str | None, endpoint: Any = None, device: Any = None) -> None:
         self.impl, self.url, self.endpoint, self.device = impl, url, endpoint, device
         self._raws: list[Any] = []
+        # a C device's stderr, once it has stopped (its log: "auth: wrong password from ...")
+        self.log = ""
 
     async def connect(self) -> Any:
         """Open a raw connection (send/recv whole frames)."""
@@ -254,6 +267,7 @@ async def serve_impl(impl: str, *, scheme: str | None = None, realtime: bool = F
     require_built("asan")
     if impl == "c":
         proc = DeviceProcess(["--tcp", "127.0.0.1:0", *device_args(**config)])
+        dut = None
         try:
             url = proc.wait_line(r"(tcp://\S+)")[1]
             dut = DeviceUnderTest(impl, url)
@@ -262,23 +276,32 @@ async def serve_impl(impl: str, *, scheme: str | None = None, realtime: bool = F
             finally:
                 await dut.aclose()
         finally:
-            await asyncio.to_thread(proc.stop)
+            log = await asyncio.to_thread(proc.stop)
+            if dut is not None:
+                dut.log = log
         return
     if impl == "c-relay":
-        async with relayed_device(device_args(**config)) as url:
-            dut = DeviceUnderTest(impl, url)
-            try:
-                yield dut
-            finally:
-                await dut.aclose()
+        logs: list[str] = []
+        dut = None
+        try:
+            async with relayed_device(device_args(**config), logs=logs) as url:
+                dut = DeviceUnderTest(impl, url)
+                try:
+                    yield dut
+                finally:
+                    await dut.aclose()
+        finally:
+            if dut is not None:
+                dut.log = "".join(logs)
         return
     raise ValueError(f"unknown device implementation {impl!r}")
 
 
 @contextlib.asynccontextmanager
-async def relayed_device(args: list[str], build: str = "asan",
-                         relay_args: tuple[str, ...] = ()) -> AsyncIterator[str]:
-    """A C device on a pty pair (socat), the Relay on the other end; yield the Relay's URL."""
+async def relayed_device(args: list[str], build: str = "asan", relay_args: tuple[str, ...] = (),
+                         logs: list[str] | None = None) -> AsyncIterator[str]:
+    """A C device on a pty pair (socat), the Relay on the other end; yield the Relay's URL.
+    The device's stderr is appended to `logs` once it has stopped."""
     if shutil.which("socat") is None:
         pytest.fail("socat is not installed (run: bash setup/50-device.sh)")
     require_built(build)
@@ -299,7 +322,9 @@ async def relayed_device(args: list[str], build: str = "asan",
             relay.terminate()
             with contextlib.suppress(subprocess.TimeoutExpired):
                 relay.wait(10)
-            await asyncio.to_thread(proc.stop)
+            log = await asyncio.to_thread(proc.stop)
+            if logs is not None:
+                logs.append(log)
 
 
 @contextlib.contextmanager

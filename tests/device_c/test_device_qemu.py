@@ -1,7 +1,7 @@
 """The example firmware (Cortex-M4, astcom_device/port/stm32) on QEMU's netduinoplus2, its
 USART on a pty, the Relay on the other side: HELLO, a whole LIST (larger than the
 firmware's 1 KiB reply scratch: it goes out in parts), READ and a stream, checked with the
-project's client. Afterwards QEMU's monitor reads the firmware's memory: the arena and link
+project's client (after a wrong password: the throttle's path). Afterwards QEMU's monitor reads the firmware's memory: the arena and link
 sizes it was built with are what the library says it needs, and the stack (painted at
 reset) kept a margin. The firmware is built by `make -C astcom_device arm`."""
 
@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from astcom_client import AstcomError, Client
+from astcom_client.exceptions import AuthenticationFailed
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "astcom"))
 from device_impls import DEVICE_DIR, build_device  # noqa: E402
@@ -75,8 +76,15 @@ async def _session(monitor: str) -> dict:
             raise AssertionError(f"the firmware does not answer ({line.strip()}); it needs "
                                  f"an arena of {arena} and a link of {link} bytes "
                                  "(FW_ARENA_BYTES, FW_LINK_BYTES in firmware.mk)")
+        # a wrong password first: its ERR 401 comes from the throttle's path (§10), and the
+        # right one after it is held 0.25 s and answered from the firmware's poll loop
+        try:
+            await (await Client.connect(url, password="not-" + PASSWORD, timeout_s=10)).close()
+            wrong = "accepted"
+        except AuthenticationFailed as exc:
+            wrong = str(exc)
         async with await Client.connect(url, password=PASSWORD, timeout_s=10) as c:
-            out = {"hello": c.hello, "entries": await c.list(),
+            out = {"hello": c.hello, "entries": await c.list(), "wrong": wrong,
                    "read": await c.read(["mount.tick", "extra.s00", "extra.s03"])}
             stream = await c.stream(["extra.s00", "extra.s03", "mount.tick"], rate_hz=1000)
             out["packets"] = []
@@ -118,6 +126,7 @@ def test_the_firmware_in_qemu_answers_hello_list_read_and_streams_through_the_re
     with tempfile.TemporaryDirectory() as tmp:
         out = asyncio.run(asyncio.wait_for(_session(f"{tmp}/monitor"), 120))
     assert out["hello"]["server"] == "example-stm32" and out["hello"]["loop_rate_hz"] == 10000.0
+    assert "wrong password" in out["wrong"], out["wrong"]
     entries = {e.name: e for e in out["entries"]}
     assert len(entries) > 70  # every variable and function: about 5 KiB of LIST
     assert [n for n in entries if n.startswith("extra.")] == [f"extra.s{i:02d}" for i in range(16)]

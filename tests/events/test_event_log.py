@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -242,6 +243,36 @@ def test_vs_log_without_follow_prints_the_whole_vss_log_once_and_ends():
     assert table.exit_code == 0
     modes = [x for x in table.stdout.splitlines() if "mode passive" in x or "mode active" in x]
     assert len(modes) == sum(e.kind == "mode" for e in held)
+
+
+def test_vs_log_says_on_stderr_how_many_events_of_each_kind_the_server_dropped():
+    from virtualstar.server.event_log import KEPT_APART
+
+    rig = Rig(start_us=START_US + 22 * 3_600_000_000).start()
+    try:
+        extra = 37
+        log = rig.server.telescope.log
+
+        async def churn() -> None:  # what a connect/close storm leaves in the ring
+            for i in range(KEPT_APART["connection"] + extra):
+                log.add(START_US, "info", "connection", f"client {i} connected")
+
+        rig.run(churn())
+        table = CliRunner().invoke(app, ["log", rig.url, "--kind", "connection"])
+        as_json = CliRunner().invoke(app, ["log", rig.url, "--json"])
+        final = log.dropped["connection"]
+    finally:
+        rig.close()
+    assert table.exit_code == 0 and as_json.exit_code == 0, table.output
+    # the ring kept its newest events; the reader is told how many of which kind it lost
+    # (the rig's and the CLI's own connections are in the ring too)
+    said = [re.search(r"dropped, to keep operations and faults: (\d+) connection events",
+                      r.stderr) for r in (table, as_json)]
+    assert all(said), (table.stderr, as_json.stderr)
+    assert extra <= int(said[0].group(1)) <= int(said[1].group(1)) <= final
+    json.loads(as_json.stdout)  # stdout stays one JSON list
+    shown = [x for x in table.stdout.splitlines() if "connected" in x]
+    assert len(shown) == KEPT_APART["connection"]
 
 
 def test_a_command_the_server_refuses_is_logged_as_a_warning_with_its_code():

@@ -36,6 +36,15 @@ def test_only_regular_text_files_within_the_cap_are_read(specials, tmp_path):
         read_text_file(tmp_path / "missing", max_bytes=10)
 
 
+def test_a_name_holding_a_nul_is_refused_as_such_by_both_readers(tmp_path):
+    from catalogs.tle import ElementFileError, read_element_text
+
+    with pytest.raises(FileRefused, match="NUL character"):
+        read_text_file(f"{tmp_path}/plan\x00.json", max_bytes=100)
+    with pytest.raises(ElementFileError, match="NUL character"):
+        read_element_text(f"{tmp_path}/stations\x00.tle")
+
+
 @pytest.mark.parametrize("command", [["run", "{path}"], ["track", "--tle", "{path}"]])
 def test_the_cli_refuses_a_fifo_for_a_plan_or_a_tle_at_once(specials, command):
     args = [a.format(path=specials["fifo"]) for a in command]

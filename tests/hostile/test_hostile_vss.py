@@ -46,9 +46,12 @@ def wait_mount_s(session, mount_s: float, *, limit_s: float = 300.0) -> tuple[in
 
 
 def peak_arcsec(session, from_us: int, to_us: int) -> float:
+    """The peak on-target error (the boresight against the target's true place) over the
+    window: what an observer would see, not the servo's following error."""
     stats = session.request("errors", {"from_us": from_us, "to_us": to_us})["result"]["stats"]
     assert stats["n"] > 0, stats
-    return float(stats["peak_arcsec"])
+    assert stats["on_target_peak_arcsec"] == stats["on_target_peak_arcsec"], stats  # not NaN
+    return float(stats["on_target_peak_arcsec"])
 
 
 def operation_trouble(session, op_id: int) -> list[str]:
@@ -233,7 +236,7 @@ def test_load_model_of_a_file_that_is_no_model_is_refused_without_stalling_the_s
     with open(huge, "wb") as f:
         f.truncate(64 << 20)  # a sparse 64 MiB file
     cases = {str(fifo): "FIFO", "/dev/zero": "character device", str(tmp_path): "directory",
-             str(huge): "more than"}
+             str(huge): "more than", "model\x00.json": "NUL character"}
     with vs_server(tmp_path, "--speed", PACE, "--start", VEGA_NIGHT) as server:
         op = login(server.url, OPERATOR)
         replies = {path: op.request("load_model", {"path": path}) for path in cases}
@@ -242,6 +245,7 @@ def test_load_model_of_a_file_that_is_no_model_is_refused_without_stalling_the_s
     for path, words in cases.items():
         reply = replies[path]
         assert reply["ok"] is False and reply["error"]["code"] == "bad_request", reply
-        assert words in reply["error"]["message"] and path in reply["error"]["message"]
+        message = reply["error"]["message"]
+        assert words in message and (path in message or repr(path) in message), message
     assert status["ok"] and status["result"]["pointing_model"] is None
     assert "Traceback" not in server.stderr

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from aiohttp import web
+from aiohttp.http_exceptions import HttpProcessingError
+from aiohttp.web_protocol import RequestPayloadError
 
 from astcom_client.origins import check_allowed_origins, is_loopback_host, origin_refusal
 
@@ -134,16 +136,29 @@ def build_app(device: AlpacaTelescope, *, allowed_origins: tuple[str, ...] | Non
 _FORM_TYPES = ("application/x-www-form-urlencoded", "application/octet-stream", "text/plain")
 
 
+# What reading a body raises when its bytes are not what its headers say (a Content-Encoding
+# that does not decode, a chunk that lies): the client's fault, so HTTP 400, never 500.
+_PAYLOAD_ERRORS = (RequestPayloadError, HttpProcessingError)
+
+
 async def _put_pairs(request: web.Request) -> list[tuple[str, str]]:
     """Return a PUT's form fields; BadParameter (HTTP 400) for a body that is not a form."""
     kind = request.content_type
     if kind in _FORM_TYPES:
-        return form_pairs(await request.read(), request.charset)  # read() keeps to the size cap
+        try:
+            body = await request.read()  # read() keeps to the size cap (413 beyond it)
+        except _PAYLOAD_ERRORS as exc:
+            raise BadParameter(f"the body cannot be read as sent: {_payload_reason(exc)}") \
+                from None
+        return form_pairs(body, request.charset)
     if kind != "multipart/form-data":
         raise BadParameter(f"a PUT's parameters are a form (application/x-www-form-urlencoded "
                            f"or multipart/form-data), not {kind[:80]}")
     try:
         form = await request.post()
+    except _PAYLOAD_ERRORS as exc:
+        raise BadParameter(f"the multipart body cannot be read as sent: "
+                           f"{_payload_reason(exc)}") from None
     except (ValueError, LookupError, AssertionError) as exc:  # UnicodeDecodeError included
         raise BadParameter(f"the multipart body cannot be read: {str(exc)[:200]}") from None
     if len(form) > MAX_FORM_FIELDS:
@@ -155,6 +170,12 @@ async def _put_pairs(request: web.Request) -> list[tuple[str, str]]:
                                "parameters are plain form fields")
         pairs.append((name, value))
     return pairs
+
+
+def _payload_reason(exc: Exception) -> str:
+    cause = exc.__cause__ or exc
+    text = getattr(cause, "message", None) or str(cause)
+    return f"{text}"[:200] or type(cause).__name__
 
 
 @dataclass

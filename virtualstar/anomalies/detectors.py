@@ -1,31 +1,49 @@
-"""The detectors: each turns segment features into a score series and flagged windows.
+"""The detectors: each turns segments into window scores against its reference.
 
 Every detector compares a window statistic with the same statistic on the reference
-stretch (where the mount is taken to behave as itself): ``deviation / limit`` where
-the limit is ``threshold`` robust sigmas of the reference (median absolute deviation),
-never less than an absolute floor that says what is too small to matter. A score of 1
-is the flagging limit, so scores of different kinds read alike.
+(where the mount is taken to behave as itself), **per class** — the motion phase and,
+per axis, the speed regime (anomalies.phases) — and never puts two classes in one
+window. The limit is ``threshold`` robust sigmas of the reference windows of the class
+(median absolute deviation), never less than an absolute floor that says what is too
+small to matter; a score of 1 is the limit, so scores of different kinds read alike.
 
-| kind | signals | statistic (per window) |
-|---|---|---|
-| current | position, current | mean of current − model(position, velocity, acceleration) |
-| vibration | error_arcsec | power of the tracking error per octave band, log ratio |
-| spike | error_arcsec, current | largest one-sample second difference per segment |
-| temperature | temperature | slope of the winding temperature, K/h |
-| clock | t_us | sample spacing in mount µs: the clock rate, ppm |
+| kind | signals | statistic per window | classes |
+|---|---|---|---|
+| current | position, current | mean of current − model(position, velocity, acceleration) | rest, sidereal, satellite, slewing |
+| vibration | error_arcsec | median log power of the tracking error per octave band | rest, sidereal, satellite, slewing |
+| spike | error_arcsec, current | largest one-sample second difference per segment | rest, sidereal, satellite, slewing |
+| temperature | temperature | slope of the winding temperature, K/h | powered |
+| clock | t_us | sample spacing in mount µs (sync steps left out): the clock rate, ppm | all |
+
+A class the reference holds too little of (fewer than `min_windows` windows or
+`min_class_s` seconds) is scored against the next more dynamic class it holds — at rest
+against sidereal tracking, sidereal against satellite rates, satellite rates against
+slews: the louder class's limits are wider, so this can miss, never invent — or not at
+all; every detector's `Check` says which classes it scored and why not the others.
+
+Detectors are fitted once on the reference (`fit`), then score chunk after chunk
+(`score`): a window is scored when it closes, so a night scored in one piece and one
+scored minute by minute give the same windows and the same scores.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .current_model import CurrentModel, fit_current_model
-from .robust import robust_center_scale, runs, window_median, window_reduce, window_starts
+from .phases import AXIS_CLASSES, CLASS_NAMES, EXCLUDED, PhaseConfig
+from .reference import ReferenceConfig
 from .segments import Segments
+from .windows import WindowCutter, class_window_starts
 
-__all__ = ["Anomaly", "DetectorConfig", "ScoreTrace", "run_detectors"]
+__all__ = ["POOLED", "Anomaly", "Check", "Chunk", "Detector", "DetectorConfig", "ScoreTrace",
+           "Window", "class_plan"]
+
+# the reference's windows of every class together: what a detector may score a class
+# against that the reference holds too little of, when it has no louder class to use
+POOLED = max(AXIS_CLASSES) + 1
 
 
 @dataclass(frozen=True)
@@ -36,18 +54,30 @@ class DetectorConfig:
     current_window_s: float = 10.0
     current_floor_a: float = 0.01
     current_ref_factor: float = 2.0  # × the largest deviation of a reference window
-    vibration_window_s: float = 60.0  # a median over it: brief stick-slip bursts are usual
-    # band power × this at least (amplitude × 4): a clean 12-h night reaches × 8.5 in 16–32 Hz
-    # for a minute whenever the sine slows to a stop (stick-slip exciting the structure)
-    vibration_floor_ratio: float = 16.0
-    spike_factor: float = 3.0  # × the largest spike of the reference stretch
+    # the current detector scores a segment only when its class held coverage_min_s of
+    # reference within coverage_ratio of its speed; its limit widens by coverage_factor ×
+    # the model's d(current)/d|v| × the distance to their median (CurrentDetector)
+    coverage_ratio: float = 1.1
+    coverage_min_s: float = 10.0
+    coverage_factor: float = 2.0
+    vibration_window_s: float = 30.0
+    vibration_floor_ratio: float = 16.0  # power × this at least (amplitude × 4)
+    spike_factor: float = 5.0  # × the largest spike of the class on the reference
+    # At satellite rates and in slews the tracking error jumps where the trajectory's
+    # pieces meet: up to 0.6″ in one sample on the emulator's fastest passes, more than a
+    # reference pass of lower rates shows. An error jump smaller than this is no glitch
+    # there (the current's jumps still count with their own limit).
+    spike_fast_floor_arcsec: float = 1.0
     spike_merge_s: float = 10.0
     temperature_window_s: float = 120.0
     temperature_floor_k_h: float = 3.0
     clock_window_s: float = 60.0
     clock_floor_ppm: float = 0.5
-    cogging_periods: float | None = None  # None: estimated; 0: no cogging term
+    cogging_periods: int | None = None  # None: estimated; 0: no cogging term
     merge_s: float = 120.0  # flagged windows this close are one anomaly
+    min_windows: int = 3  # reference windows a class needs to be scored against itself
+    phases: PhaseConfig = field(default_factory=PhaseConfig)
+    reference: ReferenceConfig = field(default_factory=ReferenceConfig)
 
 
 @dataclass(frozen=True)
@@ -81,221 +111,201 @@ class ScoreTrace:
     info: dict[str, object] = field(default_factory=dict)
 
 
-def _seg_s(seg: Segments) -> float:
-    return float(np.median(np.diff(seg.t_first_us))) * 1e-6 if len(seg) > 1 else 1.0
+@dataclass(frozen=True)
+class Check:
+    """What one detector did: on which signals, which classes it scored (and against
+    what), which it could not and why; or why it did not run at all."""
+
+    detector: str
+    axis: str
+    signals: tuple[str, ...]
+    ran: bool
+    reason: str = ""
+    classes: dict[str, str] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, object]:
+        return {"detector": self.detector, "axis": self.axis, "signals": list(self.signals),
+                "ran": self.ran, "reason": self.reason, "classes": dict(self.classes)}
+
+    def line(self) -> str:
+        """One line for the terminal."""
+        where = f"{self.detector} {self.axis}".strip()
+        if not self.ran:
+            return f"{where}: did not run — {self.reason}"
+        scored = [c for c, note in self.classes.items() if not note.startswith("not scored")]
+        notes = "; ".join(f"{c}: {note}" for c, note in self.classes.items()
+                          if note != "scored")
+        return (f"{where} ({', '.join(self.signals)}): ran on "
+                f"{', '.join(scored) or 'nothing'}" + (f"; {notes}" if notes else ""))
 
 
-def _per_window(seg: Segments, seconds: float) -> tuple[np.ndarray, int]:
-    """Return the window starts and the fewest valid segments a window needs (half of it)."""
-    per = max(1, round(seconds / max(_seg_s(seg), 1e-9)))
-    return window_starts(len(seg), per), max(1, per // 2)
+@dataclass(frozen=True)
+class Window:
+    """A scored window: mount µs [start, end), its score and (when flagged) why."""
+
+    start_us: int
+    end_us: int
+    score: float
+    detail: str = ""
 
 
-def _bridge(seg: Segments, starts: np.ndarray, cfg: DetectorConfig) -> int:
-    width_s = (len(seg) / max(len(starts), 1)) * _seg_s(seg)
-    return max(1, round(cfg.merge_s / max(width_s, 1e-9)))
+@dataclass
+class Chunk:
+    """Consecutive segments with what the detectors need besides their features."""
+
+    seg: Segments
+    phase: np.ndarray  # MotionPhase codes
+    valid: np.ndarray  # no recording gap or clock step inside the segment
+    breaks: np.ndarray  # a window must begin here (a gap; the join of two stretches)
+    classes: dict[str, np.ndarray]  # per axis: anomalies.phases classes
+    calm: dict[str, np.ndarray] = field(default_factory=dict)  # per axis: no spike inside
+
+    def __len__(self) -> int:
+        return len(self.seg)
 
 
-def _window_span(seg: Segments, starts: np.ndarray, i0: int, i1: int) -> tuple[int, int]:
-    a = int(seg.t_first_us[starts[i0]])
-    last = starts[i1 + 1] - 1 if i1 + 1 < len(starts) else len(seg) - 1
-    return a, int(seg.t_last_us[last]) + 1
+def class_plan(held: dict[int, bool], why: dict[int, str]) -> dict[int, tuple[int | None, str]]:
+    """For each class: the class whose reference it is scored against, and a note."""
+    plan: dict[int, tuple[int | None, str]] = {}
+    for c in AXIS_CLASSES:
+        if held.get(c):
+            plan[c] = (c, "scored")
+            continue
+        louder = [d for d in AXIS_CLASSES if d > c and held.get(d)]
+        if louder:
+            plan[c] = (louder[0], f"scored against {CLASS_NAMES[louder[0]]} ({why[c]})")
+        else:
+            plan[c] = (None, f"not scored: {why[c]}")
+    return plan
 
 
-def _flag(seg: Segments, starts: np.ndarray, score: np.ndarray, kind: str,
-          signals: tuple[str, ...], axis: str, detail, bridge: int) -> list[Anomaly]:
-    """Return one Anomaly per run of windows whose score is >= 1 (NaN never flags)."""
-    out = []
-    for i0, i1 in runs(np.nan_to_num(score, nan=0.0) >= 1.0, bridge=bridge):
-        a, b = _window_span(seg, starts, i0, i1)
-        peak = i0 + int(np.nanargmax(score[i0:i1 + 1]))
-        out.append(Anomaly(a, b, kind, signals, float(score[peak]), axis, detail(peak)))
-    return out
+class Detector:
+    """A detector over class windows of one axis (or of the mount)."""
 
+    kind = ""
+    window_s = 1.0
+    need_share = 0.25  # a window needs this share of its segments usable
 
-def _ref_windows(seg: Segments, starts: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """A window belongs to the reference when all of its segments do."""
-    counts = np.add.reduceat(ref.astype(np.int64), starts)
-    sizes = np.diff(np.r_[starts, len(seg)])
-    return counts == sizes
+    def __init__(self, axis: str, signals: tuple[str, ...], cfg: DetectorConfig,
+                 seg_s: float) -> None:
+        self.axis = axis
+        self.signals = signals
+        self.cfg = cfg
+        self.seg_s = seg_s
+        self.per = max(1, round(self._window_s() / seg_s))
+        self.need = max(1, math.ceil(self.per * self.need_share))
+        self.cutter = WindowCutter(self.per)
+        self.plan: dict[int, tuple[int | None, str]] = {}
+        self.trace_t: list[np.ndarray] = []
+        self.trace_score: list[np.ndarray] = []
 
+    def _window_s(self) -> float:
+        return self.window_s
 
-def detect_current(seg: Segments, ref: np.ndarray, valid: np.ndarray, axis: str,
-                   names: dict[str, str], cfg: DetectorConfig
-                   ) -> tuple[list[Anomaly], ScoreTrace, CurrentModel]:
-    """Flag windows whose current departs from the motion model (friction, winding)."""
-    f = seg.features
-    p, v, i = f[f"{axis}.position_rad"], f[f"{axis}.velocity_rad_s"], f[f"{axis}.current_a"]
-    t_s = (seg.t_mid_us - seg.t_mid_us[0]) * 1e-6
-    a = np.gradient(v, t_s) if len(v) > 1 else np.zeros_like(v)
-    fit_rows = ref & valid
-    model = fit_current_model(p, v, a, i, fit_rows, gravity=axis == "el",
-                              cogging_periods=cfg.cogging_periods)
-    resid = i - model.predict(p, v, a)
-    starts, need = _per_window(seg, cfg.current_window_s)
-    wm = window_reduce(resid, starts, valid, min_count=need)
-    ref_w = _ref_windows(seg, starts, ref)
-    med, sigma = robust_center_scale(wm, ref_w)
-    dev = wm - np.nan_to_num(med)
-    # the model's own error is not normal: never flag what the reference itself reached
-    widest = float(np.nanmax(np.abs(dev[ref_w]))) if np.isfinite(dev[ref_w]).any() else 0.0
-    limit = max(cfg.threshold * float(np.nan_to_num(sigma)), cfg.current_ref_factor * widest,
-                cfg.current_floor_a)
-    score = np.abs(dev) / limit
-    signals = (names["position"], names["current"])
-    anomalies = _flag(seg, starts, score, "current", signals, axis,
-                      lambda k: f"current {dev[k]:+.3f} A off its motion model "
-                                f"(limit {limit:.3f} A)", _bridge(seg, starts, cfg))
-    trace = ScoreTrace(f"{axis} current", seg.t_first_us[starts], score,
-                       {"cogging_periods": round(model.cogging_periods, 2),
-                        "reference_rms_a": model.reference_rms_a, "limit_a": limit})
-    return anomalies, trace, model
+    @property
+    def name(self) -> str:
+        return f"{self.axis} {self.kind}".strip()
 
+    # -- per detector ------------------------------------------------------------------
+    def classes(self, chunk: Chunk) -> np.ndarray:
+        return chunk.classes[self.axis]
 
-def detect_vibration(seg: Segments, ref: np.ndarray, valid: np.ndarray, axis: str,
-                     names: dict[str, str], cfg: DetectorConfig) -> tuple[list[Anomaly], ScoreTrace]:
-    """Flag windows whose tracking error has more power than usual in some octave band."""
-    bp = seg.features[f"{axis}.error_band_power"]
-    edges = seg.band_edges_hz
-    # a band silent on the reference has no usual level to compare with
-    usable = np.flatnonzero(np.median(bp[ref & valid], axis=0) > 0) if (ref & valid).any() \
-        else np.zeros(0, np.int64)
-    if len(usable) == 0:
-        return [], ScoreTrace(f"{axis} vibration", seg.t_first_us[:1], np.zeros(1))
-    logp = np.log10(bp[:, usable] + 1e-30)
-    starts, need = _per_window(seg, cfg.vibration_window_s)
-    wm = window_median(logp, starts, valid, min_count=need)
-    med, sigma = robust_center_scale(wm, _ref_windows(seg, starts, ref))
-    floor = np.log10(cfg.vibration_floor_ratio)
-    limit = np.maximum(cfg.threshold * np.nan_to_num(sigma), floor)
-    z = (wm - np.nan_to_num(med)) / limit  # louder only: a quieter mount is no fault
-    finite = np.where(np.isfinite(z), z, -np.inf)
-    score = finite.max(axis=1)
-    score = np.where(np.isfinite(score), score, np.nan)
-    band = finite.argmax(axis=1)
+    def use(self, chunk: Chunk) -> np.ndarray:
+        return chunk.calm[self.axis] & (self.classes(chunk) != EXCLUDED)
 
-    def detail(k: int) -> str:
-        b = usable[band[k]]
-        ratio = 10 ** (wm[k, band[k]] - med[band[k]])
-        return f"tracking-error power ×{ratio:.1f} in {edges[b]:g}–{edges[b + 1]:g} Hz"
+    def values(self, chunk: Chunk) -> dict[str, np.ndarray]:
+        raise NotImplementedError
 
-    anomalies = _flag(seg, starts, score, "vibration", (names["error_arcsec"],), axis, detail,
-                      _bridge(seg, starts, cfg))
-    return anomalies, ScoreTrace(f"{axis} vibration", seg.t_first_us[starts], score)
+    def stats(self, arrays: dict[str, np.ndarray], starts: np.ndarray) -> dict[str, np.ndarray]:
+        raise NotImplementedError
 
+    def fit_classes(self, stats: dict[str, np.ndarray], cls: np.ndarray,
+                    seconds: dict[int, float]) -> None:
+        raise NotImplementedError
 
-def detect_spikes(seg: Segments, ref: np.ndarray, valid: np.ndarray, axis: str,
-                  names: dict[str, str], cfg: DetectorConfig) -> tuple[list[Anomaly], ScoreTrace]:
-    """Flag segments holding a one-sample jump far beyond any in the reference stretch."""
-    f = seg.features
-    parts = []
-    for feat, role in (("error_spike_arcsec", "error_arcsec"), ("current_spike_a", "current")):
-        key = f"{axis}.{feat}"
-        if key in f and (ref & valid).any():
-            usual = float(np.max(f[key][ref & valid]))
-            parts.append((f[key] / max(cfg.spike_factor * usual, 1e-12), names[role]))
-    if not parts:
-        return [], ScoreTrace(f"{axis} spike", seg.t_first_us, np.zeros(len(seg)))
-    stacked = np.stack([s for s, _ in parts], axis=1)
-    score = np.where(valid, stacked.max(axis=1), np.nan)
-    bridge = max(1, round(cfg.spike_merge_s / max(_seg_s(seg), 1e-9)))
-    out = []
-    starts = np.arange(len(seg))
-    for i0, i1 in runs(np.nan_to_num(score) >= 1.0, bridge=bridge):
-        a, b = _window_span(seg, starts, i0, i1)
-        block = np.nan_to_num(score[i0:i1 + 1])
-        count = int(np.count_nonzero(block >= 1.0))
-        sigs = tuple(name for k, (_, name) in enumerate(parts)
-                     if np.nanmax(stacked[i0:i1 + 1, k]) >= 1.0)
-        out.append(Anomaly(a, b, "spike", sigs, float(block.max()), axis,
-                           f"{count} segment(s) with a one-sample jump (×{block.max():.1f} "
-                           "the limit)"))
-    return out, ScoreTrace(f"{axis} spike", seg.t_first_us, score)
+    def window_scores(self, stats: dict[str, np.ndarray], cls: np.ndarray
+                      ) -> tuple[np.ndarray, list[str]]:
+        raise NotImplementedError
 
+    # -- shared ------------------------------------------------------------------------
+    def _arrays(self, chunk: Chunk) -> dict[str, np.ndarray]:
+        arrays = self.values(chunk)
+        arrays.update(cls=self.classes(chunk), use=self.use(chunk), breaks=chunk.breaks,
+                      t_first=chunk.seg.t_first_us, t_last=chunk.seg.t_last_us)
+        return arrays
 
-def _window_slope(t_s: np.ndarray, y: np.ndarray, starts: np.ndarray, valid: np.ndarray,
-                  need: int) -> np.ndarray:
-    """Least-squares slope of y against t in each window (per second)."""
-    n = np.add.reduceat(valid.astype(np.float64), starts)
-    mt = window_reduce(t_s, starts, valid)
-    my = window_reduce(y, starts, valid)
-    mtt = window_reduce(t_s * t_s, starts, valid)
-    mty = window_reduce(t_s * y, starts, valid)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        slope = (mty - mt * my) / (mtt - mt * mt)
-    return np.where(n >= max(3, need), slope, np.nan)
+    def fit(self, chunk: Chunk, ref: np.ndarray) -> Check:
+        """Learn the reference's statistics per class from the rows `ref` of `chunk`."""
+        arrays = self._arrays(chunk)
+        arrays["use"] = arrays["use"] & ref
+        starts = class_window_starts(arrays["cls"], self.per, arrays["breaks"])
+        stats = self.stats(arrays, starts)
+        cls = arrays["cls"][starts]
+        seconds = {c: float(np.sum(arrays["use"] & (arrays["cls"] == c))) * self.seg_s
+                   for c in set(AXIS_CLASSES) | {0}}
+        self.fit_classes(stats, cls, seconds)
+        return self.check()
 
+    def check(self) -> Check:
+        classes = {CLASS_NAMES[c]: note for c, (_, note) in self.plan.items()}
+        if not any(b is not None for b, _ in self.plan.values()):
+            return Check(self.kind, self.axis, self.signals, False,
+                         "the reference holds too little of every phase", classes)
+        return Check(self.kind, self.axis, self.signals, True, classes=classes)
 
-def detect_temperature(seg: Segments, ref: np.ndarray, valid: np.ndarray, axis: str,
-                       names: dict[str, str], cfg: DetectorConfig
-                       ) -> tuple[list[Anomaly], ScoreTrace]:
-    """Flag windows whose winding temperature climbs unlike its trend on the reference."""
-    temp = seg.features[f"{axis}.temperature_c"]
-    t_s = (seg.t_mid_us - seg.t_mid_us[0]) * 1e-6
-    starts, need = _per_window(seg, cfg.temperature_window_s)
-    slope = _window_slope(t_s - t_s.mean(), temp, starts, valid, need) * 3600.0  # K/h
-    med, sigma = robust_center_scale(slope, _ref_windows(seg, starts, ref))
-    limit = max(cfg.threshold * float(np.nan_to_num(sigma)), cfg.temperature_floor_k_h)
-    dev = slope - np.nan_to_num(med)
-    score = np.abs(dev) / limit
-    anomalies = _flag(seg, starts, score, "temperature", (names["temperature"],), axis,
-                      lambda k: f"temperature changing {dev[k]:+.1f} K/h off its usual trend "
-                                f"(limit {limit:.1f} K/h)", _bridge(seg, starts, cfg))
-    return anomalies, ScoreTrace(f"{axis} temperature", seg.t_first_us[starts], score)
+    def _held(self, stat_ok: np.ndarray, cls: np.ndarray, seconds: dict[int, float],
+              classes=AXIS_CLASSES) -> tuple[dict[int, bool], dict[int, str]]:
+        held, why = {}, {}
+        for c in classes:
+            n = int(np.sum(stat_ok & (cls == c)))
+            s = seconds.get(c, 0.0)
+            held[c] = n >= self.cfg.min_windows and s >= self.cfg.reference.min_class_s
+            why[c] = (f"the reference holds {s:.0f} s of it in {n} windows; "
+                      f"{self.cfg.reference.min_class_s:.0f} s and {self.cfg.min_windows} "
+                      "windows needed")
+        return held, why
 
+    def score(self, chunk: Chunk | None, *, final: bool = False) -> list[Window]:
+        """Score the windows of `chunk` that close (all of them when `final`; `chunk` None:
+        only what is pending); return the flagged ones (score >= 1; the scores of all go
+        to the trace)."""
+        arrays, starts, closed = self.cutter.push(
+            None if chunk is None else self._arrays(chunk), final=final)
+        if closed == 0:
+            return []
+        n_used = int(starts[closed]) if closed < len(starts) else len(arrays["cls"])
+        part = {k: v[:n_used] for k, v in arrays.items()}
+        starts = starts[:closed]
+        stats = self.stats(part, starts)
+        cls = part["cls"][starts]
+        score, details = self.window_scores(stats, cls)
+        ends = np.r_[starts[1:], n_used] - 1
+        t0 = part["t_first"][starts]
+        t1 = part["t_last"][ends] + 1
+        self.trace_t.append(t0)
+        self.trace_score.append(score)
+        return [Window(int(t0[k]), int(t1[k]), float(score[k]), details[k])
+                for k in np.flatnonzero(np.nan_to_num(score, nan=0.0) >= 1.0)]
 
-def detect_clock(seg: Segments, ref: np.ndarray, valid: np.ndarray,
-                 cfg: DetectorConfig) -> tuple[list[Anomaly], ScoreTrace]:
-    """Flag windows whose sample spacing (mount µs) says the clock runs at another rate."""
-    starts, need = _per_window(seg, cfg.clock_window_s)
-    span = (seg.t_last_us - seg.t_first_us).astype(np.float64)
-    spacing = window_reduce(span, starts, valid, min_count=need)
-    med, sigma = robust_center_scale(spacing, _ref_windows(seg, starts, ref))
-    med = float(np.nan_to_num(med, nan=np.nanmedian(spacing) if len(spacing) else 1.0))
-    ppm = (spacing / med - 1.0) * 1e6
-    sigma_ppm = float(np.nan_to_num(sigma)) / med * 1e6
-    limit = max(cfg.threshold * sigma_ppm, cfg.clock_floor_ppm)
-    score = np.abs(ppm) / limit
-    anomalies = _flag(seg, starts, score, "clock", ("t_us",), "",
-                      lambda k: f"mount clock rate {ppm[k]:+.2f} ppm off its usual "
-                                f"(limit {limit:.2f} ppm)", _bridge(seg, starts, cfg))
-    return anomalies, ScoreTrace("clock", seg.t_first_us[starts], score)
+    def trace(self) -> ScoreTrace:
+        t = np.concatenate(self.trace_t) if self.trace_t else np.zeros(0, np.int64)
+        s = np.concatenate(self.trace_score) if self.trace_score else np.zeros(0)
+        return ScoreTrace(self.name, t, s)
 
+    def _basis(self, cls: np.ndarray) -> np.ndarray:
+        """Per window, the class whose reference it is scored against (-1: none)."""
+        table = np.full(POOLED + 2, -1, dtype=np.int64)
+        for c, (b, _) in self.plan.items():
+            table[c] = -1 if b is None else b
+        return np.where(cls >= 0, table[np.maximum(cls, 0)], -1)
 
-def run_detectors(seg: Segments, ref: np.ndarray, axes: dict[str, dict[str, str]],
-                  cfg: DetectorConfig) -> tuple[list[Anomaly], list[ScoreTrace]]:
-    """Run every detector the recorded signals allow; return anomalies by start and traces."""
-    anomalies: list[Anomaly] = []
-    traces: list[ScoreTrace] = []
-    if len(seg) == 0:
-        return anomalies, traces
-    # a segment across a recording gap or a clock step is no sample of the mount's behaviour
-    usual = float(np.median(seg.spacing_us))
-    valid = np.abs(seg.spacing_us - usual) <= 0.001 * usual
-    for axis, names in axes.items():
-        calm = valid
-        if "error_arcsec" in names or "current" in names:
-            found, spikes = detect_spikes(seg, ref, valid, axis, names, cfg)
-            anomalies += found
-            # a segment with a one-sample jump is the spike detector's: it would bend the
-            # current's window mean and the error's spectrum
-            calm = valid & ~(np.nan_to_num(spikes.score) >= 1.0)
-        if {"position", "current"} <= names.keys():
-            found, trace, _ = detect_current(seg, ref, calm, axis, names, cfg)
-            anomalies += found
-            traces.append(trace)
-        if "error_arcsec" in names:
-            found, trace = detect_vibration(seg, ref, calm, axis, names, cfg)
-            anomalies += found
-            traces.append(trace)
-        if "error_arcsec" in names or "current" in names:
-            traces.append(spikes)
-        if "temperature" in names:
-            found, trace = detect_temperature(seg, ref, valid, axis, names, cfg)
-            anomalies += found
-            traces.append(trace)
-    found, trace = detect_clock(seg, ref, valid, cfg)
-    anomalies += found
-    traces.append(trace)
-    anomalies.sort(key=lambda x: (x.start_us, x.kind))
-    return anomalies, traces
+    def _lookup(self, per_class: dict[int, object], cls: np.ndarray, k: int | None = None
+                ) -> np.ndarray:
+        """Per window, the value of `per_class` for the class it is scored against (NaN
+        where none): a table indexed at once, not a loop over windows."""
+        shape = (POOLED + 2,) + (() if k is None else (k,))
+        table = np.full(shape, np.nan)
+        for c, value in per_class.items():
+            table[c] = value
+        basis = self._basis(cls)
+        return table[np.where(basis >= 0, basis, len(table) - 1)]

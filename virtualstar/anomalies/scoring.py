@@ -1,4 +1,11 @@
-"""Score detections against faults injected at known times: precision and recall."""
+"""Score detections against faults injected at known times: precision and recall.
+
+A flag is **true** only when it overlaps the window of an injected fault of its own kind
+and axis — a rattling part that also moves the current makes a `current` flag, and that
+flag counts as false. A fault is **found** when a true flag for it exists. A flag that
+began more than `early_us` before the injection cannot be counting it (it was up
+before), so it does not overlap in this sense.
+"""
 
 from __future__ import annotations
 
@@ -44,22 +51,16 @@ class Scores:
                       self.true_anomalies + other.true_anomalies)
 
 
-def _overlaps(a: Anomaly, f: InjectedFault, early_us: int) -> bool:
-    """The anomaly begins inside the fault's window (or at most `early_us` before it): a
-    flag that was already up before the fault cannot count as finding it."""
-    return f.start_us - early_us <= a.start_us < f.end_us
+def matches(a: Anomaly, f: InjectedFault, early_us: int = 0) -> bool:
+    """The anomaly is of the fault's kind and axis and overlaps its window (beginning at
+    most `early_us` before the injection: a window's start is rounded down)."""
+    return (a.kind == f.kind and a.axis == f.axis and a.end_us > f.start_us
+            and f.start_us - early_us <= a.start_us < f.end_us)
 
 
 def score_detections(anomalies: list[Anomaly], faults: list[InjectedFault], *,
                      early_us: int = 0) -> Scores:
-    """Match anomalies with faults.
-
-    A fault is found when an anomaly of its kind and axis begins in its window; an anomaly
-    is true when it begins in the window of any fault of the recording (a rattling part
-    also moves the current: that flag is no false alarm). `early_us` lets an anomaly
-    begin that much before the injection (a window's start is rounded down).
-    """
-    found = sum(any(a.kind == f.kind and a.axis == f.axis and _overlaps(a, f, early_us)
-                    for a in anomalies) for f in faults)
-    true = sum(any(_overlaps(a, f, early_us) for f in faults) for a in anomalies)
+    """Match anomalies with faults (see the module docstring)."""
+    found = sum(any(matches(a, f, early_us) for a in anomalies) for f in faults)
+    true = sum(any(matches(a, f, early_us) for f in faults) for a in anomalies)
     return Scores(len(faults), found, len(anomalies), true)

@@ -338,42 +338,63 @@ def anomalies(
     store: StoreArg,
     t_from: FromOpt = "start",
     t_to: ToOpt = "end",
+    reference: Annotated[list[str] | None, typer.Option(
+        "--reference", help="A stretch to learn the mount as usual from, FROM..TO (each in "
+                            "the forms of --from, e.g. +600..+1800 or ISO-8601 UTC); repeat "
+                            "for several. Default: chosen automatically, the first 15 minutes "
+                            "of the mount working (powered, settled, no fault logged). A "
+                            "stretch with the mount powered off, one shorter than 5 minutes "
+                            "of working time, or one holding one motion phase while the "
+                            "window holds others is refused (exit 2).",
+        show_default=False)] = None,
     ref_from: Annotated[str | None, typer.Option(
-        "--reference-from", help="Start of the reference stretch (the mount as usual), same "
-                                 "forms as --from; default: the start of the window.")] = None,
+        "--reference-from", help="Start of one reference stretch (as --reference FROM..TO; "
+                                 "with --reference-to, default 15 minutes after it).")] = None,
     ref_to: Annotated[str | None, typer.Option(
-        "--reference-to", help="End of the reference stretch; default: 15 minutes after its "
-                               "start (at most half the window).")] = None,
+        "--reference-to", help="End of that reference stretch.")] = None,
     threshold: Annotated[float, typer.Option(
         "--threshold", help="Flag beyond this many robust sigmas of the reference (each "
                             "detector also has an absolute floor).")] = 8.0,
-    cogging: Annotated[float | None, typer.Option(
-        "--cogging-periods", help="Cogging periods per motor revolution in the current model; "
-                                  "default: found from the recording; 0: none.")] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print the anomalies as JSON.")] = False,
+    cogging: Annotated[int | None, typer.Option(
+        "--cogging-periods", help="Cogging periods per motor revolution in the current model "
+                                  "(the motor's datasheet); default: found from the "
+                                  "reference; 0: none.")] = None,
+    settle_s: Annotated[float, typer.Option(
+        "--settle-s", help="Seconds after each slew (and power-on) left out of the reference "
+                           "and the scoring: the loops and the structure settle.")] = 10.0,
+    json_out: Annotated[bool, typer.Option(
+        "--json", help="Print the report as JSON: anomalies, what each detector checked and "
+                       "what it could not, phases, reference.")] = False,
     plot_path: Annotated[Path | None, typer.Option(
         "--plot", help="Write a PNG of every detector's score over time here.")] = None,
 ) -> None:
     """Flag the stretches where the mount behaves unlike itself on a reference stretch.
 
-    Detects on residuals: the current minus a model fitted from position, velocity and
-    acceleration (friction rising, winding faults), the tracking error's octave-band
-    spectrum (a growing resonance), one-sample jumps (encoder glitches), the temperature's
-    trend (runaway) and the clock rate seen in the sample times (drift). --json prints a
-    list of {"start_utc", "end_utc", "start_t_us", "end_t_us", "kind", "signals", "score",
-    "axis", "detail"}; score >= 1 is past the flagging limit. Exit 0 whether or not
-    anything is found; docs/anomalies.md says what each kind means.
+    The night is cut into motion phases (powered off, at rest, slewing, settling, tracking;
+    from the mount's and the VSS's events in the store, else from the signals) and, per
+    axis, speed regimes; each detector models each of them apart: the current minus a
+    model of position, velocity and acceleration (friction rising, winding faults), the
+    tracking error's octave-band spectrum (a growing resonance), one-sample jumps (encoder
+    glitches), the temperature's trend (runaway) and the clock rate seen in the sample
+    times (drift). --json prints {"anomalies": [{"start_utc", "end_utc", "start_t_us",
+    "end_t_us", "kind", "signals", "score", "axis", "detail"}], "checks": [...],
+    "not_run": [{"detector", "axis", "reason"}], "phases", "reference", "window"}; score
+    >= 1 is past the flagging limit. Exit 0 whether or not anything is found, 2 for a wrong
+    argument, store or a refused reference; docs/anomalies.md says what each kind means.
     """
     from virtualstar.anomalies import DetectorConfig, detect_anomalies
+    from virtualstar.anomalies.phases import PhaseConfig
 
     if not threshold > 0:
         raise _fail(f"--threshold {threshold}: expected a number of sigmas > 0")
     if cogging is not None and not cogging >= 0:
         raise _fail(f"--cogging-periods {cogging}: expected >= 0 (0: no cogging term)")
+    if not 0 <= settle_s <= 600:
+        raise _fail(f"--settle-s {settle_s}: expected 0..600 seconds")
     try:
         reader = _open(store)
         a, b = _window(reader, t_from, t_to)
-        reference = None
+        stretches = [_reference_stretch(text, a, b) for text in reference or []]
         if ref_from is not None or ref_to is not None:
             ra = parse_time_bound(ref_from or "start", a, b - 1, option="--reference-from")
             rb = (parse_time_bound(ref_to, a, b - 1, option="--reference-to") if ref_to
@@ -381,10 +402,11 @@ def anomalies(
             if rb <= ra:
                 raise RecorderError(f"empty reference: --reference-to ({rb} µs) is not after "
                                     f"--reference-from ({ra} µs)")
-            reference = (ra, rb)
-        report = detect_anomalies(reader, a, b, reference=reference,
+            stretches.append((ra, rb))
+        report = detect_anomalies(reader, a, b, reference=stretches or None,
                                   config=DetectorConfig(threshold=threshold,
-                                                        cogging_periods=cogging))
+                                                        cogging_periods=cogging,
+                                                        phases=PhaseConfig(settle_s=settle_s)))
         if plot_path is not None:
             from virtualstar.anomalies.plot import plot_report
 
@@ -392,11 +414,33 @@ def anomalies(
     except (RecorderError, OSError) as exc:
         raise _error(exc) from None
     if json_out:
-        typer.echo(json.dumps(report.as_list()))
+        typer.echo(json.dumps(report.as_dict()))
         return
+    ref = report.reference
     typer.echo(f"{len(report.anomalies)} anomalies from {utc_text(a)} to {utc_text(b)} "
-               f"({report.segments} segments at {report.rate_hz:g} Hz; reference "
-               f"{utc_text(report.reference_t_us[0])} to {utc_text(report.reference_t_us[1])})")
+               f"({report.segments} segments at {report.rate_hz:g} Hz; {ref.how} reference "
+               + ", ".join(f"{utc_text(x)} to {utc_text(y)}" for x, y in ref.stretches)
+               + f", {ref.usable_s:.0f} s of the mount working)")
+    typer.echo("phases (" + report.phase_source + "): "
+               + ", ".join(f"{k} {v:.0f} s" for k, v in report.phase_s.items() if v > 0))
     for x in report.anomalies:
         typer.echo(f"  {utc_text(x.start_us)} .. {utc_text(x.end_us)}  {x.kind:<11} "
                    f"{x.axis or '-':<3} score {x.score:6.2f}  {x.detail}")
+    typer.echo("checked:")
+    for c in report.checks:
+        typer.echo(f"  {c.line()}")
+
+
+def _reference_stretch(text: str, a: int, b: int) -> tuple[int, int]:
+    """One --reference FROM..TO as mount µs (RecorderError naming the option if wrong)."""
+    lo, sep, hi = text.partition("..")
+    if not sep or not lo.strip() or not hi.strip():
+        raise RecorderError(f"--reference {text!r}: expected FROM..TO, each as --from takes "
+                            "it (start, end, +S, -S, ISO-8601 UTC or mount µs), e.g. "
+                            "+600..+1800")
+    ra = parse_time_bound(lo, a, b - 1, option="--reference")
+    rb = parse_time_bound(hi, a, b - 1, option="--reference")
+    if rb <= ra:
+        raise RecorderError(f"empty reference: --reference {text!r} ends ({rb} µs) before it "
+                            f"begins ({ra} µs)")
+    return ra, rb

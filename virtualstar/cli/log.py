@@ -76,7 +76,8 @@ def log(
     mount emulator's). From a VSS URL: the server's log (operations and phases, faults,
     safety actions, commands with client and role, connections); --follow keeps polling.
     Table by default; --json gives {"seq", "t_us", "utc", "source", "level", "kind",
-    "message", "fields"} per event.
+    "message", "fields"} per event. When the server's log had to drop events (connection
+    churn), how many of each kind is said on stderr.
     """
     from astcom_client.events import LEVELS
     from virtualstar.eventlog import EventFilter, follow_vss, format_event
@@ -117,9 +118,15 @@ def log(
             else:
                 typer.echo(format_event(e))
 
+        def dropped(counts: dict[str, int]) -> None:
+            # on stderr: the table and the JSON on stdout stay as documented
+            typer.echo("the server's log dropped, to keep operations and faults: " + ", ".join(
+                f"{n} {kind} event{'s' if n != 1 else ''}" for kind, n in sorted(
+                    counts.items())), err=True)
+
         try:
             asyncio.run(follow_vss(source, flt, show, password=api_password(),
-                                   follow=follow, duration_s=duration))
+                                   follow=follow, duration_s=duration, on_dropped=dropped))
         except KeyboardInterrupt:
             pass
         except VssRequestError as exc:

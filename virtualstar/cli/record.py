@@ -41,7 +41,8 @@ def record(
         "operations, phases, commands with client and role.")] = None,
     detect: Annotated[bool, typer.Option(
         "--detect-anomalies", help="Run the `vs data anomalies` detectors live (after a "
-        "15-minute reference): each anomaly goes to stderr and into the store's event "
+        "15-minute reference, a minute behind the stream so that the events giving the "
+        "motion phases are in): each anomaly goes to stderr and into the store's event "
         "log.")] = False,
 ) -> None:
     """Record NAME... from URL at --rate into --store until --duration or Ctrl-C.
@@ -72,7 +73,7 @@ def record(
                    f"{gap.after_t_us} and {gap.before_t_us}", err=True)
 
     logging.basicConfig(level=logging.WARNING, format="vs record: %(message)s")
-    watch = None
+    watch = watch_events = watch_end = None
     live = None
     if detect:
         from virtualstar.anomalies.live import LiveAnomalies
@@ -82,11 +83,14 @@ def record(
             typer.echo(f"vs record: anomaly: {anomaly.kind} {anomaly.axis} from "
                        f"{anomaly.as_dict()['start_utc']}: {anomaly.detail}", err=True)
 
-        live = LiveAnomalies(list(names), rate, on_anomaly)
+        def on_refused(message: str) -> None:
+            typer.echo(f"vs record: anomaly detection cannot start: {message}", err=True)
+
+        live = LiveAnomalies(list(names), rate, on_anomaly, on_refused=on_refused)
         if not live.active:
             raise _fail("--detect-anomalies needs axis.<az|el>.position/current/error_arcsec/"
                         "temperature among the names")
-        watch = live.feed
+        watch, watch_events, watch_end = live.feed, live.feed_events, live.finish
     sources = []
     if vss is not None:
         if not vss.startswith(("ws://", "wss://")):
@@ -96,7 +100,8 @@ def record(
 
         sources.append(VssEventSource(url=vss, password=api_password()))
     recorder = Recorder(client_connector(url, password=password), list(names), rate, writer,
-                        source=url, on_gap=on_gap, watch=watch, event_sources=sources)
+                        source=url, on_gap=on_gap, watch=watch, event_sources=sources,
+                        watch_events=watch_events, watch_end=watch_end)
     try:
         summary = asyncio.run(_run(recorder, duration))
     except (RecorderError, AstcomError, OSError) as exc:

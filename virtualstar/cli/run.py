@@ -47,6 +47,12 @@ def run(
     mount: Annotated[str | None, typer.Option(
         "--mount", help="With --server and --record: the mount's ASTCom endpoint to record "
                         "from (password: ASTCOM_PASSWORD).", show_default=False)] = None,
+    inject: Annotated[list[str] | None, typer.Option(
+        "--inject", help="With --emulator: write an emulator parameter at a time of the night, "
+                         "NAME=VALUE@WHEN (WHEN: ISO-8601 UTC, or +S seconds after the plan's "
+                         "start), e.g. axis.az.inject_winding_fault=0.2@+900 (a fault to "
+                         "rehearse; docs/mount-emulator.md, \"Fault injection\"); repeat for "
+                         "several.", show_default=False)] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Run a plan block by block through the VSS API: each block's start, delay and slew, the
@@ -90,6 +96,7 @@ def run(
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise fail(f"--resume {resume}: not a vs run result ({exc})") from None
     recording = _recording(record, record_rate, store, emulator, server, mount, fail)
+    writes = _writes(inject or [], doc, emulator, fail)
     show = _Progress(quiet=as_json)
     if emulator:
         from virtualstar.cli.server import parse_speed
@@ -99,11 +106,13 @@ def run(
         pace = parse_speed(speed)
         try:
             result = run_plan_on_emulator(doc, speed=pace, done=done, on_event=show,
-                                          record=recording)
+                                          record=recording, writes=writes)
         except KeyboardInterrupt:
             raise fail("interrupted: the simulated night ends with the process", 130) from None
         except RecorderError as exc:
             raise fail(f"--record: {exc}") from None
+        except PlanningError as exc:
+            raise fail(f"--inject: {exc}") from None
     elif recording is not None:
         result = _on_server_recorded(server, mount, doc, done, show, fail, recording, as_json)
     else:
@@ -129,6 +138,35 @@ def _recording(names, rate_hz: float, stores, emulator: bool, server, mount, fai
         return RunRecording(tuple(names), rate_hz, tuple(stores or [DEFAULT_RECORD_STORE]))
     except RecorderError as exc:
         raise fail(str(exc)) from None
+
+
+def _writes(specs: list[str], doc: dict, emulator: bool, fail) -> list:
+    """The --inject options as timed writes (checked before anything runs)."""
+    if not specs:
+        return []
+    if not emulator:
+        raise fail("--inject goes with --emulator (a real mount takes no injected faults)")
+    from virtualstar.astro import UtcTimes
+    from virtualstar.planning.emulated import TimedWrite
+
+    out = []
+    for spec in specs:
+        what, _, when = spec.rpartition("@")
+        name, _, value = what.partition("=")
+        try:
+            number = float(value)
+            if when.startswith("+"):
+                t_us = int(doc["start_us"]) + round(float(when[1:]) * 1e6)
+            else:
+                t_us = int(UtcTimes.from_iso([when]).to_unix_us()[0])
+        except (ValueError, KeyError, TypeError):
+            raise fail(f"--inject {spec!r}: expected NAME=VALUE@WHEN, WHEN an ISO-8601 UTC "
+                       "time or +S seconds after the plan's start (e.g. "
+                       "axis.az.inject_friction_growth=5@+1200)") from None
+        if not name.strip():
+            raise fail(f"--inject {spec!r}: no parameter name before '='")
+        out.append(TimedWrite(t_us, name.strip(), number))
+    return out
 
 
 def _on_server_recorded(server, mount: str, doc, done, show, fail, recording,

@@ -8,33 +8,63 @@ goes through the VSS API (`run_plan`), exactly as against a real server.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from astcom_client import AstcomError
 from virtualstar.astro import Site, load_site
 
+from .exceptions import PlanningError
 from .scheduler import Plan
 
 if TYPE_CHECKING:
     from .recording import RunRecording  # the recorder (pyarrow) loads only to record
 
-__all__ = ["EMULATOR_LEAD_S", "run_plan_on_emulator"]
+__all__ = ["EMULATOR_LEAD_S", "TimedWrite", "run_plan_on_emulator"]
 
 EMULATOR_LEAD_S = 120.0  # the emulator starts this long before the plan: time to unpark
+
+
+@dataclass(frozen=True)
+class TimedWrite:
+    """A parameter of the emulator written at a mount time (µs since 1970 UTC), exact to the
+    tick: a fault injection (docs/mount-emulator.md, "Fault injection") during a run."""
+
+    t_us: int
+    name: str
+    value: float
+
+
+class _ServerLog:
+    """The in-process VSS's `log` command as a recorder event source needs it (no queue of
+    broadcast events, which a fast lockstep night would fill)."""
+
+    def __init__(self, server: Any) -> None:
+        self.server = server
+
+    async def request(self, cmd: str, params: dict[str, Any]) -> Any:
+        return await self.server.call(cmd, params)
 
 
 def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None,
                          start_us: int | None = None, site: Site | None = None,
                          done: list[dict[str, Any]] | None = None,
                          on_event: Callable[[str, dict[str, Any]], None] = lambda k, d: None,
-                         record: RunRecording | None = None) -> dict[str, Any]:
+                         record: RunRecording | None = None,
+                         writes: Sequence[TimedWrite] = ()) -> dict[str, Any]:
     """Run the plan on a fresh emulator + VSS; return the run (as the `program` command).
 
     speed: None runs as fast as the CPU allows, else at most ×speed real time;
     start_us: the mount time to start at (default: EMULATOR_LEAD_S before the plan);
     record: signals recorded from the emulator for the whole run (the result gains
-    `recording`, the recorder's summary). The result gains `wall_s`.
+    `recording`, the recorder's summary); the store keeps the emulator's and the VSS's
+    event logs beside them (the VSS's phases tell `vs data anomalies` what the mount did);
+    writes: emulator parameters written at their mount times (fault injections), by an
+    operator client of their own; an unknown parameter raises PlanningError before the
+    run. The result gains `wall_s`.
     """
     from virtualstar.launcher import embedded_vss
     from virtualstar.lockstep import LockstepClock, run_lockstep
@@ -46,18 +76,32 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
 
     async def main() -> dict[str, Any]:
         async with embedded_vss(clock=clock, site=site or _plan_site(plan)) as vss:
-            if record is None:
-                return await follow(vss)
+            writer = await _start_writes(vss, clock, writes) if writes else None
+            try:
+                if record is None:
+                    return await follow(vss)
+                return await recorded(vss)
+            finally:
+                if writer is not None:
+                    if not writer.done():
+                        writer.cancel()
+                    with contextlib.suppress(asyncio.CancelledError):
+                        await writer  # a write the emulator refused raises here
 
-            from .recording import record_beside
+    async def recorded(vss) -> dict[str, Any]:
+        from virtualstar.eventlog import VssEventSource
 
-            async def connect():
-                return await vss.emulator.connect_in_memory(name="vs-run-recorder")
+        from .recording import record_beside
 
-            result, summary = await record_beside(record, connect, "embedded emulator",
-                                                  follow(vss))
-            result["recording"] = summary
-            return result
+        async def connect():
+            return await vss.emulator.connect_in_memory(name="vs-run-recorder")
+
+        assert record is not None
+        result, summary = await record_beside(
+            record, connect, "embedded emulator", follow(vss),
+            event_sources=[VssEventSource(_ServerLog(vss.server))])
+        result["recording"] = summary
+        return result
 
     async def follow(vss) -> dict[str, Any]:
         events = vss.server.subscribe(maxsize=100_000)
@@ -78,6 +122,30 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     result = run_lockstep(main(), clock)
     result["wall_s"] = time.perf_counter() - t0
     return result
+
+
+async def _start_writes(vss, clock, writes: Sequence[TimedWrite]) -> asyncio.Task:
+    """Check that every parameter exists and may be written; start writing them in time."""
+    client = await vss.emulator.connect_in_memory(name="vs-run-writes")
+    infos = {i.name: i for i in await client.list()}
+    bad = [w.name for w in writes if w.name not in infos or infos[w.name].kind != "parameter"]
+    if bad:
+        await client.close()
+        raise PlanningError(f"the emulator has no parameter {', '.join(sorted(set(bad)))} to "
+                            "write (docs/mount-emulator.md lists them)")
+
+    async def write_in_time() -> None:
+        try:
+            for w in sorted(writes, key=lambda w: w.t_us):
+                await clock.sleep_until_us(w.t_us)
+                try:
+                    await client.write({w.name: float(w.value)})
+                except AstcomError as exc:
+                    raise PlanningError(f"writing {w.name}={w.value:g}: {exc}") from None
+        finally:
+            await client.close()
+
+    return asyncio.ensure_future(write_in_time())
 
 
 def _plan_site(plan: Plan) -> Site:

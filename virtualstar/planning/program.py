@@ -82,18 +82,50 @@ class ProgramTarget:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ProgramTarget:
         """Rebuild a target from `as_dict` (as carried in a plan); raise ProgramError."""
+        if not isinstance(d, dict):
+            raise ProgramError(f"a plan's program target is {type(d).__name__}, not a table: "
+                               "write the plan again with vs plan")
         try:
             fields = {k: d[k] for k in cls.__dataclass_fields__ if k in d}
-            fields["tle_file"] = None if d.get("tle_file") is None else Path(d["tle_file"])
+            fields["tle_file"] = None if d.get("tle_file") is None else Path(str(d["tle_file"]))
             fields["az_windows_deg"] = tuple(tuple(float(x) for x in w)
                                              for w in d.get("az_windows_deg", ()))
             window = d.get("window_us")
             fields["window_us"] = None if window is None else (int(window[0]), int(window[1]))
-            return cls(**fields)
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise ProgramError(f"a plan's program target {d.get('name', '?')!r} is incomplete "
-                               f"or malformed ({exc}): write the plan again with vs plan") \
-                from None
+            target = cls(**fields)
+            target._check_carried()
+            return target
+        except (KeyError, TypeError, ValueError, IndexError, OverflowError) as exc:
+            raise ProgramError(f"a plan's program target {str(d.get('name', '?'))[:40]!r} is "
+                               f"incomplete or malformed ({exc}): write the plan again with "
+                               "vs plan") from None
+
+    def _check_carried(self) -> None:
+        """The ranges `load_program` enforces, again for a target a plan carried (a client's
+        input): ValueError/TypeError naming the field."""
+        for name in ("name", "kind", "spec", "tle_text"):
+            if not isinstance(getattr(self, name), str):
+                raise TypeError(f"{name}: text expected")
+        if self.kind not in ("star", "radec", "satellite"):
+            raise ValueError(f"kind {self.kind[:20]!r}: expected star, radec or satellite")
+        for name, lo, hi in (("priority", 1e-6, 1e6), ("duration_s", 1e-3, 1e7),
+                             ("cadence_s", 0.0, 86400.0 * 7), ("min_el_deg", -5.0, 89.0),
+                             ("sun_max_el_deg", -90.0, 90.0), ("moon_min_sep_deg", 0.0, 180.0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
+                raise ValueError(f"{name} = {str(v)[:40]!r}: expected a number in {lo:g}..{hi:g}")
+        for name, lo, hi in (("repeats", 1, 1000), ("index", 0, 10**6)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+                raise ValueError(f"{name} = {str(v)[:40]!r}: expected a whole number {lo}..{hi}")
+        if not all(0.0 <= x <= 360.0 for w in self.az_windows_deg for x in w) or not all(
+                len(w) == 2 for w in self.az_windows_deg):
+            raise ValueError("az_windows_deg: expected [from, to] pairs in degrees 0..360")
+        if self.window_us is not None and not 0 <= self.window_us[0] < self.window_us[1] < 2**62:
+            raise ValueError("window_us: expected start < end, integer µs since 1970")
+        for name in ("sunlit_while_dark", "closed_loop"):
+            if not isinstance(getattr(self, name), bool):
+                raise TypeError(f"{name}: true or false expected")
 
     @property
     def is_satellite(self) -> bool:

@@ -44,10 +44,13 @@ class RunRecording:
         for spec in self.stores:
             parse_store_spec(spec)  # a wrong store is refused before the run starts
 
-    def recorder(self, connect: Connector, source: str) -> Recorder:
+    def recorder(self, connect: Connector, source: str, *,
+                 event_sources: list | None = None) -> Recorder:
+        """`event_sources`: other event logs kept in the store (the VSS's: its phases)."""
         writers = [open_writer(parse_store_spec(s)) for s in self.stores]
         writer = writers[0] if len(writers) == 1 else TeeWriter(writers)
-        return Recorder(connect, list(self.names), self.rate_hz, writer, source=source)
+        return Recorder(connect, list(self.names), self.rate_hz, writer, source=source,
+                        event_sources=event_sources)
 
     def summary(self, recorder: Recorder) -> dict[str, Any]:
         doc = recorder.summary.as_dict()
@@ -72,11 +75,12 @@ async def _started(recorder: Recorder, task: asyncio.Task) -> None:
 
 
 async def record_beside(recording: RunRecording, connect: Connector, source: str,
-                        main: Awaitable[T]) -> tuple[T, dict[str, Any]]:
+                        main: Awaitable[T], *,
+                        event_sources: list | None = None) -> tuple[T, dict[str, Any]]:
     """Record while `main` runs (it starts once the stream runs); return its result and the
     recording's summary. A recorder that cannot start (unknown signal, store) raises
-    before `main` begins."""
-    recorder = recording.recorder(connect, source)
+    before `main` begins. `event_sources` (e.g. the VSS's log) are kept in the store too."""
+    recorder = recording.recorder(connect, source, event_sources=event_sources)
     task = asyncio.ensure_future(recorder.run())
     try:
         await _started(recorder, task)

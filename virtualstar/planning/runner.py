@@ -124,7 +124,32 @@ class BlockRecord:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> BlockRecord:
-        return cls(**{k: d[k] for k in cls.__dataclass_fields__ if k in d})
+        """A record from a previous run's JSON (a client's or a file's: checked; TypeError
+        or ValueError naming the field otherwise)."""
+        if not isinstance(d, dict):
+            raise TypeError("a record is a table")
+        rec = cls(**{k: d[k] for k in cls.__dataclass_fields__ if k in d})
+        for name in ("target", "kind", "outcome"):
+            if not isinstance(getattr(rec, name), str):
+                raise TypeError(f"{name}: text expected")
+        for name in ("planned_start_us", "planned_end_us", "start_us", "end_us"):
+            t = getattr(rec, name)
+            if t is None and name in ("start_us", "end_us"):
+                continue
+            if isinstance(t, bool) or not isinstance(t, int) or not 0 <= t < 2**62:
+                raise ValueError(f"{name} = {str(t)[:40]!r}: expected integer µs since 1970")
+        for f in dataclasses.fields(cls):
+            v = getattr(rec, f.name)
+            if f.name.endswith(("_s", "_arcsec")) or f.name in ("priority", "repeat", "samples"):
+                if v is None and f.default is None:
+                    continue
+                if (isinstance(v, bool) or not isinstance(v, (int, float))
+                        or not abs(v) < 1e12):  # NaN fails too
+                    raise ValueError(f"{f.name} = {str(v)[:40]!r}: expected a finite number")
+        if not isinstance(rec.planned_deviation, list) or not (
+                rec.error is None or isinstance(rec.error, dict)):
+            raise TypeError("planned_deviation: a list, error: a table expected")
+        return rec
 
 
 @dataclass

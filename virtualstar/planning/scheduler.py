@@ -101,17 +101,75 @@ class Plan:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> Plan:
-        """Read a plan back (vs plan --json); raise PlanFileError saying what is wrong."""
+        """Read a plan back (vs plan --json); raise PlanFileError saying what is wrong.
+
+        A plan comes from a file or a client: every value is checked for its type and range
+        here, before a runner or the mount sees it."""
         keys = set(Block.__dataclass_fields__)
         try:
+            if not isinstance(doc, dict) or not isinstance(doc["blocks"], list):
+                raise TypeError("a table with a list of blocks expected")
             blocks = [Block(**{k: v for k, v in b.items() if k in keys}) for b in doc["blocks"]]
-            return cls(str(doc["program"]), int(doc["start_us"]), int(doc["end_us"]), blocks,
-                       list(doc.get("left_out", [])), dict(doc.get("site", {})),
-                       float(doc.get("setup_s", SETUP_S)), dict(doc.get("program_spec", {})))
+            plan = cls(doc["program"], doc["start_us"], doc["end_us"], blocks,
+                       doc.get("left_out", []), doc.get("site", {}),
+                       doc.get("setup_s", SETUP_S), doc.get("program_spec", {}))
+            _check_plan(plan)
+            plan.start_us, plan.end_us = int(plan.start_us), int(plan.end_us)
+            plan.setup_s = float(plan.setup_s)
+            return plan
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise PlanFileError(f"not a plan written by vs plan: {type(exc).__name__} {exc} "
                                 "(expected program, start_us, end_us and blocks with target, "
                                 "start_us, end_us, az/el)") from None
+
+
+# mount times in a plan: integer µs since 1970, before 2**62 µs (year ~148 000), so that
+# sums and differences of them stay within int64 wherever they go
+_MAX_US = 2**62
+
+
+def _check_us(name: str, value: Any) -> None:
+    if (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+            or not 0 <= value < _MAX_US):
+        raise ValueError(f"{name} = {str(value)[:40]!r}: expected mount time in integer µs "
+                         f"since 1970, 0..2**62")
+
+
+def _check_number(name: str, value: Any, lo: float, hi: float) -> None:
+    if (isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating))
+            or not lo <= value <= hi):  # NaN fails both comparisons
+        raise ValueError(f"{name} = {str(value)[:40]!r}: expected a number in {lo:g}..{hi:g}")
+
+
+def _check_plan(plan: Plan) -> None:
+    """Refuse (ValueError/TypeError) a plan whose values could not come from `vs plan`."""
+    for name, value, kind in (("program", plan.program, str), ("left_out", plan.left_out, list),
+                              ("site", plan.site, dict), ("program_spec", plan.program_spec,
+                                                          dict)):
+        if not isinstance(value, kind):
+            raise TypeError(f"{name}: a {kind.__name__} expected")
+    _check_us("start_us", plan.start_us)
+    _check_us("end_us", plan.end_us)
+    if plan.end_us < plan.start_us:
+        raise ValueError("end_us before start_us")
+    _check_number("setup_s", plan.setup_s, 0.0, 86_400.0)
+    for i, b in enumerate(plan.blocks):
+        where = f"block {i + 1}"
+        if not isinstance(b.target, str) or not isinstance(b.kind, str):
+            raise TypeError(f"{where}: target and kind must be text")
+        _check_us(f"{where} start_us", b.start_us)
+        _check_us(f"{where} end_us", b.end_us)
+        if b.end_us <= b.start_us:
+            raise ValueError(f"{where}: end_us not after start_us")
+        _check_number(f"{where} repeat", b.repeat, 1, 1e6)
+        _check_number(f"{where} priority", b.priority, -1e6, 1e6)
+        for name in ("start_az_deg", "end_az_deg", "az_travel_deg"):
+            _check_number(f"{where} {name}", getattr(b, name), -3600.0, 3600.0)
+        for name in ("start_el_deg", "end_el_deg"):
+            _check_number(f"{where} {name}", getattr(b, name), -90.0, 90.0)
+        _check_number(f"{where} slew_s", b.slew_s, 0.0, 86_400.0)
+        if not isinstance(b.constraints, dict):
+            raise TypeError(f"{where}: constraints: a table expected")
 
 
 def schedule(program: str, grid: NightGrid, skies: list[TargetSky], passes: dict[str, list],

@@ -221,13 +221,14 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
         return await Client.open(emu.endpoint.connect_in_memory(maxsize=256), name="recorder",
                                  queue_packets=4096)
 
-    watch = None
+    watch = watch_events = watch_end = None
     if detect:
         from virtualstar.anomalies.live import LiveAnomalies
 
         live = LiveAnomalies(exp.names, exp.record_hz, lambda a: recorder.anomaly_found(a))
-        watch = live.feed
+        watch, watch_events, watch_end = live.feed, live.feed_events, live.finish
     recorder = Recorder(connect, exp.names, exp.record_hz, writer, watch=watch,
+                        watch_events=watch_events, watch_end=watch_end,
                         source=f"in-process mount emulator, sine experiment on {exp.axis}")
     task: asyncio.Task | None = None
     try:

@@ -193,7 +193,9 @@ class Recorder:
                  *, source: str = "", on_gap: Callable[[Gap], None] | None = None,
                  reconnect_delay_s: float = DEFAULT_RECONNECT_DELAY_S,
                  watch: Callable[[SampleBlock], None] | None = None,
-                 event_sources: list | None = None) -> None:
+                 event_sources: list | None = None,
+                 watch_events: Callable[[list[Event]], None] | None = None,
+                 watch_end: Callable[[], None] | None = None) -> None:
         if not names:
             raise RecorderError("name at least one signal to record")
         if len(set(names)) != len(names):
@@ -207,6 +209,10 @@ class Recorder:
         self._on_gap = on_gap
         # `watch` sees every block written (live anomaly detection, virtualstar.anomalies.live)
         sink_writer = writer if watch is None else _Watched(writer, watch)
+        # `watch_events` sees the events stored (the live detectors' motion phases), and
+        # `watch_end` is called once the last samples are in, before the store closes
+        self._watch_events = watch_events
+        self._watch_end = watch_end
         self.sink = SampleSink(sink_writer, self.names, on_gap=self._gap)
         self.summary = RecordingSummary(self.names, self.rate_hz)
         self.log = EventLog("recorder")
@@ -254,6 +260,8 @@ class Recorder:
             self._logged_seq = own[-1].seq
         if write is not None and self.sink.session and (own or device):
             write(sorted(own + device, key=lambda e: e.t_us))
+        if self._watch_events is not None and device:
+            self._watch_events(device)
 
     def anomaly_found(self, anomaly) -> None:
         """Log an anomaly the live detectors found (virtualstar.anomalies.Anomaly)."""
@@ -406,6 +414,11 @@ class Recorder:
                     with contextlib.suppress(Exception):
                         await asyncio.wait_for(close(), 2.0)
             try:
+                if self._watch_end is not None and self.sink.session:
+                    try:
+                        self._watch_end()
+                    except Exception as exc:  # a watcher must not cost the store its end
+                        log.warning("the recording's watcher failed at its end: %s", exc)
                 if self.sink.session:
                     self._stop.set()  # the start event is due now, whatever came
                     self._event("info", "session", f"recording ended: {self.sink.samples} "

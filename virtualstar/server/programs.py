@@ -91,13 +91,14 @@ class ProgramControl:
             history = [BlockRecord.from_dict(r) for r in done or []]
         except PlanningError as exc:
             raise BadRequest(f"run_plan: {exc}") from None
-        except TypeError as exc:
+        except (TypeError, ValueError) as exc:
             raise BadRequest(f"run_plan: done: a previous run's records expected ({exc})") \
                 from None
         self.t.check_can_move()
         runner = ProgramRunner(plan, program, _TelescopeApi(self.t, execute),
                                on_change=self._changed, done_before=history,
                                degraded_s=self.t.config.degraded_after_s)
+        runner.as_dict()  # what the answer holds can be written, before anything starts
         self.runner = runner
         self.task = asyncio.get_running_loop().create_task(self._run(runner),
                                                            name="vss-program")

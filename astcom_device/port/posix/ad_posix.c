@@ -7,6 +7,7 @@
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <arpa/inet.h>
 #include <poll.h>
 #include <pthread.h>
 #include <sched.h>
@@ -334,6 +335,26 @@ static conn *conn_new(int fd, const ad_config *cfg, const ad_posix_opts *o)
     return c;
 }
 
+/* "a.b.c.d:port" or "[v6]:port": password attempts are throttled per address (§10) */
+static void peer_text(const struct sockaddr_storage *sa, socklen_t len, char *out, size_t cap)
+{
+    char host[INET6_ADDRSTRLEN] = "?";
+    unsigned port = 0;
+    if (sa->ss_family == AF_INET && len >= (socklen_t)sizeof(struct sockaddr_in)) {
+        const struct sockaddr_in *a = (const struct sockaddr_in *)sa;
+        inet_ntop(AF_INET, &a->sin_addr, host, sizeof host);
+        port = ntohs(a->sin_port);
+        snprintf(out, cap, "%s:%u", host, port);
+    } else if (sa->ss_family == AF_INET6 && len >= (socklen_t)sizeof(struct sockaddr_in6)) {
+        const struct sockaddr_in6 *a = (const struct sockaddr_in6 *)sa;
+        inet_ntop(AF_INET6, &a->sin6_addr, host, sizeof host);
+        port = ntohs(a->sin6_port);
+        snprintf(out, cap, "[%s]:%u", host, port);
+    } else {
+        snprintf(out, cap, "?");
+    }
+}
+
 static void parse_frames(ad_device *dev, conn *c, int64_t now_us)
 {
     size_t off = 0;
@@ -538,8 +559,12 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
         poll(pf, (nfds_t)n, wait_ms);
         int64_t now_us = mono_ns() / 1000;
         if (li >= 0 && (pf[li].revents & POLLIN)) {
-            int fd = accept4(lfd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
+            struct sockaddr_storage sa;
+            socklen_t sa_len = sizeof sa;
+            int fd = accept4(lfd, (struct sockaddr *)&sa, &sa_len, SOCK_NONBLOCK | SOCK_CLOEXEC);
             if (fd >= 0) {
+                char peer[INET6_ADDRSTRLEN + 16];
+                peer_text(&sa, sa_len, peer, sizeof peer);
                 int one = 1;
                 setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
                 conn *c = conn_new(fd, cfg, o);
@@ -548,7 +573,7 @@ int ad_posix_run(ad_device *dev, const ad_posix_opts *o, ad_step_fn step)
                 } else {
                     ad_sink sink = {conn_room, conn_send, c, conn_begin, conn_part, conn_end,
                                     conn_queued};
-                    c->s = ad_open(dev, sink, now_us);
+                    c->s = ad_open(dev, sink, peer, now_us);
                     if (!c->s) begin_close(c);
                     c->next = conns;
                     conns = c;

@@ -161,6 +161,9 @@ int main(void)
     cfg.max_pending = 1;
     cfg.max_pending_calls = 1;
     cfg.ring_ticks = LOOP_HZ / 50; /* 20 ms */
+    /* password attempts: the rules of a host (§10) in a table of 2 addresses (the least
+     * it may have: max_pending + 1); 80 bytes each */
+    cfg.auth_max_addresses = 2;
     ex_init(cfg.loop_rate_hz, start_us, NULL);
     const ad_var *vars = ex_vars(EX_MAX_EXTRA, &nv);
     const ad_fn *fns = ex_fns(&nf);

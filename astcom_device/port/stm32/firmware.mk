@@ -18,7 +18,7 @@ ARM_COMMON := $(ARM_CPU) -Os -flto=auto -ffunction-sections -fdata-sections -std
   '-DMBEDTLS_CONFIG_FILE="mbedtls_config_m4.h"'
 ARM_FLAGS := $(ARM_COMMON) -Wall -Wextra -Werror -Wno-unused-parameter -DEX_MCU -DAD_NO_FORMAT_CHECK \
   -DEX_TRAJ_CAPACITY=48 -DAD_LINK_TX_FRAMES=1u -DAD_LINK_PARK_FRAMES=0u -DFIRMWARE_PASSWORD='"$(FIRMWARE_PASSWORD)"' \
-  -DFW_ARENA_BYTES=20736u -DFW_LINK_BYTES=3360u -DFW_MBEDTLS_BYTES=512u -DAD_WHY_BYTES=320
+  -DFW_ARENA_BYTES=21168u -DFW_LINK_BYTES=3360u -DFW_MBEDTLS_BYTES=512u -DAD_WHY_BYTES=320
 ARM_INC := -Iinclude -Isrc -Iexamples -Iport/stm32 -I$(ARM_DIR)/include -I$(DEBSRC)/mbedtls/include
 MBEDTLS_SRC := $(addprefix $(DEBSRC)/mbedtls/library/,md.c sha256.c platform.c platform_util.c memory_buffer_alloc.c)
 MPACK_SRC := $(DEBSRC)/libmpack/src/core.c $(DEBSRC)/libmpack/src/conv.c
