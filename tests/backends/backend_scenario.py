@@ -1,6 +1,12 @@
 """One run of the VSS on a simulator we did not write, in real time; prints what it saw as JSON.
 
-Usage: backend_scenario.py alpaca|indi OUT_DIR
+Usage: backend_scenario.py alpaca|indi sky|pass OUT_DIR
+
+Two parts, each on its own simulator, so that the test modules (one per simulator and
+part) run side by side under pytest-xdist: ``sky`` (a star: slew, landing, sidereal
+track, recorded by `vs record`; `vs run` of a small plan; the Sun refused; a slew
+routed round it) and ``pass`` (an ISS-like pass stopped mid-pass; the driver killed
+mid-track).
 
 Run inside a private network namespace (`unshare -n`, loopback up): indiserver binds
 every interface, and the Alpaca simulator is kept there too. The VSS drives the
@@ -19,13 +25,13 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import math
 import os
 import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 import traceback
 from pathlib import Path
@@ -39,9 +45,11 @@ from synthetic_pass import synthetic_pass_tle  # noqa: E402
 BIN = Path(sys.executable).parent
 INDI_PORT = 7624
 INDI_DEVICE = "Telescope Simulator"
-STAR_TRACK_S = 12.0
-PASS_LEAD_S = 55.0  # the pass culminates this long after it is commanded
-PASS_AFTER_S = 8.0  # ... and is stopped this long after culmination (mid-pass)
+STAR_TRACK_S = 10.0
+OFFSET_ARCSEC = 60.0  # the declination offset applied during a track
+PASS_JOIN_S = 35.0  # the followed stretch of the pass begins about this long after the command
+PASS_TRACK_S = 12.0  # ... and is stopped this long after the landing check (mid-pass)
+START_TIMEOUT_S = 120.0  # a loaded host takes long to start a simulator (FastAPI, indiserver)
 
 
 def now_us() -> int:
@@ -62,6 +70,7 @@ class Simulator:
     def __init__(self, kind: str, out_dir: Path) -> None:
         self.kind = kind
         self.port = free_port() if kind == "alpaca" else INDI_PORT
+        self.out_dir = out_dir
         self.log = open(out_dir / f"{kind}-simulator.log", "ab")  # noqa: SIM115
         self.proc: subprocess.Popen | None = None
 
@@ -79,7 +88,7 @@ class Simulator:
             cmd = ["indiserver", "-p", str(self.port), "indi_simulator_telescope"]
         self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=self.log,
                                      start_new_session=True)
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + START_TIMEOUT_S
         while time.monotonic() < deadline:
             with socket.socket() as s:
                 if s.connect_ex(("127.0.0.1", self.port)) == 0:
@@ -102,81 +111,91 @@ class Simulator:
 
 
 class Observer:
-    """An independent client recording every reported place: (t_s, ra_h, dec_deg)."""
+    """An independent client recording every reported place: (t_s, ra_h, dec_deg).
+
+    It runs in a process of its own (this script with ``--observe``), so the time it
+    stamps on each place is not delayed by the VSS's work in this process (the GIL); it
+    writes one line per place, which `mark` and `since` read back.
+    """
 
     def __init__(self, sim: Simulator) -> None:
         self.sim = sim
-        self.samples: list[tuple[float, float, float]] = []
-        self.lock = threading.Lock()
-        self.stopping = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        self.path = sim.out_dir / f"observed-{time.time_ns()}.txt"
+        self.path.touch()
+        self.proc = subprocess.Popen(
+            [sys.executable, __file__, "--observe", sim.kind, str(sim.port), str(self.path)],
+            stdout=sim.log, stderr=sim.log)
 
-    def _run(self) -> None:
-        try:
-            if self.sim.kind == "alpaca":
-                self._alpaca()
-            else:
-                asyncio.run(self._indi())
-        except Exception:  # the simulator killed on purpose ends this observer
-            pass
-
-    def _alpaca(self) -> None:
-        from alpaca.telescope import Telescope
-
-        tel = Telescope(f"127.0.0.1:{self.sim.port}", 0)
-        while not self.stopping.is_set():
-            try:
-                t0 = time.time()
-                ra = tel.RightAscension
-                dec = tel.Declination
-                t1 = time.time()
-            except Exception:
-                time.sleep(0.2)
-                continue
-            # the simulator answers each with where the mount is when asked (~1 ms apart)
-            with self.lock:
-                self.samples.append(((t0 + t1) / 2, float(ra), float(dec)))
-            time.sleep(0.05)
-
-    async def _indi(self) -> None:
-        from indipyclient import IPyClient
-
-        obs = self
-
-        class Client(IPyClient):
-            async def rxevent(self, event) -> None:
-                if (event.devicename == INDI_DEVICE and event.vectorname == "EQUATORIAL_EOD_COORD"
-                        and event.eventtype == "Set"):
-                    t = time.time()  # a push describes the moment it is sent
-                    v = self[INDI_DEVICE]["EQUATORIAL_EOD_COORD"]
-                    with obs.lock:
-                        obs.samples.append((t, v.getfloatvalue("RA"), v.getfloatvalue("DEC")))
-
-            async def hardware(self) -> None:
-                while not obs.stopping.is_set():
-                    await asyncio.sleep(0.1)
-                self.shutdown()
-
-        client = Client(indihost="127.0.0.1", indiport=self.sim.port)
-        client.debug_verbosity(0)
-        await client.asyncrun()
+    def _lines(self) -> list[str]:
+        lines = self.path.read_text().split("\n")
+        return lines[:-1]  # the last is empty, or a line still being written
 
     def mark(self) -> int:
-        with self.lock:
-            return len(self.samples)
+        return len(self._lines())
 
     def since(self, k: int) -> list[tuple[float, float, float]]:
-        with self.lock:
-            return list(self.samples[k:])
+        return [tuple(float(x) for x in line.split()) for line in self._lines()[k:]]
 
     def close(self) -> None:
-        self.stopping.set()
-        self.thread.join(10)
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
 
 
-def daytime_site():
-    """A site where the Sun stands ~50° high now (latitude -30°, the Sun 2.5 h east)."""
+def observe(kind: str, port: int, path: Path) -> None:
+    """The observer process: append every place the simulator reports to `path`."""
+    with open(path, "a", buffering=1) as out:
+        def put(t: float, ra_h: float, dec_deg: float) -> None:
+            out.write(f"{t:.6f} {ra_h!r} {dec_deg!r}\n")
+
+        while True:
+            try:
+                if kind == "alpaca":
+                    _observe_alpaca(port, put)
+                else:
+                    asyncio.run(_observe_indi(port, put))
+            except Exception:  # the simulator killed on purpose: try again
+                time.sleep(0.2)
+
+
+def _observe_alpaca(port: int, put) -> None:
+    from alpaca.telescope import Telescope
+
+    tel = Telescope(f"127.0.0.1:{port}", 0)
+    while True:
+        t0 = time.time()
+        ra = tel.RightAscension
+        dec = tel.Declination
+        t1 = time.time()
+        # the simulator answers each with where the mount is when asked (~1 ms apart)
+        put((t0 + t1) / 2, float(ra), float(dec))
+        time.sleep(0.05)
+
+
+async def _observe_indi(port: int, put) -> None:
+    from indipyclient import IPyClient
+
+    class Client(IPyClient):
+        async def rxevent(self, event) -> None:
+            if (event.devicename == INDI_DEVICE and event.vectorname == "EQUATORIAL_EOD_COORD"
+                    and event.eventtype == "Set"):
+                t = time.time()  # a push describes the moment it is sent
+                v = self[INDI_DEVICE]["EQUATORIAL_EOD_COORD"]
+                put(t, v.getfloatvalue("RA"), v.getfloatvalue("DEC"))
+
+    client = Client(indihost="127.0.0.1", indiport=port)
+    client.debug_verbosity(0)
+    await client.asyncrun()
+    raise ConnectionError("the INDI server closed")
+
+
+def daytime_site(sun_hour_angle_deg: float = -37.5):
+    """A site (latitude -30°) where the Sun stands at this hour angle now: by default 2.5 h
+    east, about 50° high (180: a night site, the Sun far below the horizon)."""
     from virtualstar.astro import EarthOrientation, SolarSystemBody, load_site
     from virtualstar.astro.mount_frames import observed_to_apparent_radec
 
@@ -190,7 +209,7 @@ def daytime_site():
     from virtualstar.astro.mount_frames import hour_angle_rad
 
     ha_deg = math.degrees(float(hour_angle_rad(ra, t, base, eop)[0]))
-    lon = (-37.5 - ha_deg + 180.0) % 360.0 - 180.0  # the Sun's hour angle there: -37.5°
+    lon = (sun_hour_angle_deg - ha_deg + 180.0) % 360.0 - 180.0
     return base.with_overrides(lon_deg=lon), eop
 
 
@@ -232,12 +251,15 @@ def op_doc(op) -> dict:
     return json.loads(json.dumps(op.as_dict(), default=str))
 
 
-async def scenario(kind: str, out_dir: Path) -> dict:
-    from virtualstar.astro import IcrsStar, Satellite, SolarSystemBody, observe_mount_times
+async def scenario(kind: str, part: str, out_dir: Path) -> dict:
+    from virtualstar.astro import SolarSystemBody, observe_mount_times
     from virtualstar.server import build_server
 
-    doc: dict = {"kind": kind, "errors": []}
-    site, eop = daytime_site()
+    doc: dict = {"kind": kind, "part": part, "errors": [], "steps_s": {}}
+    t0 = time.monotonic()
+    # the pass part at night: no Sun zone between the mount and the pass (a detour would
+    # only lengthen the test; the sky part proves the routes)
+    site, eop = daytime_site(-37.5 if part == "sky" else 180.0)
     doc["site"] = {"lat_deg": site.lat_deg, "lon_deg": site.lon_deg, "height_m": site.height_m,
                    "pressure_hpa": site.pressure_hpa, "temperature_c": site.temperature_c,
                    "humidity": site.humidity, "wavelength_um": site.wavelength_um}
@@ -248,140 +270,18 @@ async def scenario(kind: str, out_dir: Path) -> dict:
     t = vss.telescope
     obs = Observer(sim)
     try:
-        await t.link.wait_connected(30)
+        await t.link.wait_connected(START_TIMEOUT_S)
         await asyncio.sleep(1.0)
         doc["connected"] = json.loads(json.dumps((await t.status())["backend"], default=str))
         tnow = np.array([now_us()], np.int64)
         sun = observe_mount_times(SolarSystemBody("sun"), tnow, site, eop)
         sun_azel = (math.degrees(sun.az_rad[0]), math.degrees(sun.el_rad[0]))
         doc["sun_azel_deg"] = sun_azel
-
-        # 1. a star: slew, land, sidereal track (its reports judged against astropy)
-        star = pick_star(site, eop, sun_azel)
-        doc["star"] = star.name
-        # the recorder records the backend's reports like any signal, all through (started
-        # first: a loaded host takes seconds to start a process)
-        store = out_dir / "store"
-        rec = await asyncio.create_subprocess_exec(
-            str(BIN / "vs"), "record", t.signals.url, "report.ra_deg", "report.dec_deg",
-            "rate.axis1_arcsec_s", "error.sky_arcsec", "--rate", "50", "--duration", "600",
-            "--store", f"parquet:{store}",
-            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-        await asyncio.sleep(2.0)
-        op = await t.follow_target(IcrsStar.from_catalog(star), star.name,
-                                   duration_s=STAR_TRACK_S)
-        await op.begun
-        k = obs.mark()
-        await wait_op(op, STAR_TRACK_S + 60)
-        rec.send_signal(signal.SIGINT)  # Ctrl-C: the recorder closes its store and exits
-        _out, rec_err = await asyncio.wait_for(rec.communicate(), 60)
-        doc["star_op"] = op_doc(op)
-        doc["star_samples"] = obs.since(k)
-        q = await asyncio.create_subprocess_exec(
-            str(BIN / "vs"), "data", "query", str(store), "--to", "end", "--json",
-            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-        q_out, q_err = await q.communicate()
-        doc["recorded"] = {"record_exit": rec.returncode, "record_stderr": rec_err.decode()[-1500:],
-                           "query_exit": q.returncode, "query_stderr": q_err.decode()[-1500:],
-                           "data": json.loads(q_out) if q.returncode == 0 else None,
-                           "report_period_s": t.link.stats.period_s()}
-
-        # 2. vs run of a small plan: one block of the same star, planned and run by the CLI
-        doc["run"] = await run_small_plan(url, site, star.name, out_dir)
-
-        # 3. the Sun: refused before anything moves
-        try:
-            await t.follow_target(SolarSystemBody("sun"), "Sun", duration_s=10)
-            doc["sun_refusal"] = None
-        except Exception as exc:
-            doc["sun_refusal"] = {"code": getattr(exc, "code", type(exc).__name__),
-                                  "message": str(exc)}
-
-        # 4. a slew whose straight path would cross the Sun zone goes round it
-        # on either side of the Sun in azimuth, 50° from it on the sky, both on the same side
-        # of north (the VSS reports azimuths 0..360°): the straight way passes the Sun
-        el = 35.0 if sun_azel[1] > 30 else 25.0
-        off = 50.0 / math.cos(math.radians(el))
-        if not off < sun_azel[0] < 360.0 - off:
-            doc["errors"].append(f"the Sun's azimuth {sun_azel[0]:.1f}° leaves no room")
-        a = ((sun_azel[0] - off) % 360.0, el)
-        b = ((sun_azel[0] + off) % 360.0, el)
-        op = await t.slew_altaz(*a)
-        await wait_op(op, 300)
-        doc["route_first"] = op_doc(op)
-        k = obs.mark()
-        op = await t.slew_altaz(*b)
-        await wait_op(op, 300)
-        doc["route_op"] = op_doc(op)
-        doc["route_samples"] = obs.since(k)
-        doc["route_ends"] = [a, b]
-
-        # 5. a satellite pass (ISS-like, culminating away from the Sun), stopped mid-pass
-        culm_s = time.time() + PASS_LEAD_S
-        name, l1, l2 = synthetic_pass_tle(site.lat_deg, site.lon_deg, site.height_m, culm_s,
-                                          away_from_az_deg=sun_azel[0])
-        doc["tle"] = [name, l1, l2]
-        doc["culmination_s"] = culm_s
-        op = await t.track_satellite(Satellite.from_tle(l1, l2, name))
-        await op.begun
-        k = obs.mark()
-        # stopped mid-pass: past culmination (a German mount may follow only the stretch
-        # after the meridian: then 25 s into it)
-        tracking_since = None
-        while not op.done.done() and time.time() < culm_s + 150:
-            if op.phase.label == "tracking" and tracking_since is None:
-                tracking_since = time.time()
-            if tracking_since is not None and time.time() > max(culm_s + PASS_AFTER_S,
-                                                                 tracking_since + 15) \
-                    and time.time() > tracking_since + 10:
-                break
-            await asyncio.sleep(0.2)
-        doc["pass_op_before_stop"] = op_doc(op)
-        stop_at = time.time()
-        doc["stop_result"] = await t.stop()
-        doc["stop_answered_s"] = time.time() - stop_at
-        doc["stop_sent_s"] = stop_at
-        await asyncio.sleep(4.0)  # the mount must stay at rest: the observer keeps reading
-        doc["pass_op"] = op_doc(op)
-        doc["pass_samples"] = obs.since(k)
-
-        # 6. the driver killed mid-track: a fault, the mount told to stop, nothing resumed.
-        # The track follows the place the mount points at (no slew first: the test is short)
-        from virtualstar.astro.equatorial import jnow_to_icrs
-
-        v = await t.link.read(["axis1_position", "axis2_position"])
-        here_icrs = jnow_to_icrs(math.degrees(v["axis1_position"]) % 360.0,
-                                 math.degrees(v["axis2_position"]), now_us())
-        op = await t.follow_target(IcrsStar(*here_icrs), "the place it points at",
-                                   duration_s=None)
-        await op.begun
-        await asyncio.sleep(3.0)
-        calls_before = len(t.link.calls) and t.link.calls[-1].seq
-        killed = time.time()
-        sim.kill()
-        try:
-            await wait_op(op, 30)
-        except TimeoutError:
-            doc["errors"].append("the operation did not end within 30 s of the kill")
-        doc["kill_op"] = op_doc(op)
-        doc["kill_fault_after_s"] = time.time() - killed
-        # what the VSS sent between the kill and the fault (a command already on its way,
-        # and the stop), and after the fault
-        doc["calls_after_kill"] = [c.role for c in t.link.calls if c.seq > calls_before]
-        calls_before = len(t.link.calls) and t.link.calls[-1].seq
-        obs.close()
-        sim.start()
-        await t.link.wait_connected(60)
-        await asyncio.sleep(3.0)
-        obs = Observer(sim)
-        await asyncio.sleep(2.0)
-        k = obs.mark()
-        await asyncio.sleep(3.0)
-        doc["after_restart"] = {"status": json.loads(json.dumps(
-            (await t.status())["backend"], default=str)), "samples": obs.since(k),
-            "operation": op_doc(t.op) if t.op else None,
-            "calls": [c.role for c in t.link.calls if c.seq > calls_before]}
-
+        doc["steps_s"]["connected"] = time.monotonic() - t0
+        if part == "sky":
+            await sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0)
+        else:
+            obs = await pass_part(doc, t, site, sun_azel, sim, obs, t0)
         doc["final_backend"] = json.loads(json.dumps((await t.status())["backend"], default=str))
     except Exception:
         doc["errors"].append(traceback.format_exc())
@@ -389,7 +289,198 @@ async def scenario(kind: str, out_dir: Path) -> dict:
         obs.close()
         await vss.close()
         sim.stop()
+    doc["steps_s"]["end"] = time.monotonic() - t0
     return doc
+
+
+async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
+    """A star (landing, track, recorder), `vs run`, the Sun refused, a slew routed round it."""
+    from virtualstar.astro import IcrsStar, SolarSystemBody
+
+    # 1. a star: slew, land, sidereal track (its reports judged against astropy)
+    star = pick_star(site, eop, sun_azel)
+    doc["star"] = star.name
+    # the recorder records the backend's reports like any signal, all through (started
+    # first: a loaded host takes seconds to start a process)
+    store = out_dir / "store"
+    rec = await asyncio.create_subprocess_exec(
+        str(BIN / "vs"), "record", t.signals.url, "report.ra_deg", "report.dec_deg",
+        "rate.axis1_arcsec_s", "error.sky_arcsec", "--rate", "50", "--duration", "600",
+        "--store", f"parquet:{store}",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    await asyncio.sleep(2.0)
+    op = await t.follow_target(IcrsStar.from_catalog(star), star.name,
+                               duration_s=STAR_TRACK_S)
+    await op.begun
+    k = obs.mark()
+    await wait_op(op, STAR_TRACK_S + 60)
+    rec.send_signal(signal.SIGINT)  # Ctrl-C: the recorder closes its store and exits
+    _out, rec_err = await asyncio.wait_for(rec.communicate(), 60)
+    doc["star_op"] = op_doc(op)
+    doc["star_samples"] = obs.since(k)
+    q = await asyncio.create_subprocess_exec(
+        str(BIN / "vs"), "data", "query", str(store), "--to", "end", "--json",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    q_out, q_err = await q.communicate()
+    doc["recorded"] = {"record_exit": rec.returncode, "record_stderr": rec_err.decode()[-1500:],
+                       "query_exit": q.returncode, "query_stderr": q_err.decode()[-1500:],
+                       "data": json.loads(q_out) if q.returncode == 0 else None,
+                       "report_period_s": t.link.stats.period_s()}
+
+    doc["steps_s"]["star"] = time.monotonic() - t0
+    # 2. vs run of a small plan: one block of the same star, planned and run by the CLI
+    doc["run"] = await run_small_plan(url, site, star.name, out_dir)
+    doc["steps_s"]["run"] = time.monotonic() - t0
+
+    # 2b. a PWI4-style offset during a track: the rate loop follows the offset path
+    k = obs.mark()  # from the slew on: INDI pushes nothing while the star is held still
+    op = await t.follow_target(IcrsStar.from_catalog(star), star.name, duration_s=None)
+    await op.begun
+    await asyncio.sleep(2.0)
+    answer = await t.steering.offset("dec", "add", arcsec=OFFSET_ARCSEC)
+    await asyncio.sleep(6.0)
+    doc["offset"] = {"answer": json.loads(json.dumps(answer, default=str)),
+                     "samples": obs.since(k), "arcsec": OFFSET_ARCSEC,
+                     "op_before_stop": op_doc(op)}
+    await t.stop()
+    doc["steps_s"]["offset"] = time.monotonic() - t0
+
+    # 3. the Sun: refused before anything moves
+    try:
+        await t.follow_target(SolarSystemBody("sun"), "Sun", duration_s=10)
+        doc["sun_refusal"] = None
+    except Exception as exc:
+        doc["sun_refusal"] = {"code": getattr(exc, "code", type(exc).__name__),
+                              "message": str(exc)}
+
+    # 4. a slew whose straight path would cross the Sun zone goes round it
+    # on either side of the Sun in azimuth, 50° from it on the sky, both on the same side
+    # of north (the VSS reports azimuths 0..360°): the straight way passes the Sun
+    el = 35.0 if sun_azel[1] > 30 else 25.0
+    off = 50.0 / math.cos(math.radians(el))
+    if not off < sun_azel[0] < 360.0 - off:
+        doc["errors"].append(f"the Sun's azimuth {sun_azel[0]:.1f}° leaves no room")
+    a = ((sun_azel[0] - off) % 360.0, el)
+    b = ((sun_azel[0] + off) % 360.0, el)
+    # the first slew puts the mount at one end without passing the Sun (the end on the
+    # mount's side of it): only the second must go round
+    here_az = math.degrees((await t.motion.position()).az_rad) % 360.0
+    if (here_az - sun_azel[0]) * (a[0] - sun_azel[0]) < 0:
+        a, b = b, a
+    op = await t.slew_altaz(*a)
+    await wait_op(op, 300)
+    doc["route_first"] = op_doc(op)
+    k = obs.mark()
+    op = await t.slew_altaz(*b)
+    await wait_op(op, 300)
+    doc["route_op"] = op_doc(op)
+    doc["route_samples"] = obs.since(k)
+    doc["route_ends"] = [a, b]
+    doc["steps_s"]["route"] = time.monotonic() - t0
+
+
+async def pass_part(doc, t, site, sun_azel, sim, obs, t0):
+    """An ISS-like pass stopped mid-pass, then the driver killed mid-track."""
+    from virtualstar.astro import IcrsStar, Satellite
+
+    # 5. a satellite pass (ISS-like, culminating away from the Sun), stopped mid-pass,
+    # timed so that the stretch the mount follows begins ~PASS_JOIN_S from now
+    name, l1, l2, culm_s = timed_pass(site, sun_azel[0],
+                                      doc["connected"]["capabilities"]["geometry"])
+    doc["tle"] = [name, l1, l2]
+    doc["culmination_s"] = culm_s
+    op = await t.track_satellite(Satellite.from_tle(l1, l2, name))
+    await op.begun
+    k = obs.mark()
+    tracking_since = None
+    while not op.done.done() and time.time() < culm_s + 150:
+        if op.phase.label == "tracking" and tracking_since is None:
+            tracking_since = time.time()
+        if tracking_since is not None and time.time() > tracking_since + PASS_TRACK_S:
+            break
+        await asyncio.sleep(0.2)
+    doc["pass_op_before_stop"] = op_doc(op)
+    stop_at = time.time()
+    doc["stop_result"] = await t.stop()
+    doc["stop_answered_s"] = time.time() - stop_at
+    doc["stop_sent_s"] = stop_at
+    await asyncio.sleep(4.0)  # the mount must stay at rest: the observer keeps reading
+    doc["pass_op"] = op_doc(op)
+    doc["pass_samples"] = obs.since(k)
+    doc["steps_s"]["pass"] = time.monotonic() - t0
+
+    # 6. the driver killed mid-track: a fault, the mount told to stop, nothing resumed.
+    # The track follows the place the mount points at (no slew first: the test is short)
+    from virtualstar.astro.equatorial import jnow_to_icrs
+
+    v = await t.link.read(["axis1_position", "axis2_position"])
+    here_icrs = jnow_to_icrs(math.degrees(v["axis1_position"]) % 360.0,
+                             math.degrees(v["axis2_position"]), now_us())
+    op = await t.follow_target(IcrsStar(*here_icrs), "the place it points at",
+                               duration_s=None)
+    await op.begun
+    await asyncio.sleep(3.0)
+    calls_before = len(t.link.calls) and t.link.calls[-1].seq
+    killed = time.time()
+    sim.kill()
+    try:
+        await wait_op(op, 30)
+    except TimeoutError:
+        doc["errors"].append("the operation did not end within 30 s of the kill")
+    doc["kill_op"] = op_doc(op)
+    doc["kill_fault_after_s"] = time.time() - killed
+    # what the VSS sent between the kill and the fault (a command already on its way,
+    # and the stop), and after the fault
+    doc["calls_after_kill"] = [c.role for c in t.link.calls if c.seq > calls_before]
+    calls_before = len(t.link.calls) and t.link.calls[-1].seq
+    obs.close()
+    sim.start()
+    await t.link.wait_connected(START_TIMEOUT_S)
+    await asyncio.sleep(3.0)
+    obs = Observer(sim)
+    await asyncio.sleep(2.0)
+    k = obs.mark()
+    await asyncio.sleep(3.0)
+    doc["after_restart"] = {"status": json.loads(json.dumps(
+        (await t.status())["backend"], default=str)), "samples": obs.since(k),
+        "operation": op_doc(t.op) if t.op else None,
+        "calls": [c.role for c in t.link.calls if c.seq > calls_before]}
+    doc["steps_s"]["kill"] = time.monotonic() - t0
+    return obs
+
+
+def timed_pass(site, sun_az_deg: float, geometry: str) -> tuple[str, str, str, float]:
+    """An ISS-like pass whose followed stretch begins about `PASS_JOIN_S` from now.
+
+    A fork or alt-az mount joins as soon as it can: the pass culminates then. A German
+    mount follows one side of the meridian only (the VSS picks the longest such stretch),
+    and a pass culminating 70° high crosses the meridian some 20° from culmination: the
+    pass is shifted so that the crossing comes `PASS_JOIN_S` from now (the stretch after
+    it, the longer, is followed, still at about 1°/s).
+    """
+    from virtualstar.astro import EarthOrientation, Satellite, observe_mount_times
+    from virtualstar.astro.mount_frames import hour_angle_rad, observed_to_apparent_radec
+
+    culm_s = time.time() + PASS_JOIN_S + 5.0
+    name, l1, l2 = synthetic_pass_tle(site.lat_deg, site.lon_deg, site.height_m, culm_s,
+                                      away_from_az_deg=sun_az_deg)
+    if geometry != "german":
+        return name, l1, l2, culm_s
+    eop = EarthOrientation.from_astropy_iers_data()
+    t = np.arange(int((culm_s - 90) * 1e6), int((culm_s + 90) * 1e6), 500_000, dtype=np.int64)
+    o = observe_mount_times(Satellite.from_tle(l1, l2, name), t, site, eop)
+    ra, _dec = observed_to_apparent_radec(o.az_rad, o.el_rad, t, site, eop)
+    ha = hour_angle_rad(ra, t, site, eop)
+    up = o.el_rad > math.radians(20.0)
+    flips = np.flatnonzero((np.sign(ha[1:]) != np.sign(ha[:-1])) & up[1:])
+    if not len(flips):
+        return name, l1, l2, culm_s
+    t_m = t[flips[0] + 1] / 1e6
+    # where the crossing lies relative to the culmination, when it should come
+    culm_s += time.time() + PASS_JOIN_S - t_m
+    name, l1, l2 = synthetic_pass_tle(site.lat_deg, site.lon_deg, site.height_m, culm_s,
+                                      away_from_az_deg=sun_az_deg)
+    return name, l1, l2, culm_s
 
 
 async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
@@ -416,6 +507,15 @@ async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
     out, err = await p.communicate()
     if p.returncode != 0:
         return {"plan_exit": p.returncode, "stderr": err.decode()[-2000:]}
+    # the planner times the first slew from its park place (it cannot know the mount is
+    # already on the star, a minute's wait here): the block is moved to begin soon
+    doc_plan = json.loads(plan.read_text())
+    for block in doc_plan["blocks"][:1]:
+        shift = min(0, now_us() + 12_000_000 - block["start_us"])
+        for key in ("start", "end"):
+            block[f"{key}_us"] += shift
+            block[f"{key}_utc"] = iso_utc(block[f"{key}_us"])
+    plan.write_text(json.dumps(doc_plan))
     p = await asyncio.create_subprocess_exec(
         str(BIN / "vs"), "run", str(plan), "--server", url, "-o", str(run),
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
@@ -428,9 +528,16 @@ async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
 
 
 def main() -> None:
-    kind, out_dir = sys.argv[1], Path(sys.argv[2])
+    if sys.argv[1] == "--observe":
+        observe(sys.argv[2], int(sys.argv[3]), Path(sys.argv[4]))
+        return
+    kind, part, out_dir = sys.argv[1], sys.argv[2], Path(sys.argv[3])
     out_dir.mkdir(parents=True, exist_ok=True)
-    doc = asyncio.run(scenario(kind, out_dir))
+    log = logging.FileHandler(out_dir / "vss.log")  # the rate loop's every cycle, for a post-mortem
+    log.setFormatter(logging.Formatter("%(created).3f %(name)s %(levelname)s %(message)s"))
+    logging.getLogger("virtualstar").addHandler(log)
+    logging.getLogger("virtualstar").setLevel(logging.DEBUG)
+    doc = asyncio.run(scenario(kind, part, out_dir))
     text = json.dumps(doc, default=str)
     (out_dir / "scenario.json").write_text(text)
     print(text)

@@ -112,3 +112,62 @@ def test_vs_server_refuses_signals_for_an_astcom_mount():
                                    "ws://127.0.0.1:0"])
     assert out.exit_code == 2 and "alpaca:// or indi://" in out.output
 
+
+
+def _plan_pass(tmp_path, geometry: str):
+    """`vs plan` of a program whose one target is an ISS-like pass culminating 70° high, ~45°
+    of azimuth off the meridian (it crosses the meridian some 20° from culmination)."""
+    from typer.testing import CliRunner
+
+    from virtualstar.cli.main import app
+
+    culm_s = 1_790_000_000.0
+    name, l1, l2 = synthetic_pass_tle(-30.0, 0.0, 1500.0, culm_s)
+    (tmp_path / "pass.tle").write_text(f"{name}\n{l1}\n{l2}\n")
+    (tmp_path / "site.toml").write_text("[site]\nlat_deg = -30.0\nlon_deg = 0.0\n"
+                                        "height_m = 1500.0\n")
+    (tmp_path / "program.toml").write_text(
+        '[program]\nname = "flip"\n\n[defaults]\nmin_el_deg = 20\nsun_max_el_deg = 90\n'
+        'moon_min_sep_deg = 0\n\n[[target]]\ntle_file = "pass.tle"\nsat = "ISS-LIKE"\n')
+    iso = [datetime.fromtimestamp(culm_s + d, tz=UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+           for d in (-900, 900)]
+    out = CliRunner().invoke(app, [
+        "plan", str(tmp_path / "program.toml"), "--from", iso[0], "--to", iso[1], "--site-file",
+        str(tmp_path / "site.toml"), "--mount-geometry", geometry, "--json"])
+    assert out.exit_code == 0, out.output
+    import json
+
+    blocks = json.loads(out.output)["blocks"]
+    assert len(blocks) == 1, blocks
+    return blocks[0], (name, l1, l2)
+
+
+def _hour_angles_deg(tle, t_s: np.ndarray) -> np.ndarray:
+    """skyfield's hour angle of date of the satellite at the site (-30°, 0°, 1500 m), degrees."""
+    from skyfield.api import EarthSatellite, wgs84
+
+    from virtualstar.astro.bodies import skyfield_context
+
+    sf = skyfield_context(EarthOrientation.from_astropy_iers_data())
+    sat = EarthSatellite(tle[1], tle[2], tle[0], sf.ts)
+    here = sf.ephemeris["earth"] + wgs84.latlon(-30.0, 0.0, 1500.0)
+    ts = sf.ts.from_datetimes([datetime.fromtimestamp(float(x), tz=UTC) for x in t_s])
+    ra, _dec, _ = here.at(ts).observe(sf.ephemeris["earth"] + sat).apparent().radec(epoch="date")
+    return ((ts.gast * 15.0 + 0.0 - ra.hours * 15.0) + 180.0) % 360.0 - 180.0
+
+
+def test_vs_plan_cuts_a_pass_to_one_side_of_the_meridian_for_a_german_mount(tmp_path):
+    """A German mount would flip in the middle of a pass that crosses the meridian: `vs plan
+    --mount-geometry german` plans only its longest stretch on one side (skyfield's hour
+    angle keeps its sign all through the block), an alt-az plan keeps the whole pass."""
+    whole, tle = _plan_pass(tmp_path, "altaz")
+    german, _ = _plan_pass(tmp_path, "german")
+    t_whole = np.linspace(whole["start_us"], whole["end_us"], 200) / 1e6
+    ha_whole = _hour_angles_deg(tle, t_whole)
+    assert ha_whole.min() < 0 < ha_whole.max(), "the test pass must cross the meridian"
+    t = np.linspace(german["start_us"], german["end_us"], 200) / 1e6
+    ha = _hour_angles_deg(tle, t)
+    assert np.all(ha > -0.05) or np.all(ha < 0.05), np.round(ha, 2)  # one side (a 1-s step)
+    assert german["end_us"] - german["start_us"] < whole["end_us"] - whole["start_us"]
+    assert german["end_us"] - german["start_us"] >= 30e6  # the longer side is kept
+    assert german["constraints"].get("meridian_cut") and "meridian_cut" not in whole["constraints"]

@@ -39,6 +39,10 @@ def plan(
     horizon: Annotated[Path | None, typer.Option(
         "--horizon", help="Horizon profile ('AZ_DEG EL_DEG' lines); default: the site file's "
                           "or the flat limit.")] = None,
+    mount_geometry: Annotated[str, typer.Option(
+        "--mount-geometry", help="The mount's geometry: altaz, fork or german (`vs status "
+        "--json` → backend.capabilities.geometry). On a German mount every satellite pass is "
+        "cut to its longest stretch on one side of the meridian (no flip mid-track).")] = "altaz",
     as_json: Annotated[bool, typer.Option("--json", help="Print the plan as JSON.")] = False,
 ) -> None:
     """Plan a night: satellite passes become fixed blocks, sidereal targets fill the gaps by
@@ -51,6 +55,8 @@ def plan(
     def fail(message: str):  # with --json, the error goes to stdout as JSON too
         return status_fail(message, as_json=as_json)
 
+    if mount_geometry not in ("altaz", "fork", "german"):
+        raise fail(f"--mount-geometry {mount_geometry!r}: expected altaz, fork or german")
     if (night is None) == (start is None and end is None) or ((start is None) != (end is None)):
         raise fail("give either --night DATE or both --from and --to")
     try:
@@ -70,7 +76,8 @@ def plan(
                 raise fail(f"--to {end} is not after --from {start}")
             if b - a > 36 * 3600e6:
                 raise fail("--from/--to span more than 36 hours: plan one night at a time")
-        result = plan_program(PlanRequest(prog, a, b, site, zones), eop)
+        result = plan_program(PlanRequest(prog, a, b, site, zones,
+                                          mount_geometry=mount_geometry), eop)
         if png is not None:
             from virtualstar.planning.plot import plot_plan
 

@@ -29,6 +29,9 @@ class PlanRequest:
     setup_s: float = SETUP_S
     skip: frozenset[str] = frozenset()  # targets already done (re-planning a running night)
     start_place_deg: tuple[float, float] = (PARK_AZ_DEG, PARK_EL_DEG)  # mount az, el at start
+    # "altaz", "fork" or "german" (a backend's capabilities.geometry): a German mount
+    # follows a pass on one side of the meridian only (it would flip in between)
+    mount_geometry: str = "altaz"
 
 
 def plan_program(req: PlanRequest, eop: EarthOrientation | None = None) -> Plan:
@@ -40,7 +43,9 @@ def plan_program(req: PlanRequest, eop: EarthOrientation | None = None) -> Plan:
     skies = target_skies([t for t in targets if not t.is_satellite], grid, req.site, eop,
                          req.zones)
     satellites = [t for t in targets if t.is_satellite]
-    passes = {t.name: satellite_windows(t, grid, req.site, eop, req.zones) for t in satellites}
+    passes = {t.name: satellite_windows(t, grid, req.site, eop, req.zones,
+                                        mount_geometry=req.mount_geometry)
+              for t in satellites}
     plan = schedule(req.program.name, grid, skies, passes, satellites, limits=req.limits,
                     setup_s=req.setup_s, start_place_deg=req.start_place_deg)
     plan.site = dataclasses.asdict(req.site)

@@ -197,7 +197,8 @@ def schedule(program: str, grid: NightGrid, skies: list[TargetSky], passes: dict
             block = Block(target.name, "satellite", placed + 1, target.priority, w["start_us"],
                           w["end_us"], w["start_az_deg"], w["start_el_deg"], w["end_az_deg"],
                           w["end_el_deg"], az_travel_deg=w["az_travel_deg"],
-                          constraints={"culmination_el_deg": round(w["culmination_el_deg"], 3)})
+                          constraints={"culmination_el_deg": round(w["culmination_el_deg"], 3),
+                                       **({"meridian_cut": True} if w.get("meridian_cut") else {})})
             clash = _clash(blocks, block, ctx)
             if clash is not None:
                 reasons.append(f"the pass at {iso_utc(w['start_us'])} overlaps {clash}")

@@ -248,9 +248,15 @@ def constraint_masks(target: ProgramTarget, az: np.ndarray, el: np.ndarray, grid
 
 
 def satellite_windows(target: ProgramTarget, grid: NightGrid, site: Site, eop: EarthOrientation,
-                      zones: AvoidanceZones, step_s: float = 1.0) -> list[dict]:
+                      zones: AvoidanceZones, step_s: float = 1.0, *,
+                      mount_geometry: str = "altaz") -> list[dict]:
     """Return the passes of a satellite target in the night, each trimmed to its part that
-    satisfies the target's constraints: [{start_us, end_us, culmination_el_deg, az/el...}]."""
+    satisfies the target's constraints: [{start_us, end_us, culmination_el_deg, az/el...}].
+
+    On a German mount (`mount_geometry="german"`) a pass is never planned across the
+    meridian, where the mount would have to flip mid-track: it is cut to its longest
+    stretch on one side (``meridian_cut`` true), as the VSS's pass selection does.
+    """
     sat = load_target_satellite(target)
     t0, t1 = int(grid.t_us[0]), int(grid.t_us[-1])
     # where it is above min_el: a scan every SCAN_STEP_S (one vectorised SGP4 call), each
@@ -277,17 +283,31 @@ def satellite_windows(target: ProgramTarget, grid: NightGrid, site: Site, eop: E
         if target.sunlit_while_dark:
             ok &= (satellite_sunlit(sat.satrec, UtcTimes.from_unix_us(t), eop)
                    & (fine.sun_el_deg < DARK_SUN_EL_DEG))
+        whole = _runs(ok)
+        if mount_geometry == "german":
+            ok &= ~_meridian_crossings(obs.az_rad, obs.el_rad, site)
         runs = _runs(ok)
         if not runs:
             continue
         j0, j1 = max(runs, key=lambda r: r[1] - r[0])
+        cut = (j0, j1) != max(whole, key=lambda r: r[1] - r[0])  # not what alt-az gets
         path = np.degrees(np.unwrap(obs.az_rad[j0:j1 + 1]))
         out.append({"start_us": int(t[j0]), "end_us": int(t[j1]),
                     "az_travel_deg": float(path[-1] - path[0]),
                     "start_az_deg": float(az[j0]), "start_el_deg": float(el[j0]),
                     "end_az_deg": float(az[j1]), "end_el_deg": float(el[j1]),
-                    "culmination_el_deg": float(el.max())})
+                    "culmination_el_deg": float(el.max()),
+                    **({"meridian_cut": True} if cut else {})})
     return out
+
+
+def _meridian_crossings(az_rad: np.ndarray, el_rad: np.ndarray, site: Site) -> np.ndarray:
+    """True at each sample whose hour angle has the other sign than the sample before (the
+    first sample after a meridian crossing): removing them splits a pass into its sides.
+    The hour angle's sign is the azimuth's side of the meridian (refraction leaves it)."""
+    ha, _dec = erfa.ae2hd(np.mod(az_rad, 2 * np.pi), el_rad, np.radians(site.lat_deg))
+    side = np.sin(ha) >= 0
+    return np.r_[False, side[1:] != side[:-1]]
 
 
 def _sep(az1, el1, az2, el2) -> np.ndarray:

@@ -121,7 +121,8 @@ async def acquire(t: Station, op: Operation, path: Path, *, not_before_us: int |
     """
     if not t.link.capabilities.trajectory_buffer:
         return await rate_procedures.acquire_by_rates(t, op, path, not_before_us=not_before_us,
-                                                      end_us=end_us, allow_sun=allow_sun)
+                                                      end_us=end_us, allow_sun=allow_sun,
+                                                      corrections=corrections)
     cfg = t.config
     lead_s = t.margins.start_lead_s
     plan = 0

@@ -49,7 +49,8 @@ class _TelescopeApi:
 
         t = self.t
         req = PlanRequest(program, start_us, end_us, t.config.site, t.safety.zones(),
-                          limits=t.limits, start_place_deg=place_deg)
+                          limits=t.limits, start_place_deg=place_deg,
+                          mount_geometry=t.link.capabilities.geometry or "altaz")
         if t.clock.lockstep:  # mount time stands still while this loop computes
             return plan_program(req, t.eop)
         return await asyncio.to_thread(plan_program, req, t.eop)  # the feeder keeps running

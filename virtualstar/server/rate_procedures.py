@@ -5,8 +5,9 @@ false, ``rate_axes`` true); the recipe is the same as with a buffer, in mount ti
 
 * `acquire_by_rates`: plan the join instant from the distance and the driver's rate,
   go round the Sun/Moon zones through fixed waypoints (`slew` role, the checks of
-  `goto_safely`), goto the path's place at the join (`goto_native`, held by the
-  mount's tracking), then hand over to a `RateFollower` that waits for the join.
+  `goto_safely`), goto the start of the run-up to the path's place at the join
+  (`goto_native`, held by the mount's tracking), then hand over to a `RateFollower`
+  that starts the path's rate along the run-up and follows the path from the join.
 * `equatorial_stretch`: on an equatorial mount, the part of a satellite pass the mount
   can follow without a meridian flip (German) and with its right-ascension axis within
   its rate limit near the pole (the equatorial keyhole).
@@ -21,7 +22,14 @@ import numpy as np
 
 from .exceptions import TargetUnreachable, Unsupported
 from .operations import Operation, Phase
-from .rate_loop import MERIDIAN_LIMIT_DEG, NativeFrame, RateFollower, RateJoin
+from .rate_loop import (
+    MERIDIAN_LIMIT_DEG,
+    NativeFrame,
+    RateFollower,
+    RateJoin,
+    run_up_s,
+    run_up_start,
+)
 from .trajectories import Path, TablePath
 
 if TYPE_CHECKING:
@@ -29,8 +37,12 @@ if TYPE_CHECKING:
 
 __all__ = ["acquire_by_rates", "equatorial_stretch", "follow_now"]
 
-JOIN_MARGIN_S = 5.0  # mount seconds between landing at the join point and the join (the
-# axis-sign probe runs meanwhile: about 2 s)
+JOIN_MARGIN_S = 5.0  # mount seconds between landing and the run-up's start (the axis-sign
+# probe runs meanwhile: about 2 s)
+PROBE_ALLOWANCE_US = 4_000_000  # the axis-sign probe: about 2 s at 4 reports a second
+STILL_ARCSEC = 2.0  # a path that moves less than this (native axes) may be joined sooner
+SOONER_MARGIN_US = 3_000_000  # ... this long after the goto landed, for the loop to take up
+# the goto's residual (a loaded host: at 0.5 s an Alpaca star landed 288″ off at the check)
 GOTO_SETTLE_S = 1.5  # a goto's end is seen a few reports after the driver lands
 MAX_JOIN_PLANS = 6
 POLE_RATE_FRACTION = 0.9  # the right-ascension axis may use this much of its rate limit
@@ -85,11 +97,20 @@ def route_estimate_s(t: Station, here, legs: list[tuple[float, float]]) -> float
 
 async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
                            not_before_us: int | None = None, end_us: int | None = None,
-                           allow_sun: bool = False) -> tuple[RateJoin, RateFollower]:
-    """Goto a point ahead on `path`, then return the join and the follower that takes over."""
+                           allow_sun: bool = False,
+                           corrections=None) -> tuple[RateJoin, RateFollower]:
+    """Goto a point ahead on `path`, then return the join and the follower that takes over.
+
+    Offsets (`corrections`, PWI4-style, guide pulses) need nothing more on a rate mount:
+    the loop samples the offset path at every report, so a change is followed from the
+    next report on. Changes made before the join start at the join (the goto aims at the
+    place the offsets had when it was planned).
+    """
     require_rates(t)
     frame = frame_of(t)
-    margin_s = JOIN_MARGIN_S
+    stats = getattr(t.link, "stats", None)
+    run_up_us = int(run_up_s(stats.period_s() if stats is not None else None) * 1e6)
+    margin_s = JOIN_MARGIN_S + run_up_us / 1e6
     for plan in range(MAX_JOIN_PLANS):
         here = await t.motion.position()
         join_us = max(here.t_us, not_before_us or 0)
@@ -105,26 +126,36 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
         if end_us is not None and join_us > end_us - 10_000_000:
             raise TargetUnreachable(f"too little of the path is left to join it: it ends "
                                     f"{(end_us - here.t_us) / 1e6:.0f} s from now")
-        at = path.sample(np.array([join_us], np.int64))
-        az, el = float(at.az_rad[0]), float(at.el_rad[0])
+        # the goto goes to the start of the run-up (a few degrees before the join point
+        # at most, on the line the path arrives along): that place is checked and routed
+        if corrections is not None:
+            corrections.hold_until(join_us)
+        start = run_up_start(frame, path, join_us, run_up_us)
+        az, el = frame.observed(start, join_us - run_up_us)
         t.supervisor.phase(op, Phase.SLEWING, to_az_deg=math.degrees(az) % 360.0,
-                           to_el_deg=math.degrees(el), join_us=join_us)
+                           to_el_deg=math.degrees(el), join_us=join_us,
+                           run_up_s=run_up_us / 1e6)
         legs = t.safety.route(here.az_rad, here.el_rad, az, el, here.t_us,
-                              f"the join point of {op.target}", allow_sun=allow_sun)
+                              f"the run-up to {op.target}", allow_sun=allow_sun)
         if len(legs) > 1:
             op.info["detour_deg"] = [[round(math.degrees(a), 3), round(math.degrees(e), 3)]
                                      for a, e in legs[:-1]]
         steps = short_legs(here, legs)
         for leg_az, leg_el in steps[:-1]:  # waypoints round a zone
             await t.link.call("goto_place", math.degrees(leg_az), math.degrees(leg_el))
-        ra_dec = frame.place(path, np.array([join_us], np.int64))
-        await t.link.call("goto_native", float(ra_dec[0][0]), float(ra_dec[1][0]))
+        await t.link.call("goto_native", start[0], start[1])
         landed_us = await t.motion.mount_time_us()
-        if landed_us < join_us - 0.5e6:
+        # the sign probe (after a connection or a pier change) runs before the run-up
+        probe_us = 0 if getattr(t.link, "signs_measured", True) else PROBE_ALLOWANCE_US
+        if landed_us < join_us - run_up_us - probe_us - 500_000:
+            join_us = _sooner_if_still(frame, path, join_us,
+                                       landed_us + probe_us + run_up_us + SOONER_MARGIN_US)
+            if corrections is not None:
+                corrections.hold_until(join_us)
             if join_us - landed_us > 5e6:
                 t.supervisor.phase(op, Phase.WAITING, join_us=join_us)
             follower = RateFollower(t.link, frame, path, join_us, errors=t.errors,
-                                    note_rates=None)
+                                    note_rates=None, run_up_us=run_up_us)
             op.info["join_plans"] = plan + 1
             t.supervisor.phase(op, Phase.JOINING)
             return RateJoin(path, join_us, landed_us), follower
@@ -132,6 +163,19 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
     raise TargetUnreachable(f"could not reach the join point of {op.target} ahead of the "
                             f"target after {MAX_JOIN_PLANS} gotos (the driver's gotos are "
                             "slower than its rate limit says)")
+
+
+def _sooner_if_still(frame: NativeFrame, path: Path, join_us: int, earliest_us: int) -> int:
+    """Join at `earliest_us` instead when the path's native place is the same then (within
+    `STILL_ARCSEC`): a star on an equatorial mount, whose place of date barely moves, need
+    not wait for the slew estimate (made for the driver's worst case) to run out."""
+    if earliest_us >= join_us:
+        return join_us
+    at = np.array([earliest_us, join_us], np.int64)
+    a1, a2 = frame.place(path, at)
+    d1 = float((a1[1] - a1[0] + math.pi) % (2 * math.pi) - math.pi) * math.cos(float(a2[1]))
+    moved_arcsec = math.degrees(math.hypot(d1, float(a2[1] - a2[0]))) * 3600.0
+    return earliest_us if moved_arcsec < STILL_ARCSEC else join_us
 
 
 def follow_now(t: Station, path: Path, join_us: int) -> tuple[RateJoin, RateFollower]:

@@ -56,6 +56,13 @@ def _now_us() -> int:
     return time.time_ns() // 1000
 
 
+
+class _Gone:
+    state = "Gone"  # a vector of a lost connection: never Busy
+
+
+_GONE = _Gone()
+
 class IndiDriver:
     """One INDI telescope device, its properties pushed by indiserver."""
 
@@ -127,6 +134,7 @@ class IndiDriver:
         self._client, self._task, self._place, self._read_place = None, None, None, None
 
     def _vector(self, name: str):
+        """The device's vector `name`, or None (not defined, or the connection is gone)."""
         client = self._client
         if client is None or self.device not in client:
             return None
@@ -186,6 +194,8 @@ class IndiDriver:
         fresh = place is not self._read_place
         self._read_place = place
         eq = self._vector("EQUATORIAL_EOD_COORD")
+        if eq is None:
+            raise OSError(f"INDI {self.device}: EQUATORIAL_EOD_COORD is gone (connection lost)")
         track = self._vector("TELESCOPE_TRACK_STATE")
         park = self._vector("TELESCOPE_PARK")
         pier = self._vector("TELESCOPE_PIER_SIDE")
@@ -205,7 +215,7 @@ class IndiDriver:
         await self._send("ON_COORD_SET", {"TRACK": "On", "SLEW": "Off", "SYNC": "Off"})
         await self._send("EQUATORIAL_EOD_COORD", {"RA": ra_h % 24.0, "DEC": dec_deg})
         # the driver flags the goto (Busy) when it has taken it
-        await self._wait(lambda: self._vector("EQUATORIAL_EOD_COORD").state == "Busy"
+        await self._wait(lambda: (self._vector("EQUATORIAL_EOD_COORD") or _GONE).state == "Busy"
                          or self._is_close(ra_h, dec_deg), "the goto")
 
     def _is_close(self, ra_h: float, dec_deg: float) -> bool:
@@ -214,6 +224,8 @@ class IndiDriver:
 
     async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
         mode = self._vector("TELESCOPE_TRACK_MODE")
+        if mode is None:  # the connection was lost (indiserver may drop a slow client)
+            raise OSError(f"INDI {self.device}: TELESCOPE_TRACK_MODE is gone (connection lost)")
         if not (ra_deg_s or dec_deg_s):
             # no offset: the mount's own sidereal tracking (libindi refuses a custom rate that
             # equals sidereal, and keeps the last one: the mount would go on turning)

@@ -71,6 +71,9 @@ _ROLES = ("az_position", "el_position", "axis1_position", "axis2_position", "rep
 _FUNCTIONS = ("power_on", "power_off", "stop", "slew", "goto_place", "goto_native", "set_rates",
               "traj_reset", "reset_faults")
 
+PUSH_SILENCE_ARCSEC = 1.0  # a silent pushing driver's last place counts as current while the
+# commanded rates could have moved it less than this since it was pushed
+
 
 @dataclass(frozen=True)
 class DriverReport:
@@ -156,6 +159,7 @@ class _Report:
     read_us: int  # when it was last read
     flags: DriverReport
     spread_us: int = 0  # half the interval it appeared in: the report time's uncertainty
+    first_t_us: int = 0  # the mount time it described when it first appeared
 
 
 @dataclass
@@ -169,6 +173,15 @@ class ReportStats:
 
     def period_s(self) -> float | None:
         return statistics.median(self.periods_s) if len(self.periods_s) >= 3 else None
+
+    def jitter_s(self) -> float:
+        """How irregularly new places arrive: the median absolute deviation of the last 20
+        intervals from their median (a loaded host handles a push late by this much)."""
+        last = list(self.periods_s)[-20:]
+        if len(last) < 3:
+            return 0.0
+        mid = statistics.median(last)
+        return statistics.median(abs(x - mid) for x in last)
 
 
 def _now_us() -> int:
@@ -256,7 +269,7 @@ class RateMountLink:
             out["reported"] = {"ra_deg": math.degrees(rep.ra_rad) % 360.0,
                                "dec_deg": math.degrees(rep.dec_rad),
                                "t_us": rep.t_us, "age_s": (_now_us() - rep.t_us) / 1e6,
-                               "time_uncertainty_s": rep.spread_us / 1e6,
+                               "time_uncertainty_s": self.report_spread_us() / 1e6,
                                "slewing": rep.flags.slewing, "tracking": rep.flags.tracking,
                                "at_park": rep.flags.at_park,
                                "side_of_pier": {0: "east", 1: "west"}.get(
@@ -427,7 +440,7 @@ class RateMountLink:
                 t_us, spread = (old.read_us + mid) // 2, (mid - old.read_us) // 2
             if old is not None and old.t_us < t_us:
                 self.stats.periods_s.append((t_us - old.t_us) / 1e6)
-            self._report = _Report(ra, dec, t_us, mid, rep, spread)
+            self._report = _Report(ra, dec, t_us, mid, rep, spread, t_us)
             self.stats.reports += 1
             self._new_report.set()
             self._new_report = asyncio.Event()
@@ -435,7 +448,14 @@ class RateMountLink:
         else:
             old.read_us = mid
             old.flags = rep
-            if self._rates_rad_s == (0.0, 0.0) and (rep.tracking or rep.at_park):
+            still = self._rates_rad_s == (0.0, 0.0) and (rep.tracking or rep.at_park)
+            # a pushing driver pushes a place only when it has changed enough (the INDI
+            # simulator: a few tenths of an arcsecond): at a tiny commanded rate its silence
+            # means it moved less than `PUSH_SILENCE_ARCSEC` since its last push
+            drift = math.hypot(*self._rates_rad_s) * (mid - old.first_t_us) / 1e6
+            quiet = (not self.driver.poll_s and rep.tracking
+                     and drift * ARCSEC_PER_RAD < PUSH_SILENCE_ARCSEC)
+            if still or quiet:
                 # a place that stands still on the sky describes now as well (with tracking
                 # off the place of date moves: a silent driver's report is then just old)
                 old.t_us, old.spread_us = mid, 0
@@ -581,11 +601,23 @@ class RateMountLink:
             left = deadline - time.monotonic()
             if left <= 0 or not self.connected:
                 return
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._new_report.wait(), left)
+            # asyncio.wait, not wait_for: Python 3.11's wait_for can swallow a cancellation
+            # that arrives as the event is set (set at every read of a quiet driver), and
+            # the rate loop waiting here would outlive its operation
+            waiter = asyncio.ensure_future(self._new_report.wait())
+            try:
+                await asyncio.wait({waiter}, timeout=left)
+            finally:
+                waiter.cancel()
 
     def report_spread_us(self) -> int:
-        return 0 if self._report is None else self._report.spread_us
+        """The uncertainty of the newest report's time: half the interval it appeared in
+        (polled), or for a push the jitter of the pushes' arrival (its handling delay)."""
+        if self._report is None:
+            return 0
+        if self._report.flags.received_us is not None:
+            return max(self._report.spread_us, int(self.stats.jitter_s() * 1e6))
+        return self._report.spread_us
 
     async def call(self, role: str, *args: Any) -> Any:
         self.calls.append(MountCall(next(self._call_seq), role, current_operation.get()))
@@ -599,8 +631,11 @@ class RateMountLink:
                 return await asyncio.wait_for(fn(*args), self.config.timeout_s * 30)
             except (OSError, TimeoutError) as exc:
                 self.last_error = f"{role}: {exc or type(exc).__name__}"
-                raise MountUnavailable(f"the {self.backend} driver did not answer {role}: "
-                                       f"{exc or type(exc).__name__}") from None
+                err = MountUnavailable(f"the {self.backend} driver did not answer {role}: "
+                                       f"{exc or type(exc).__name__}")
+                # slow (a loaded host), not gone: the caller may try once more
+                err.timed_out = isinstance(exc, TimeoutError) and self.connected
+                raise err from None
 
     async def _send(self, coro) -> None:
         await asyncio.wait_for(coro, self.config.timeout_s)

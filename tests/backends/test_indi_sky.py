@@ -1,0 +1,11 @@
+"""The VSS on INDI's indi_simulator_telescope (indiserver): a star, `vs run`, the Sun refused, a slew round it (sky_checks.py; real time)."""
+
+import pytest
+
+pytest.register_assert_rewrite("sky_checks")
+
+from scenario_run import SCENARIO_TIMEOUT_S, scenario_fixture  # noqa: E402
+from sky_checks import *  # noqa: E402, F403
+
+pytestmark = pytest.mark.timeout(SCENARIO_TIMEOUT_S + 60)
+seen = scenario_fixture("indi", "sky")
