@@ -18,11 +18,14 @@ since the epoch) and by a little across it. `shifted_tle` moves a satellite:
   the δΩ·cos i it brings along the track is taken back out of the mean anomaly.
   Positive: to the left of the direction of travel, as the VSS's `transverse`.
 
-Both are then corrected twice by what `measure_offsets` (skyfield) sees from the site at
-`at_us`, so that *there and then* the truth is `along_s` along and `across_arcsec`
-across; elsewhere on the pass it differs as a real error does. The result is written as
-TLE text with `sgp4.exporter` (angles to 1e-4°: the time to 2 ms, the across offset to
-about an arcsecond).
+Both are then corrected by what `measure_offsets` (skyfield) sees from the site at
+`at_us` until *there and then* the truth is `along_s` along (to 10 µs) and `across_arcsec`
+across (to 0.01″); elsewhere on the pass it differs as a real error does. (What a move
+is seen as depends on both offsets: 2 s of mean anomaly alone look like ≈ 2.09 s along
+and tens of arcseconds across. Each round moves the elements by the miss through
+Broyden's running estimate of that dependence; three to five rounds converge.) The
+result is written as TLE text with `sgp4.exporter` (angles to 1e-4°: the time to 2 ms,
+the across offset to about an arcsecond).
 """
 
 from __future__ import annotations
@@ -39,6 +42,11 @@ from .truth import CameraSite
 __all__ = ["measure_offsets", "shifted_elements", "shifted_tle"]
 
 MINUTES_PER_S = 1.0 / 60.0
+# shifted_elements corrects its move until it is seen this close (10 µs: ≤ 0.04″ at 1°/s)
+ALONG_TOLERANCE_S = 1e-5
+ACROSS_TOLERANCE_ARCSEC = 0.01
+MAX_ROUNDS = 8
+RATE_STEP_US = 100_000  # the direction of travel: the track from 50 ms before to 50 ms after
 
 
 def _satrec(line1: str, line2: str):
@@ -83,20 +91,34 @@ def shifted_elements(line1: str, line2: str, *, along_s: float, across_arcsec: f
                      at_us: int, site: CameraSite):
     """Return the elements (an sgp4 `Satrec`, full precision) of the satellite moved along
     and across its track, so that seen from `site` at `at_us` it is `along_s` later along
-    the track and `across_arcsec` across it (two rounds: what a move of the elements looks
-    like from the ground is measured with `measure_offsets` and the rest moved again)."""
+    the track and `across_arcsec` across it (in rounds: what a move of the elements looks
+    like from the ground is measured with `measure_offsets` and the rest moved again, until
+    it is within ALONG_TOLERANCE_S and ACROSS_TOLERANCE_ARCSEC)."""
     if not (math.isfinite(along_s) and math.isfinite(across_arcsec)):
         raise CameraConfigError("along_s and across_arcsec must be finite")
     sat = _satrec(line1, line2)
     if not along_s and not across_arcsec:
         return sat
-    a, c = along_s, across_arcsec
-    out = _move(sat, a, c, at_us, site)
-    for _ in range(2):
-        seen_a, seen_c = measure_offsets(sat, out, np.array([at_us]), site)
-        a += along_s - float(seen_a[0])
-        c += across_arcsec - float(seen_c[0])
-        out = _move(sat, a, c, at_us, site)
+    from .truth import SatelliteTruth
+
+    nominal = SatelliteTruth.from_satrec(sat, _plain_site(site))  # its places once, not per round
+    target = np.array([along_s, across_arcsec])
+    moved = target.copy()  # what the elements are moved by (seconds, arcsec)
+    jac = np.eye(2)  # d(seen)/d(moved): Broyden's estimate, updated each round
+    out = _move(sat, *moved, at_us, site)
+    before = None  # (moved, seen) of the round before
+    for _ in range(MAX_ROUNDS):
+        seen = np.array([float(x[0]) for x in measure_offsets(nominal, out, np.array([at_us]),
+                                                               site)])
+        miss = target - seen
+        if abs(miss[0]) <= ALONG_TOLERANCE_S and abs(miss[1]) <= ACROSS_TOLERANCE_ARCSEC:
+            break
+        if before is not None:
+            d_moved, d_seen = moved - before[0], seen - before[1]
+            jac += np.outer(d_seen - jac @ d_moved, d_moved) / (d_moved @ d_moved)
+        before = (moved, seen)
+        moved = moved + np.linalg.solve(jac, miss)
+        out = _move(sat, *moved, at_us, site)
     return out
 
 
@@ -147,14 +169,16 @@ def measure_offsets(nominal, truth, t_us: np.ndarray,
                     site: CameraSite) -> tuple[np.ndarray, np.ndarray]:
     """Return (along seconds, across arcsec) of `truth` relative to `nominal` at times.
 
-    Each is (line1, line2) or an sgp4 `Satrec`. From skyfield's apparent places: the along offset τ solves truth(t) ≈ nominal(t + τ)
-    along the track (Newton steps), the across offset is what is left, positive to the
-    left of the direction of travel (x = az·cos E right, y = el up).
+    Each is (line1, line2), an sgp4 `Satrec` or a `SatelliteTruth`. From skyfield's
+    apparent places: the along offset τ solves truth(t) ≈ nominal(t + τ) along the track
+    (Newton steps), the across offset is what is left, positive to the left of the
+    direction of travel (x = az·cos E right, y = el up).
     """
     from .truth import SatelliteTruth
 
-    where = CameraSite(site.lat_deg, site.lon_deg, site.height_m)
-    nom, tru = (SatelliteTruth.of(x, where) for x in (nominal, truth))
+    where = _plain_site(site)
+    nom, tru = (x if isinstance(x, SatelliteTruth) else SatelliteTruth.of(x, where)
+                for x in (nominal, truth))
     t = np.asarray(t_us, np.int64)
     t_az, t_el = tru.place(t)
     tau = np.zeros(len(t))
@@ -165,15 +189,24 @@ def measure_offsets(nominal, truth, t_us: np.ndarray,
     return tau, (-x * uy + y * ux)
 
 
+def _plain_site(site: CameraSite) -> CameraSite:
+    return CameraSite(site.lat_deg, site.lon_deg, site.height_m)
+
+
 def _relative(nom, t, tau, t_az, t_el):
     shifted = t + np.round(tau * 1e6).astype(np.int64)
     az, el = nom.place(shifted)
-    az2, el2 = nom.place(shifted + 100_000)
+    # the direction of travel *at* the nominal place: a central difference (a forward one
+    # gives it 50 ms on, turned by up to 0.3° near a LEO's culmination, where the az/el
+    # axes themselves turn at the azimuth rate × sin E: 0.2″ along for 40″ across)
+    az1, el1 = nom.place(shifted - RATE_STEP_US // 2)
+    az2, el2 = nom.place(shifted + RATE_STEP_US // 2)
+    step_s = RATE_STEP_US / 1e6
     x = np.remainder(t_az - az + math.pi, 2 * math.pi) - math.pi
     x = x * np.cos(el) * 206264.80624709636
     y = (t_el - el) * 206264.80624709636
-    vx = np.remainder(az2 - az + math.pi, 2 * math.pi) - math.pi
-    vx = vx * np.cos(el) * 206264.80624709636 / 0.1
-    vy = (el2 - el) * 206264.80624709636 / 0.1
+    vx = np.remainder(az2 - az1 + math.pi, 2 * math.pi) - math.pi
+    vx = vx * np.cos(el) * 206264.80624709636 / step_s
+    vy = (el2 - el1) * 206264.80624709636 / step_s
     rate = np.hypot(vx, vy)
     return x, y, vx / rate, vy / rate, rate

@@ -20,14 +20,19 @@ from hypothesis import strategies as st
 from virtualstar.server.commands import COMMANDS
 
 NAN, INF = math.nan, math.inf
+NOT_JSON = [NAN, INF, -INF]  # JSON has no such numbers: on the wire its parser refuses them
 HUGE = [1e300, -1e300, 2**70, -(2**70), 10**30]
 # Parameters whose domain has no negative values: durations, counts, times, rates, sequence
 # numbers and the angles that run from 0 (right ascension, azimuth)
 NEVER_NEGATIVE = {"settle_s", "duration_s", "max_wait_s", "max_points", "since", "limit", "id",
                   "from_us", "to_us", "rate_arcsec_s", "ra_deg", "az_deg"}
 # What a command needs besides the parameter under test, so that only that one is wrong
+# (and its own range check is what refuses it)
 NEEDS = {"slew": {"star": "Vega"}, "track": {"star": "Vega"},
-         "pointing_sample": {"star": "Vega"}, "move": {"az_rate_deg_s": 0.5}}
+         "pointing_sample": {"star": "Vega"}, "move": {"az_rate_deg_s": 0.5},
+         "offset": {"axis": "dec"}, "guide": {"north_arcsec": 1.0}}
+NEEDS_FOR = {("offset", "seconds"): {"axis": "path"},  # seconds of time: along a pass only
+             ("guide", "north_arcsec"): {"east_arcsec": 1.0}}
 
 
 def numeric_parameters() -> list[tuple[str, str]]:
@@ -65,25 +70,87 @@ def test_the_numeric_parameters_are_those_the_api_documents():
     assert ("pointing_sample", "settle_s") in found and ("log", "since") in found
 
 
+def bad_values(name: str) -> list:
+    """Values of a numeric parameter that JSON can carry and its range check must refuse."""
+    values: list = [*HUGE]
+    if name in NEVER_NEGATIVE:
+        values += [-5, -1e-3] if name not in ("duration_s", "rate_arcsec_s") else [-5, 0]
+    return values
+
+
+def own_check(cmd: str, name: str, value) -> str:
+    """What the parameter's own check says of a finite bad value: an integer parameter
+    given a fraction, that it expects an int; else its range's upper bound (commands.py's
+    table: the field's `within`, or the defaults for an int or a float)."""
+    from virtualstar.server.commands import ANY_FLOAT, INT64
+
+    command = COMMANDS[cmd].params
+    f = next(f for f in dataclasses.fields(command) if f.name == name)
+    kinds = typing.get_args(typing.get_type_hints(command)[name])
+    kinds = kinds or (typing.get_type_hints(command)[name],)
+    if float not in kinds and isinstance(value, float):
+        return "expected int"
+    within = f.metadata.get("within", INT64 if float not in kinds else ANY_FLOAT)
+    return f"{within.hi:g}"
+
+
+def params_with(cmd: str, name: str, value) -> dict:
+    """The command's parameters with `value` for `name` and, besides, what it needs."""
+    if cmd in ("slew", "track", "pointing_sample") and name in ("ra_deg", "dec_deg"):
+        return {"ra_deg": 10.0, "dec_deg": 10.0, name: value}
+    if cmd in ("slew", "track", "pointing_sample") and name in ("az_deg", "el_deg"):
+        return {"az_deg": 10.0, "el_deg": 40.0, name: value}
+    return {**NEEDS_FOR.get((cmd, name), NEEDS.get(cmd, {})), name: value}
+
+
 @pytest.mark.parametrize(("cmd", "name"), numeric_parameters())
 def test_nan_infinite_huge_and_impossible_negative_values_are_refused_and_end_nothing(
         tracking, cmd, name):
     op, op_id = tracking
-    values: list = [NAN, INF, -INF, *HUGE]
-    if name in NEVER_NEGATIVE:
-        values += [-5, -1e-3] if name not in ("duration_s", "rate_arcsec_s") else [-5, 0]
-    for value in values:
-        params = {**NEEDS.get(cmd, {}), name: value}
-        if cmd in ("slew", "track", "pointing_sample") and name in ("ra_deg", "dec_deg"):
-            params = {"ra_deg": 10.0, "dec_deg": 10.0, name: value}
-        elif cmd in ("slew", "track", "pointing_sample") and name in ("az_deg", "el_deg"):
-            params = {"az_deg": 10.0, "el_deg": 40.0, name: value}
+    for value in [*NOT_JSON, *bad_values(name)]:
         # NaN and the infinities leave as the tokens Python writes; JSON has none
-        reply = op.request(cmd, raw=json.dumps({"id": 1, "cmd": cmd, "params": params}))
+        frame = json.dumps({"id": 1, "cmd": cmd, "params": params_with(cmd, name, value)})
+        reply = op.request(cmd, raw=frame)
         assert reply["ok"] is False, (cmd, name, value, reply)
         assert reply["error"]["code"] == "bad_request", (cmd, name, value, reply)
+        # each refused by its own check: the parser for what JSON cannot hold, else the
+        # parameter's own check, which names it and says what it expects
+        message = reply["error"]["message"]
+        if math.isfinite(value):
+            assert name in message and own_check(cmd, name, value) in message, (cmd, name,
+                                                                                 value, reply)
+        else:
+            assert "not a JSON number" in message, (cmd, name, value, reply)
         running = op.request("status")["result"]["operation"]
         assert running["id"] == op_id and running["phase"] == "tracking", (cmd, name, value)
+
+
+def test_nan_and_infinities_handed_in_process_are_refused_by_each_parameters_own_check():
+    """The façades hand values on in-process (Alpaca's JSON Parameters are read by Python's
+    json, which takes NaN and Infinity): there no parser stands in front of the ranges."""
+    from vss_rig import run_lockstep_scenario
+
+    from virtualstar.server.exceptions import VssError
+
+    async def scenario(vss, clock):
+        track = await vss.server.call("track", {"star": "Vega"})
+        while (await vss.server.call("status"))["operation"]["phase"] != "tracking":
+            await clock.sleep(1.0)
+        refused, let_through = [], []
+        for cmd, name in numeric_parameters():
+            for value in NOT_JSON:
+                try:
+                    await vss.server.call(cmd, params_with(cmd, name, value))
+                    let_through.append((cmd, name, value))
+                except VssError as exc:
+                    refused.append((cmd, name, value, exc.code, str(exc)))
+        return track["id"], refused, let_through, await vss.server.call("status")
+
+    op_id, refused, let_through, status = run_lockstep_scenario(VEGA_NIGHT, scenario)
+    assert not let_through
+    for cmd, name, value, code, message in refused:
+        assert code == "bad_request" and name in message, (cmd, name, value, code, message)
+    assert status["operation"]["id"] == op_id and status["operation"]["phase"] == "tracking"
 
 
 @pytest.mark.parametrize(("frame", "words"), [

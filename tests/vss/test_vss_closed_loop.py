@@ -13,6 +13,12 @@ import math
 
 import numpy as np
 import pytest
+from closed_loop_truth import (
+    RISING_ISS_UTC,
+    SETTLE_S,
+    check_locked_on_the_true_iss,
+    off_iss_camera,
+)
 from signal_recording import recording
 from sky_truth import satellite_truth, sky_sep_arcsec, star_truth
 from vss_rig import run_lockstep_scenario
@@ -176,3 +182,51 @@ def test_a_closed_loop_without_a_camera_is_refused_naming_the_option():
 
     err = run_lockstep_scenario("2024-05-18T22:00:00Z", scenario)
     assert err.code == "no_camera" and "--camera" in err.message
+
+
+PLAN_START, PLAN_END = RISING_ISS_UTC, "2024-05-18T19:53:00Z"  # the ISS from 10° to 23°
+
+
+def _closed_loop_plan(tmp_path) -> dict:
+    """One ISS block with `closed_loop = true`, the pass cut short by the plan's window."""
+    from virtualstar.planning import PlanRequest, load_program, plan_program
+
+    (tmp_path / "stations.tle").write_text(sample_tle_path("stations").read_text())
+    (tmp_path / "program.toml").write_text("""
+[[target]]
+name = "ISS"
+tle_file = "stations.tle"
+sat = "ISS"
+min_el_deg = 15
+sun_max_el_deg = 90
+closed_loop = true
+""")
+    req = PlanRequest(load_program(tmp_path / "program.toml"), _us(PLAN_START),
+                      _us(PLAN_END), load_site())
+    return plan_program(req).as_dict()
+
+
+def test_a_plan_block_with_closed_loop_runs_locked_on_the_true_iss(tmp_path):
+    site = load_site()
+    plan = _closed_loop_plan(tmp_path)
+    [block] = plan["blocks"]
+    assert block["target"] == "ISS" and block["kind"] == "satellite"
+    camera = off_iss_camera(site, at_us=block["start_us"], seed=7)
+
+    async def scenario(vss, clock):
+        c = vss.client()
+        async with recording(vss, ENCODERS, rate_hz=10.0, clock=clock) as rec:
+            result = await c.request("run_plan", {"plan": plan, "wait": True})
+        status = await c.request("status")
+        return result, rec, status
+
+    result, rec, status = run_lockstep_scenario(PLAN_START, scenario, camera=camera)
+    [r] = result["records"]
+    assert r["outcome"] == "done", r
+    op = status["operation"]
+    assert op["id"] == r["operation_id"]  # the block's own track ...
+    settled = op["info"]["tracking_from_us"] + int(SETTLE_S * 1e6)
+    assert r["end_us"] - settled >= 30_000_000  # at least 30 s of the block to measure
+    # the block's own track ran with the loop, locked on the true ISS
+    check_locked_on_the_true_iss(op["info"]["closed_loop"], rec, settled, r["end_us"], camera,
+                                 site, min_samples=300)

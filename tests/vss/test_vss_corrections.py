@@ -8,13 +8,11 @@ emulator's geometry is perfect and no pointing model is loaded, so encoder = obs
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 from signal_recording import recording
 from sky_truth import iss_truth, radec_truth, sky_sep_arcsec
-from vss_rig import run_lockstep_scenario
+from vss_rig import mapping_without, run_lockstep_scenario
 
 from virtualstar.astro import load_site
 from virtualstar.vss_client import VssRequestError
@@ -77,9 +75,10 @@ def test_an_offset_add_of_30_arcsec_is_reached_within_the_rate_and_acceleration_
             answer = await c.request("offset", {"axis": "el", "op": "add", "arcsec": 30.0})
             await clock.sleep(3.5)
             status = await c.request("status")
-        return answer, status, rec
+        log = await c.request("log", {"since": 0})
+        return answer, status, rec, log
 
-    answer, status, rec = run_lockstep_scenario(
+    answer, status, rec, log = run_lockstep_scenario(
         START, scenario, offset_rate_arcsec_s=rate, offset_accel_arcsec_s2=accel)
     t = rec.t_us
     true_az, true_el = radec_truth(RA_DEG, DEC_DEG, t, site)
@@ -100,6 +99,13 @@ def test_an_offset_add_of_30_arcsec_is_reached_within_the_rate_and_acceleration_
     assert doc["mode"] == "replace_from" and doc["min_lead_ms"] == 20.0
     assert doc["offsets"]["axes"]["el"]["total_arcsec"] == pytest.approx(30.0)
     assert set(doc["offsets"]["axes"]) == {"el"}
+    # logged once, with what was asked and when and how it reaches the mount
+    [event] = [e for e in log["events"] if e["kind"] == "offset"]
+    assert event["fields"] == {"id": answer["id"], "axis": "el", "op": "add", "arcsec": 30.0,
+                               "from_us": answer["from_us"], "lead_ms": 20.0,
+                               "sent": "replace_from"}
+    assert answer["accepted_us"] - 200_000 <= event["t_us"] <= answer["from_us"]
+    assert "offset el add +30″" in event["message"]
 
 
 def test_path_offset_puts_the_boresight_where_skyfield_has_the_iss_1_5_s_later():
@@ -161,14 +167,8 @@ def test_stop_ends_everything_and_leaves_no_offset_behind():
 
 
 def test_a_controller_without_replace_from_falls_back_to_appending_and_says_so(tmp_path):
-    from importlib import resources
-
     site = load_site()
-    doc = json.loads(resources.files("virtualstar").joinpath(
-        "data/emulator-mapping.json").read_text("utf-8"))
-    del doc["functions"]["traj_replace"]
-    mapping = tmp_path / "append-only.json"
-    mapping.write_text(json.dumps(doc))
+    mapping = mapping_without(tmp_path, "traj_replace")
 
     async def scenario(vss, clock):
         c = vss.client()

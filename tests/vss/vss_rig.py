@@ -157,6 +157,21 @@ def run_lockstep_scenario(start_iso: str, scenario, *, site: Site | None = None,
     return run_lockstep(main(), clock)
 
 
+def mapping_without(tmp_path, *functions: str):
+    """The bundled emulator mapping with `functions` roles removed, as a file in `tmp_path`
+    (a controller that lacks them, e.g. `traj_replace`)."""
+    import json
+    from importlib import resources
+
+    doc = json.loads(resources.files("virtualstar").joinpath(
+        "data/emulator-mapping.json").read_text("utf-8"))
+    for role in functions:
+        del doc["functions"][role]
+    path = tmp_path / f"without-{'-'.join(functions)}.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
 async def read_emulator(vss, names: list[str]) -> tuple[dict[str, Any], int]:
     """Read emulator variables over a connection of the test's own (values, mount time µs)."""
     client = await vss.emulator.connect_in_memory(name="test-observer")

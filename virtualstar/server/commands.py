@@ -259,11 +259,10 @@ def _value(cmd: str, name: str, value: Any, hint: Any, meta: Any) -> Any:
     if float in allowed and isinstance(value, int | float) and not isinstance(value, bool):
         if not math.isfinite(value):
             raise BadRequest(f"{cmd}: {name}={value!r} must be a finite number")
-        if isinstance(value, int) and int not in allowed:
-            INT64.check(cmd, name, value)  # before float(): 10**400 would overflow
-            value = float(value)
+        # the parameter's own range first: Python compares an int with a float exactly, so
+        # 10**400 is refused here (in the parameter's terms) before float() could overflow
         meta.get("within", ANY_FLOAT if int not in allowed else INT64).check(cmd, name, value)
-        return value
+        return float(value) if isinstance(value, int) and int not in allowed else value
     if not _plain_match(value, allowed):
         expected = " or ".join(t.__name__ for t in allowed if t is not type(None))
         raise BadRequest(f"{cmd}: {name}={_show(value)} has the wrong type; expected {expected}")

@@ -26,9 +26,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -38,7 +38,7 @@ from .offset_path import OffsetPath, sky_rate_arcsec_s
 from .offsets import OffsetLimits, Offsets
 from .trajectories import Path
 
-__all__ = ["CorrectionMode", "Corrections"]
+__all__ = ["CorrectionMode", "Corrections", "Replanned", "replan", "start_of_change"]
 
 REPLACE_ATTEMPTS = 4
 
@@ -61,6 +61,71 @@ class CorrectionMode:
 
 
 Change = Callable[[Offsets, int, float | None], int]
+S = TypeVar("S")
+
+
+@dataclass(frozen=True)
+class Replanned:
+    """A change that reached the mount: when it was accepted and starts (µs), how it was sent."""
+
+    accepted_us: int  # the mount time read when it was planned
+    from_us: int  # where the changed path begins
+    sent: str  # "replace_from", "planned" (the next batch has it) or "appended"
+    value: Any  # what the change returned
+
+    @property
+    def lead_ms(self) -> float:
+        return (self.from_us - self.accepted_us) / 1000
+
+
+def start_of_change(mode: CorrectionMode, feeder: Feeder | None, now_us: int, margin_us: int,
+                    not_before_us: int | None = None) -> tuple[int, str]:
+    """Where a change may start, and how it reaches the mount."""
+    floor = not_before_us if not_before_us is not None else now_us
+    if feeder is None or not feeder.stats.pushed:
+        return max(now_us, floor), "planned"  # nothing buffered yet: the next batch has it
+    if mode.can_replace:
+        from_us = max(now_us + mode.min_lead_us + margin_us, floor)
+        if from_us <= feeder.stats.last_point_us:
+            return from_us, "replace_from"
+        return from_us, "planned"  # beyond the points buffered: the next batch has it
+    return max(feeder.next_us, floor), "appended"
+
+
+async def replan(mode: CorrectionMode, clock_now: Callable[[], Awaitable[int]],
+                 feeder_of: Callable[[], Feeder | None], change: Callable[[int], Any],
+                 snapshot: Callable[[], S], restore: Callable[[S], None], *,
+                 not_before_us: int | None = None) -> Replanned | None:
+    """Change a path from the earliest mount time the mount allows and send its future again.
+
+    Under the feeder's lock (no cycle in between): read the mount time, choose `from_us`
+    (`start_of_change`), apply `change(from_us)` to what the feeder samples and, with
+    `traj_replace`, send the path again from `from_us`. A refusal (the time went by)
+    puts the state back (`restore(snapshot())`) and tries again from later, up to
+    REPLACE_ATTEMPTS times; None when every attempt was refused. Any other error
+    restores the state and propagates.
+    """
+    margin = mode.margin_us
+    for _attempt in range(REPLACE_ATTEMPTS):
+        feeder = feeder_of()
+        guard = feeder.lock if feeder is not None else contextlib.nullcontext()
+        async with guard:
+            now = int(await clock_now())
+            from_us, how = start_of_change(mode, feeder, now, margin, not_before_us)
+            saved = snapshot()
+            try:
+                value = change(from_us)
+                if how == "replace_from":
+                    await feeder.replace_from(from_us)  # type: ignore[union-attr]
+            except MountRejected:
+                restore(saved)  # the mount keeps the old points
+                margin = max(2 * margin, 5_000)
+                continue
+            except BaseException:
+                restore(saved)
+                raise
+            return Replanned(now, from_us, how, value)
+    return None
 
 
 class Corrections:
@@ -106,46 +171,18 @@ class Corrections:
         (from the mount time it was accepted at) and how it was sent.
         """
         async with self._lock:
-            margin = self.mode.margin_us
-            for _attempt in range(REPLACE_ATTEMPTS):
-                feeder = self.feeder
-                guard = feeder.lock if feeder is not None else contextlib.nullcontext()
-                async with guard:
-                    now = int(await self._now())
-                    from_us, how = self._start(now, margin)
-                    snapshot = self.offsets.snapshot()
-                    try:
-                        reached = change(self.offsets, from_us, self.sky_rate_at(from_us))
-                        if how == "replace_from":
-                            await feeder.replace_from(from_us)  # type: ignore[union-attr]
-                    except MountRejected:
-                        self.offsets.restore(snapshot)  # the mount keeps the old points
-                        margin = max(2 * margin, 5_000)
-                        continue
-                    except BaseException:
-                        self.offsets.restore(snapshot)
-                        raise
-                    record = {"what": what, "accepted_us": now, "from_us": from_us,
-                              "reached_us": int(reached), "lead_ms": (from_us - now) / 1000,
-                              "sent": how}
-                    self.history = (self.history + [record])[-50:]
-                    return record
-            raise NotTracking(f"{what}: the mount refused the re-planned trajectory "
-                              f"{REPLACE_ATTEMPTS} times (the host is too slow for the "
-                              f"{self.mode.min_lead_us / 1000:g} ms lead); try again")
-
-    def _start(self, now: int, margin_us: int) -> tuple[int, str]:
-        """Where a change may start, and how it reaches the mount."""
-        floor = self.not_before_us if self.not_before_us is not None else now
-        feeder = self.feeder
-        if feeder is None or not feeder.stats.pushed:
-            return max(now, floor), "planned"  # nothing buffered yet: the next batch has it
-        if self.mode.can_replace:
-            from_us = max(now + self.mode.min_lead_us + margin_us, floor)
-            if from_us <= feeder.stats.last_point_us:
-                return from_us, "replace_from"
-            return from_us, "planned"  # beyond the points buffered: the next batch has it
-        return max(feeder.next_us, floor), "appended"
+            done = await replan(
+                self.mode, self._now, lambda: self.feeder,
+                lambda from_us: change(self.offsets, from_us, self.sky_rate_at(from_us)),
+                self.offsets.snapshot, self.offsets.restore, not_before_us=self.not_before_us)
+            if done is None:
+                raise NotTracking(f"{what}: the mount refused the re-planned trajectory "
+                                  f"{REPLACE_ATTEMPTS} times (the host is too slow for the "
+                                  f"{self.mode.min_lead_us / 1000:g} ms lead); try again")
+            record = {"what": what, "accepted_us": done.accepted_us, "from_us": done.from_us,
+                      "reached_us": int(done.value), "lead_ms": done.lead_ms, "sent": done.sent}
+            self.history = (self.history + [record])[-50:]
+            return record
 
     def status(self, t_us: int) -> dict[str, Any]:
         """What the offsets are at a mount time (per axis), and the last changes."""

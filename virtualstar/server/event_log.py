@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["KEPT_APART", "NOT_LOGGED", "QUIET_COMMANDS", "describe"]
+__all__ = ["KEPT_APART", "LOGGED_BY_SENDER", "NOT_LOGGED", "QUIET_COMMANDS", "describe"]
 
 # Kinds any client can cause in numbers keep rings of their own (astcom_client.events):
 # however many connections come and go, or passwords are guessed, the operations,
@@ -19,6 +19,9 @@ __all__ = ["KEPT_APART", "NOT_LOGGED", "QUIET_COMMANDS", "describe"]
 KEPT_APART = {"connection": 2000, "auth": 2000}
 
 NOT_LOGGED = frozenset({"heartbeat", "hello"})
+# Pushed kinds whose senders log them themselves, with more than the push carries (an
+# offset's timing, a closed loop's level): logged once, not again when pushed.
+LOGGED_BY_SENDER = frozenset({"offset", "closed_loop"})
 # Read-only commands a panel or `vs watch` sends over and over: logging them would drown
 # the log (a refused one is still logged).
 QUIET_COMMANDS = frozenset({"ping", "status", "errors", "wait", "program", "log"})
@@ -55,7 +58,7 @@ def _message(kind: str, data: dict[str, Any]) -> str:
 
 def describe(kind: str, data: dict[str, Any]) -> tuple[str, str, str] | None:
     """Return (level, logged kind, message) of a pushed event; None when it is not logged."""
-    if kind in NOT_LOGGED:
+    if kind in NOT_LOGGED or kind in LOGGED_BY_SENDER:
         return None
     level, logged = _TABLE.get(kind, ("info", kind))
     return level, logged, _message(kind, data)

@@ -65,6 +65,22 @@ class Motion:
         v = await self.link.read(["az_position", "el_position", "mount_time"])
         return Position(float(v["az_position"]), float(v["el_position"]), int(v["mount_time"]))
 
+    async def held_place(self) -> Position:
+        """Where the controller holds the axes at rest, and the mount time of that tick.
+
+        The encoders plus what they miss of the reference (the following-error roles,
+        arcsec), so a path that leaves from here starts without a step; the encoders
+        alone when the mount maps no error roles.
+        """
+        roles = ["az_position", "el_position", "mount_time"]
+        errors = all(self.link.mapping.has(r) for r in ("az_error", "el_error"))
+        v = await self.link.read(roles + (["az_error", "el_error"] if errors else []))
+        az, el = float(v["az_position"]), float(v["el_position"])
+        if errors:
+            az += float(v["az_error"]) / ARCSEC_PER_RAD
+            el += float(v["el_error"]) / ARCSEC_PER_RAD
+        return Position(az, el, int(v["mount_time"]))
+
     async def state(self) -> int:
         return int((await self.link.read(["mount_state"]))["mount_state"])
 
@@ -188,13 +204,27 @@ class Motion:
         Returns None, leaving the mount holding, when the host was too slow to prime
         the buffer before the run-up began (the caller plans the join again).
         """
-        await self.link.call("traj_init")
-        feeder = Feeder(self.link, self.clock, feeder_config, ramp, ramp.begin_us,
+        return await self.start_following(ramp, ramp.begin_us, feeder_config,
+                                          latest_us=ramp.begin_us - int(start_lead_s * 1e6 / 2),
+                                          on_points=on_points)
+
+    async def start_following(self, path: Path, first_us: int, feeder_config: FeederConfig, *,
+                              latest_us: int, on_points=None,
+                              initialised: bool = False) -> Feeder | None:
+        """Initialise the buffer, prime it with `path` from `first_us`, start following.
+
+        The axes hold until `first_us`. Returns None, leaving the mount holding, when a
+        point was refused or the mount time read before priming was past `latest_us`
+        (the rest of the start would come too late: the caller plans again).
+        `initialised`: the caller already called `traj_init` (one request less to wait for).
+        """
+        if not initialised:
+            await self.link.call("traj_init")
+        feeder = Feeder(self.link, self.clock, feeder_config, path, first_us,
                         fault_code=self.codes["fault"], tracking_code=self.codes["tracking"],
                         on_points=on_points)
         now = await feeder.cycle()
-        if (feeder.stats.rejected or feeder.stats.first_point_us != ramp.begin_us
-                or now + int(start_lead_s * 1e6 / 2) > ramp.begin_us):
+        if feeder.stats.rejected or feeder.stats.first_point_us != first_us or now > latest_us:
             # never start half-way up a ramp: the mount was not told to follow yet
             return None
         await self.link.call("traj_start")

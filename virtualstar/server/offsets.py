@@ -99,12 +99,13 @@ class OffsetProfile:
     v: list[float] = field(default_factory=list)
     a: list[float] = field(default_factory=list)
     changes: int = 0
-    folded: bool = False  # knots older than KEEP_HISTORY_US before a change were forgotten
+    folded: bool = False  # knots older than keep_history_us before a change were forgotten
+    keep_history_us: int | None = None  # None: KEEP_HISTORY_US
     _arrays: tuple[np.ndarray, ...] | None = field(default=None, repr=False, compare=False)
 
     def copy(self) -> OffsetProfile:
         return OffsetProfile(list(self.t_us), list(self.p), list(self.v), list(self.a),
-                             self.changes, self.folded)
+                             self.changes, self.folded, self.keep_history_us)
 
     def at(self, t_us: int) -> tuple[float, float]:
         """Return (offset, rate) at one mount time."""
@@ -181,7 +182,8 @@ class OffsetProfile:
         self._truncate(from_us)
         t = from_us
         if v0 != rate:
-            dt_us = max(1, int(round(abs(rate - v0) / a_max * 1e6)))
+            # whole µs, rounded up: the acceleration never exceeds a_max
+            dt_us = max(1, math.ceil(abs(rate - v0) / a_max * 1e6 - 1e-6))
             acc = (rate - v0) / (dt_us * 1e-6)
             self._knot(t, p0, v0, acc)
             dt = dt_us * 1e-6
@@ -203,7 +205,8 @@ class OffsetProfile:
         n = bisect.bisect_left(self.t_us, from_us)
         del self.t_us[n:], self.p[n:], self.v[n:], self.a[n:]
         self._arrays = None
-        self.fold(from_us - KEEP_HISTORY_US)
+        keep = KEEP_HISTORY_US if self.keep_history_us is None else self.keep_history_us
+        self.fold(from_us - keep)
 
     def _knot(self, t_us: int, p: float, v: float, a: float) -> None:
         self._arrays = None

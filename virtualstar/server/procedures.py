@@ -52,6 +52,7 @@ from . import rate_procedures
 from .corrections import Corrections
 from .exceptions import InExclusionZone, StaleElements, TargetUnreachable
 from .feeder import Feeder, FeederConfig
+from .hand_pad import START_REQUESTS, ZERO_RATES, HandPad, PadState
 from .operations import Operation, Phase
 from .pass_selection import choose_pass, windows_from_passes
 from .trajectories import (
@@ -81,9 +82,7 @@ MIN_JOIN_TRACK_S = 10.0  # a finite path is joined only if this much of it is le
 CLOSED_LOOP_LEAD_S = 5.0  # mount seconds buffered under a closed loop (real time's lead)
 PASS_OFFSET_MARGIN_S = 30.0  # a pass is planned this much longer at both ends (path offsets)
 RUN_UP_STEP_US = 2_000_000  # a run-up inside a zone moves the join this much later
-MOVE_LOOKAHEAD_S = 3600.0  # a move at rates is checked against the limits and zones this far
-MOVE_CHECK_STEP_DEG = 0.1  # ... on a grid of mount time that moves at most this far a step
-LIMIT_MARGIN_DEG = 0.5  # a move at rates comes to rest this far inside an axis limit
+MOVE_START_ATTEMPTS = 4  # starts of a move tried, each with twice the margin, before giving up
 
 
 # ---------------------------------------------------------------------- shared steps
@@ -328,45 +327,106 @@ async def _slew_to_fixed(t: Station, op: Operation, here, az_deg: float, el_deg:
     return pos, enc_az, enc_el
 
 
-async def move_at_rates(t: Station, op: Operation, az_rate_deg_s: float, el_rate_deg_s: float,
-                        *, allow_sun: bool = False) -> dict[str, Any]:
-    """Turn the axes at constant rates from where the mount rests (a hand pad; ASCOM MoveAxis).
+async def move_at_rates(t: Station, op: Operation, pad: HandPad) -> dict[str, Any]:
+    """Turn the axes at the hand pad's rates from where the mount rests (ASCOM MoveAxis).
 
-    The move starts from rest with a constant-acceleration run-up and ends, with a
-    run-out to rest, before an axis limit or a Sun/Moon/horizon zone (checked an hour
-    ahead); `stop` or any other command ends it sooner. The operation has *begun*
-    once the mount follows the trajectory.
+    With `traj_replace` the axes leave the minimum lead after the command at their
+    acceleration limits, and a new `move` changes the rates the same way (hand_pad.py);
+    without it, the move starts after the start lead with a run-up (a new move starts
+    again). It ends, with a run-out to rest, before an axis limit or a Sun/Moon/horizon
+    zone (checked an hour ahead); `stop` or any other command ends it sooner. The
+    operation has *begun* once the mount follows the trajectory.
     """
-    cfg = t.config
-    lim = t.limits
     await prepare(t, op)
-    here = await t.motion.position()
-    v = np.radians([az_rate_deg_s, el_rate_deg_s])
-    accel = np.radians([lim.az_max_accel_deg_s2, lim.el_max_accel_deg_s2])
-    ramp_s = max(cfg.ramp_s, 2.0 * float(np.max(np.abs(v) / accel)))
-    lead_s = t.margins.start_lead_s
-    join_us = here.t_us + int((lead_s + ramp_s) * 1e6)
-    start = np.array([here.az_rad, here.el_rad]) + 0.5 * v * ramp_s
-    end_us, why = _move_end(t, start, v, join_us, ramp_s, allow_sun)
-    if end_us <= join_us:
-        raise TargetUnreachable(f"moving at az {az_rate_deg_s:g}°/s, el {el_rate_deg_s:g}°/s from "
-                                f"az {math.degrees(here.az_rad):.2f}° el "
-                                f"{math.degrees(here.el_rad):.2f}°: {why} at once")
-    path = RampOut(ConstantRatePath(join_us, float(start[0]), float(start[1]), float(v[0]),
-                                    float(v[1]), end_us), ramp_s, 1.0)
-    ramp = RampIn(path, join_us, ramp_s)
-    t.supervisor.phase(op, Phase.SLEWING, az_rate_deg_s=az_rate_deg_s,
-                       el_rate_deg_s=el_rate_deg_s, stops_at_utc=iso_utc(end_us), stops_for=why)
     if not t.link.capabilities.trajectory_buffer:
-        # the driver turns at the rates at once: the move starts here, without a run-up
-        path = ConstantRatePath(here.t_us + int(lead_s * 1e6), here.az_rad, here.el_rad,
-                                float(v[0]), float(v[1]), end_us)
-        ramp, feeder = rate_procedures.follow_now(t, path, path.at_us)
-    else:
-        feeder = await t.motion.start_trajectory(ramp, t.feeder_config(), lead_s,
-                                                 on_points=t.note_points)
-    if feeder is None:
-        raise TargetUnreachable("the host was too slow to start the move; send it again")
+        return await _move_by_rates(t, op, pad)
+    async with pad.lock:  # a change of rates meanwhile waits for the start
+        if pad.zero:  # the rates were set to 0 before it moved
+            pad.state = PadState.ENDED
+            t.supervisor.phase(op, Phase.SLEWING, az_rate_deg_s=0.0, el_rate_deg_s=0.0)
+            t.supervisor.phase(op, Phase.ENDING)
+            return {"ended": f"{ZERO_RATES} before the move began",
+                    "moved_until_us": await t.motion.mount_time_us()}
+        feeder = await _start_move(t, op, pad)
+        pad.feeder, pad.state = feeder, PadState.MOVING
+    t.supervisor.begun(op)
+    try:
+        await run_beside(pad.wait_for_end(t, op), feeder)
+    finally:
+        pad.state = PadState.ENDED
+    op.info["feeder"] = feeder.stats.as_dict()
+    t.supervisor.phase(op, Phase.ENDING)
+    await t.motion.halt()
+    return {"ended": pad.why, "moved_until_us": pad.stop_us}
+
+
+async def _start_move(t: Station, op: Operation, pad: HandPad) -> Feeder:
+    """Plan the move from where the mount rests and start following it (under `pad.lock`)."""
+    mode = t.steering.mode
+    margin_us = mode.margin_us
+    for _attempt in range(MOVE_START_ATTEMPTS):
+        # the buffer emptied before the mount time is read: three requests to wait for
+        # after it (the feeder's read, its first push, traj_start), not four
+        await t.link.call("traj_init")
+        here = await t.motion.held_place()
+        if pad.replace:  # from the minimum lead, at the axes' acceleration limits
+            lead_us = mode.min_lead_us + START_REQUESTS * margin_us
+            pad.accel = HandPad.accel_rad_s2(t.limits)
+            latest_us = here.t_us + lead_us - mode.min_lead_us // 2 - 2 * margin_us
+        else:  # after the start lead, with a run-up as the other paths have
+            lead_us = int(t.margins.start_lead_s * 1e6)
+            pad.accel = _run_up_accel(t, pad)
+            latest_us = here.t_us + lead_us // 2
+        from_us = here.t_us + lead_us
+        reached = _plan_move(t, pad, from_us, here)
+        t.supervisor.phase(op, Phase.SLEWING)
+        pad.report(t, op, start={"accepted_us": here.t_us, "from_us": from_us,
+                                 "lead_ms": lead_us / 1000, "rates_reached_us": reached})
+        config = t.feeder_config()
+        if pad.replace:  # the first points are due within the minimum lead
+            config = dataclasses.replace(config, min_lead_s=min(config.min_lead_s,
+                                                                lead_us / 2e6))
+        feeder = await t.motion.start_following(pad.path, from_us, config, latest_us=latest_us,
+                                                on_points=t.note_points, initialised=True)
+        if feeder is not None:
+            return feeder
+        margin_us = max(2 * margin_us, 5_000)
+    raise TargetUnreachable("the host was too slow to start the move; send it again")
+
+
+def _plan_move(t: Station, pad: HandPad, from_us: int, here) -> int:
+    """Plan the pad's rates from a place at rest; refuse a move that would stop at once."""
+    try:
+        return pad.plan(t, from_us, az_rad=here.az_rad, el_rad=here.el_rad)
+    except TargetUnreachable as exc:
+        az, el = pad.rates_deg_s
+        raise TargetUnreachable(f"moving at az {az:g}°/s, el {el:g}°/s from az "
+                                f"{math.degrees(here.az_rad):.2f}° el "
+                                f"{math.degrees(here.el_rad):.2f}°: {exc} at once") from None
+
+
+def _run_up_accel(t: Station, pad: HandPad) -> np.ndarray:
+    """The run-up of a move without re-planning: both axes reach their rates together, in
+    `ramp_s` (2 s) or twice what the acceleration limits allow (rad/s²)."""
+    v = np.abs(np.radians(pad.rates_deg_s))
+    limit = HandPad.accel_rad_s2(t.limits)
+    ramp_s = max(t.config.ramp_s, 2.0 * float(np.max(v / limit)))
+    return np.where(v > 0, v / ramp_s, limit)
+
+
+async def _move_by_rates(t: Station, op: Operation, pad: HandPad) -> dict[str, Any]:
+    """A move on a mount without a trajectory buffer: its driver turns at the rates at once."""
+    here = await t.motion.position()
+    pad.accel = _run_up_accel(t, pad)  # the driver's own run-out is not known: a gentle one
+    from_us = here.t_us + int(t.margins.start_lead_s * 1e6)
+    _plan_move(t, pad, from_us, here)
+    v = np.radians(pad.rates_deg_s)
+    path = ConstantRatePath(from_us, here.az_rad, here.el_rad, float(v[0]), float(v[1]),
+                            pad.stop_us)
+    t.supervisor.phase(op, Phase.SLEWING)
+    pad.report(t, op)
+    pad.state = PadState.ENDED  # a new move starts again
+    _ramp, feeder = rate_procedures.follow_now(t, path, path.at_us)
     t.supervisor.begun(op)
 
     async def moving() -> None:
@@ -376,34 +436,7 @@ async def move_at_rates(t: Station, op: Operation, az_rate_deg_s: float, el_rate
     op.info["feeder"] = feeder.stats.as_dict()
     t.supervisor.phase(op, Phase.ENDING)
     await t.motion.halt()
-    return {"ended": why, "moved_until_us": end_us}
-
-
-def _move_end(t: Station, start: np.ndarray, v: np.ndarray, join_us: int, ramp_s: float,
-              allow_sun: bool) -> tuple[int, str]:
-    """When a move at rates `v` (from `start` at `join_us`) must begin its run-out, and why."""
-    lim = t.limits
-    stop_s = 0.5 * ramp_s  # the run-out covers half a ramp at the move's rate
-    m = math.radians(LIMIT_MARGIN_DEG)
-    ends = [(MOVE_LOOKAHEAD_S, "an hour of moving elapsed")]
-    for axis, lo, hi, name in ((0, lim.wrap_min_deg, lim.wrap_max_deg, "the cable wrap"),
-                               (1, lim.el_min_deg, lim.el_max_deg, "the elevation limit")):
-        if v[axis] == 0.0:
-            continue
-        edge = math.radians(hi) - m if v[axis] > 0 else math.radians(lo) + m
-        ends.append(((edge - start[axis]) / v[axis] - stop_s, f"stopped before {name} "
-                     f"({math.degrees(edge):.1f}°)"))
-    run_s, why = min(ends)
-    step_s = min(1.0, MOVE_CHECK_STEP_DEG / math.degrees(float(np.max(np.abs(v)))))
-    grid_s = np.arange(-ramp_s, max(run_s, 0.0) + stop_s + step_s, step_s)
-    t_us = join_us + np.round(grid_s * 1e6).astype(np.int64)
-    hit = t.safety.first_hit(start[0] + v[0] * grid_s, start[1] + v[1] * grid_s, t_us,
-                             allow_sun=allow_sun)
-    if hit is not None:
-        hit_s = float(grid_s[hit.index]) - step_s - stop_s
-        if hit_s < run_s:
-            run_s, why = hit_s, f"stopped before: {hit.describe('the mount')}"
-    return join_us + int(run_s * 1e6), why
+    return {"ended": pad.why, "moved_until_us": pad.stop_us}
 
 
 async def measure_pointing(t: Station, op: Operation, target: Any, name: str, *,

@@ -18,6 +18,7 @@ from .corrections import CorrectionMode, Corrections
 from .estimator import FilterConfig
 from .exceptions import BadRequest, NoCamera, NotTracking
 from .guiding import MAX_GUIDE_RATE_ARCSEC_S, MAX_GUIDE_STEP_ARCSEC, pulse_change
+from .hand_pad import HandPad
 from .offsets import AXES, OPERATIONS, OffsetLimits
 from .operations import TERMINAL, Operation, Phase
 
@@ -46,6 +47,7 @@ class Steering:
         self.limits = OffsetLimits(cfg.offset_rate_arcsec_s, cfg.offset_accel_arcsec_s2)
         self.min_lead_us = DEFAULT_MIN_LEAD_US
         self._current: tuple[int, Corrections] | None = None
+        self._pad: tuple[int, HandPad] | None = None  # the running move's (hand_pad.py)
         self.camera: CameraLink | None = None  # a guide camera for closed loops (camera_link.py)
         self.filter_config = FilterConfig()
 
@@ -63,6 +65,17 @@ class Steering:
                                                 math.radians(self.t.config.site.lat_deg),
                                                 limits=self.limits))
         return self._current[1]
+
+    def hand_pad(self, op: Operation | None) -> HandPad | None:
+        """The hand pad of a running move, None for any other operation."""
+        if op is None or op.finished or self._pad is None or self._pad[0] != op.id:
+            return None
+        return self._pad[1]
+
+    def keep_hand_pad(self, op: Operation, pad: HandPad) -> None:
+        """Remember the pad of a move just started (a move that took new rates keeps its own)."""
+        if self.hand_pad(op) is None:
+            self._pad = (op.id, pad)
 
     def need_camera(self, what: str) -> None:
         """Refuse a closed loop without a guide camera (NoCamera, naming the option)."""
@@ -95,9 +108,11 @@ class Steering:
         if self.t.op is not op:
             raise NotTracking(f"offset: operation {op.id} ended while the offset was sent")
         doc = self._answer(op, corr, record)
+        asked = {"axis": axis, "op": operation,
+                 **{k: v for k, v in (("arcsec", arcsec), ("seconds", seconds)) if v is not None}}
         self._log(op, f"offset {axis} {operation}"
                   + ("" if operation == "reset" else f" {_value_text(axis, arcsec, seconds)}"),
-                  doc)
+                  doc, asked)
         return doc
 
     async def guide(self, north_arcsec: float, east_arcsec: float,
@@ -139,8 +154,11 @@ class Steering:
                 "reached_utc": iso_utc(record["reached_us"], 3), "mode": self.mode.as_dict()["mode"],
                 "offsets": corr.status(record["from_us"])}
 
-    def _log(self, op: Operation, text: str, doc: dict[str, Any]) -> None:
-        fields = {"id": op.id, "from_us": doc["from_us"], "lead_ms": doc["lead_ms"],
+    def _log(self, op: Operation, text: str, doc: dict[str, Any],
+             asked: dict[str, Any]) -> None:
+        """Log and push an offset: what was asked (axis, op, arcsec or seconds), and when and
+        how it reaches the mount."""
+        fields = {"id": op.id, **asked, "from_us": doc["from_us"], "lead_ms": doc["lead_ms"],
                   "sent": doc["sent"]}
         self.t.log_event("info", "offset", f"operation {op.id}: {text} (from "
                          f"{doc['from_utc']}, {doc['lead_ms']:.0f} ms after acceptance, "

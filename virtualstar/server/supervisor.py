@@ -71,17 +71,24 @@ class Supervisor:
     # ------------------------------------------------------------------ commands
     async def start(self, kind: str, target: str, procedure: Procedure, *,
                     resumable: bool = False,
-                    check: Callable[[], Awaitable[None]] | None = None) -> Operation:
+                    check: Callable[[], Awaitable[None]] | None = None,
+                    steer: Callable[[Operation | None], Awaitable[bool]] | None = None
+                    ) -> Operation:
         """End the running operation, wait for it, then start `procedure`; return the new one.
 
         `check` runs first, in the order the commands arrived (under the lock): if it
         raises, the command is refused and the running operation goes on untouched.
+        `steer(current operation or None)` then may hand the command to the running
+        operation instead (a hand pad's new rates): when it returns True, that operation
+        is returned and goes on; when it raises, the command is refused.
         A command must reach here without awaiting anything else, or a `stop` sent after
         it could overtake it.
         """
         async with self._lock:
             if check is not None:
                 await check()
+            if steer is not None and await steer(self.op):
+                return self.op  # type: ignore[return-value]
             await self._end_running(OperationAborted(f"replaced by a new {kind} ({target})"))
             loop = asyncio.get_running_loop()
             op = Operation(next(self._ids), kind, target, resumable=resumable,

@@ -58,6 +58,7 @@ from .exceptions import (
     VssError,
 )
 from .feeder import FeederConfig
+from .hand_pad import RATES_NOTE, RESTART_NOTE, HandPad
 from .link_interface import MountBackend
 from .motion import Motion
 from .offset_path import sky_rate_arcsec_s
@@ -442,7 +443,7 @@ class Telescope:
         return check
 
     async def _start(self, kind: str, name: str, procedure, *, resumable: bool = False,
-                     allow_sun: bool = False, check=None) -> Operation:
+                     allow_sun: bool = False, check=None, steer=None) -> Operation:
         async def checks() -> None:
             self.check_can_move()  # it may have gone passive while this waited for the lock
             if check is not None:
@@ -454,8 +455,10 @@ class Telescope:
             finally:  # ended early (stopped, replaced, failed): its target is no longer followed
                 self.on_target.end(self.last_mount_us or 0, op_id=op.id)
 
-        op = await self.supervisor.start(kind, name, run, resumable=resumable, check=checks)
-        if allow_sun:
+        ops_before = self.supervisor.operations_started
+        op = await self.supervisor.start(kind, name, run, resumable=resumable, check=checks,
+                                         steer=steer)
+        if allow_sun and self.supervisor.operations_started > ops_before:
             op.info["allow_sun"] = True
             log.warning("safety override: operation %s (%s %s) may point inside the Sun and "
                         "Moon exclusion zones", op.id, kind, name)
@@ -528,23 +531,42 @@ class Telescope:
 
     async def move(self, az_rate_deg_s: float, el_rate_deg_s: float, *,
                    allow_sun: bool = False) -> Operation:
-        """Turn the axes at constant rates until stopped or a limit/zone is near (hand pad)."""
+        """Turn the axes at constant rates until stopped or a limit/zone is near (hand pad).
+
+        A move while a move runs changes its rates (from the minimum lead, with
+        `traj_replace`; hand_pad.py), zero rates included: it ramps down and ends.
+        Without `traj_replace`, or zero rates with no move running, as before: a new
+        move ends the running operation; zero rates are refused.
+        """
         lim = self.limits
         for name, rate, top in (("az_rate_deg_s", az_rate_deg_s, lim.az_max_rate_deg_s),
                                 ("el_rate_deg_s", el_rate_deg_s, lim.el_max_rate_deg_s)):
             if abs(rate) > top:
                 raise BadRequest(f"move: {name}={rate:g} is beyond the mount's rate limit "
                                  f"±{top:g}°/s")
-        if az_rate_deg_s == 0.0 and el_rate_deg_s == 0.0:
-            raise BadRequest("move: both rates are 0; send stop to end a move")
         self.check_can_move()
         name = f"move az {az_rate_deg_s:+g}°/s el {el_rate_deg_s:+g}°/s"
+        buffered = self.link.capabilities.trajectory_buffer
+        replace = buffered and self.steering.mode.can_replace
+        pad = HandPad(az_rate_deg_s, el_rate_deg_s, allow_sun=allow_sun, replace=replace,
+                      note=RESTART_NOTE if buffered else RATES_NOTE)
+
+        async def steer(running: Operation | None) -> bool:
+            other = self.steering.hand_pad(running)
+            if other is not None and await other.retarget(self, running, az_rate_deg_s,
+                                                          el_rate_deg_s, allow_sun=allow_sun):
+                return True
+            if pad.zero:
+                raise BadRequest("move: both rates are 0 and no hand-pad move runs that could "
+                                 "ramp down; send stop to end a move")
+            return False
 
         async def procedure(op: Operation) -> dict[str, Any]:
-            return await procedures.move_at_rates(self, op, az_rate_deg_s, el_rate_deg_s,
-                                                  allow_sun=allow_sun)
+            return await procedures.move_at_rates(self, op, pad)
 
-        return await self._start("move", name, procedure, allow_sun=allow_sun)
+        op = await self._start("move", name, procedure, allow_sun=allow_sun, steer=steer)
+        self.steering.keep_hand_pad(op, pad)
+        return op
 
     async def guide(self, north_arcsec: float, east_arcsec: float,
                     rate_arcsec_s: float) -> dict[str, Any]:

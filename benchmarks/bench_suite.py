@@ -1,0 +1,68 @@
+"""The suite's own speed: `make test`'s pytest, wall time beside what the CPU it used allows
+(goal ≤ 4 min on a quiet 2-core machine, ≤ 6 min beside two CPU burners; issue 26).
+
+One run of the suite exactly as `make test` runs it (`pytest -q -n WORKERS --dist loadscope`),
+optionally beside N processes that burn a core each (as `make test-under-load` does). The
+reference, measured in the same run, is the CPU the suite's processes used (the kernel's
+figure for this process's children: pytest, its workers, the servers, browsers and compilers
+they start) divided by the cores left to it: the wall time a perfectly packed run would take.
+The difference is what waiting (real-time tests, a worker's last long module) costs.
+
+    python benchmarks/bench_suite.py [--workers 4] [--burners 0|2] [-- extra pytest args]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--workers", type=int, default=4, help="pytest-xdist workers (make test: 4)")
+    ap.add_argument("--burners", type=int, default=0,
+                    help="processes burning a core each beside the suite (test-under-load: 2)")
+    ap.add_argument("pytest_args", nargs="*", help="more pytest arguments (after --)")
+    args = ap.parse_args()
+    cores = os.cpu_count() or 1
+    load_before = os.getloadavg()[0]
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+               for _ in range(args.burners)]
+    try:
+        before = os.times()
+        t0 = time.monotonic()
+        proc = subprocess.run(
+            [sys.executable, "-m", "pytest", "-q", "-n", str(args.workers), "--dist",
+             "loadscope", "-p", "no:cacheprovider", *args.pytest_args],
+            cwd=ROOT, capture_output=True, text=True)
+        wall_s = time.monotonic() - t0
+        after = os.times()
+    finally:
+        for b in burners:
+            b.kill()
+            b.wait()
+    cpu_s = (after.children_user - before.children_user
+             + after.children_system - before.children_system)
+    # the burners are children too, but they have not been waited for by the time `after` is
+    # read: their CPU is not in cpu_s
+    share = cores * args.workers / (args.workers + args.burners) if args.burners else cores
+    share = min(share, cores)
+    summary = [line for line in proc.stdout.splitlines() if re.search(r"\d+ (passed|failed)", line)]
+    print(f"machine: {cores} cores, 1-min load before the run {load_before:.2f}, "
+          f"{args.burners} burner(s)")
+    print(f"suite: {summary[-1] if summary else proc.stdout[-500:]}")
+    print(f"ours: wall {wall_s:.0f} s ({wall_s / 60:.1f} min) with {args.workers} workers")
+    print(f"reference: CPU used {cpu_s:.0f} s / {share:.2f} cores left to it = "
+          f"{cpu_s / share:.0f} s, a perfectly packed run ({wall_s / (cpu_s / share):.2f}× that)")
+    return proc.returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main())
