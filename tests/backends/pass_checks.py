@@ -64,10 +64,12 @@ def test_a_driver_killed_mid_track_ends_the_track_with_a_fault_and_no_runaway(se
     assert op["phase"] == "failed", op
     assert op["info"]["error"]["code"] == "mount_fault", op["info"]["error"]
     assert seen["kill_fault_after_s"] < 15.0
-    # between the kill and the fault: at most the rate command already on its way, then
+    # between the kill and the fault: at most the rate commands already on their way, then
     # "stop"; after the fault nothing at all, and nothing resumed after the restart
     calls = seen["calls_after_kill"]
-    assert calls.count("set_rates") <= 1 and set(calls) <= {"set_rates", "stop"}, calls
+    # (INDI: a silent pushing driver counts as unchanged while the commanded rates could
+    # have moved it < 1″, so one more cycle may command before the closed connection shows)
+    assert calls.count("set_rates") <= 2 and set(calls) <= {"set_rates", "stop"}, calls
     after = seen["after_restart"]
     assert after["operation"]["id"] == op["id"] and after["operation"]["phase"] == "failed"
     assert after["calls"] == [], after["calls"]

@@ -138,5 +138,7 @@ def test_an_offset_during_a_track_moves_the_mount_by_that_much(seen):
     # (INDI pushes nothing once the mount holds the offset place: its last push stands)
     assert before.sum() >= 1 and after.sum() >= 1, (before.sum(), after.sum())
     assert np.abs(d_dec[before]).max() < 3.0 and np.abs(d_ra[before]).max() < 3.0
-    assert np.abs(d_dec[after] - off["arcsec"]).max() < 3.0, np.round(d_dec[after], 2)
-    assert np.abs(d_ra[after]).max() < 3.0, np.round(d_ra[after], 2)
+    # the place it holds (the last reported) is the offset one; on the way there, converging
+    assert abs(d_dec[-1] - off["arcsec"]) < 3.0 and abs(d_ra[-1]) < 3.0, (d_ra[-1], d_dec[-1])
+    assert np.abs(d_dec[after] - off["arcsec"]).max() < 10.0, np.round(d_dec[after], 2)
+    assert np.abs(d_ra[after]).max() < 10.0, np.round(d_ra[after], 2)
