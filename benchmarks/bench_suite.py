@@ -58,6 +58,9 @@ def main() -> int:
     print(f"machine: {cores} cores, 1-min load before the run {load_before:.2f}, "
           f"{args.burners} burner(s)")
     print(f"suite: {summary[-1] if summary else proc.stdout[-500:]}")
+    for line in proc.stdout.splitlines():
+        if line.startswith(("FAILED", "ERROR")):
+            print(f"  {line[:300]}")
     print(f"ours: wall {wall_s:.0f} s ({wall_s / 60:.1f} min) with {args.workers} workers")
     print(f"reference: CPU used {cpu_s:.0f} s / {share:.2f} cores left to it = "
           f"{cpu_s / share:.0f} s, a perfectly packed run ({wall_s / (cpu_s / share):.2f}× that)")
