@@ -130,6 +130,13 @@ def flood_never_read(url: str, count: int, *, give_up_s: float = 5.0,
     sock, _ = ws_open(url)
     if first:
         sock.sendall(first)
+    return sock, flood_socket(sock, count, give_up_s=give_up_s, text=text, opcode=opcode)
+
+
+def flood_socket(sock: socket.socket, count: int, *, give_up_s: float = 5.0,
+                 text: str | bytes = '{"id": 1, "cmd": "ping"}', opcode: int = 1) -> Flood:
+    """Write `count` requests on an open connection (authenticated or not) without reading,
+    until the socket has taken nothing for `give_up_s`; how many whole requests went out."""
     frame = ws_frame(text, opcode=opcode)
     data = frame * count
     sock.setblocking(False)
@@ -147,7 +154,7 @@ def flood_never_read(url: str, count: int, *, give_up_s: float = 5.0,
             break
         sent += n
         idle_since = time.monotonic()
-    return sock, Flood(sent // len(frame), count, closed)
+    return Flood(sent // len(frame), count, closed)
 
 
 @dataclass

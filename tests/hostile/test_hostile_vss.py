@@ -20,6 +20,7 @@ from hostile_peers import (
     OPERATOR,
     VEGA_NIGHT,
     flood_never_read,
+    flood_socket,
     login,
     vs_server,
     ws_frame,
@@ -94,29 +95,6 @@ def test_fifty_thousand_pings_never_read_do_not_disturb_a_lockstep_track(tmp_pat
     assert "Traceback" not in server.stderr
 
 
-def _flood_session(session, count: int, give_up_s: float = 3.0) -> int:
-    """Write `count` pings on an authenticated session without reading; return how many
-    whole requests the socket took before the server stopped reading it."""
-    frame = ws_frame('{"id": "flood", "cmd": "ping", "params": {"pad": "%s"}}' % ("x" * 600))
-    data = frame * count
-    sock = session.sock
-    sock.setblocking(False)
-    sent, idle_since = 0, time.monotonic()
-    while sent < len(data):
-        try:
-            n = sock.send(data[sent:sent + 65536])
-        except BlockingIOError:
-            if time.monotonic() - idle_since > give_up_s:
-                break
-            time.sleep(0.01)
-            continue
-        except (ConnectionResetError, BrokenPipeError):
-            break
-        sent += n
-        idle_since = time.monotonic()
-    return sent // len(frame)
-
-
 def test_an_authenticated_client_that_never_reads_is_held_to_its_budget(tmp_path):
     """The rule of the unauthenticated flood, at the larger budget of a logged-in observer:
     the server stops reading it, and the operator's track and answers are untouched."""
@@ -129,7 +107,8 @@ def test_an_authenticated_client_that_never_reads_is_held_to_its_budget(tmp_path
         quiet = peak_arcsec(op, *wait_mount_s(op, 30))
         flooder = login(server.url, OBSERVER)
         assert flooder.role == "observer"
-        sent = _flood_session(flooder, 50_000)
+        flood = flood_socket(flooder.sock, 50_000, give_up_s=3.0, text=(
+            '{"id": "flood", "cmd": "ping", "params": {"pad": "%s"}}' % ("x" * 600)))
         try:
             during = wait_mount_s(op, 30)
             status = op.request("status")
@@ -138,7 +117,7 @@ def test_an_authenticated_client_that_never_reads_is_held_to_its_budget(tmp_path
             flooder.sock.close()
         trouble = operation_trouble(op, op_id)
         op.close()
-    assert sent < 50_000, "the server read the whole flood: no back-pressure"
+    assert flood.sent < flood.wanted, "the server read the whole flood: no back-pressure"
     assert status["ok"] and status["result"]["operation"]["id"] == op_id
     assert status["result"]["operation"]["phase"] == "tracking"
     assert trouble == []
