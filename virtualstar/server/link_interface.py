@@ -25,11 +25,14 @@ declination of date) and turned with ``set_rates``.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any, Protocol
 
-__all__ = ["GEOMETRIES", "MountBackend", "MountCapabilities"]
+from .exceptions import MountUnavailable
+
+__all__ = ["GEOMETRIES", "ConnectionWaits", "MountBackend", "MountCapabilities"]
 
 GEOMETRIES = ("altaz", "german", "fork")
 
@@ -103,3 +106,36 @@ class MountBackend(Protocol):
     def describe(self) -> dict[str, Any]:
         """The backend's part of `status`: capabilities, reports (rate, age), what it measured."""
         ...
+
+
+class ConnectionWaits:
+    """Waiting for a mount link's (re)connection, shared by every link that keeps
+    `_connected` (an Event), `_changed` (a Condition notified on each change), `connected`,
+    `connects` (how many connections so far), `config.url` and `last_error`."""
+
+    _connected: asyncio.Event
+    _changed: asyncio.Condition
+    connects: int
+    last_error: str
+
+    async def wait_connected(self, timeout_s: float | None = None) -> None:
+        """Wait until the mount is connected; raise MountUnavailable after `timeout_s`."""
+        try:
+            await asyncio.wait_for(self._connected.wait(), timeout_s)
+        except TimeoutError:
+            raise MountUnavailable(f"no connection to the mount at {self.config.url} "
+                                   f"({self.last_error or 'still trying'})") from None
+
+    async def wait_reconnected(self, connects_before: int, timeout_s: float) -> None:
+        """Wait for a connection newer than the `connects_before`-th; MountUnavailable after
+        `timeout_s`."""
+        async def newer() -> None:
+            async with self._changed:
+                await self._changed.wait_for(
+                    lambda: self.connected and self.connects > connects_before)
+
+        try:
+            await asyncio.wait_for(newer(), timeout_s)
+        except TimeoutError:
+            raise MountUnavailable(f"the mount at {self.config.url} did not come back within "
+                                   f"{timeout_s:g} s ({self.last_error or 'still trying'})") from None

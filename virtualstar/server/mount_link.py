@@ -26,7 +26,7 @@ from astcom_client import AstcomError, Client, ConnectionClosed, DeviceError, St
 from virtualstar.astro.constants import ARCSEC_PER_RAD
 
 from .exceptions import MappingError, MountRejected, MountUnavailable
-from .link_interface import MountCapabilities
+from .link_interface import ConnectionWaits, MountCapabilities
 from .mapping import RoleMapping
 from .operations import current_operation
 
@@ -65,7 +65,7 @@ class LinkConfig:
     connector: Callable[[], Awaitable[Client]] | None = None
 
 
-class MountLink:
+class MountLink(ConnectionWaits):
     """A self-healing, serialised ASTCom connection to a mount, spoken in roles.
 
     The ASTCom backend of the mount-link interface (`link_interface.MountBackend`): the
@@ -125,27 +125,6 @@ class MountLink:
                 await self._client.close()
             self._client = None
         self._connected.clear()
-
-    async def wait_connected(self, timeout_s: float | None = None) -> None:
-        """Wait until the mount is connected; raise MountUnavailable after `timeout_s`."""
-        try:
-            await asyncio.wait_for(self._connected.wait(), timeout_s)
-        except TimeoutError:
-            raise MountUnavailable(f"no connection to the mount at {self.config.url} "
-                                   f"({self.last_error or 'still trying'})") from None
-
-    async def wait_reconnected(self, connects_before: int, timeout_s: float) -> None:
-        """Wait for a connection newer than the `connects_before`-th; MountUnavailable after `timeout_s`."""
-        async def newer() -> None:
-            async with self._changed:
-                await self._changed.wait_for(
-                    lambda: self.connected and self.connects > connects_before)
-
-        try:
-            await asyncio.wait_for(newer(), timeout_s)
-        except TimeoutError:
-            raise MountUnavailable(f"the mount at {self.config.url} did not come back within "
-                                   f"{timeout_s:g} s ({self.last_error or 'still trying'})") from None
 
     async def _notify(self) -> None:
         async with self._changed:

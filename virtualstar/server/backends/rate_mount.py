@@ -49,7 +49,7 @@ from virtualstar.astro.constants import ARCSEC_PER_RAD, SIDEREAL_RATE_ARCSEC_S
 from virtualstar.astro.mount_frames import apparent_radec_to_observed, observed_to_apparent_radec
 
 from ..exceptions import MountRejected, MountUnavailable
-from ..link_interface import MountCapabilities
+from ..link_interface import ConnectionWaits, MountCapabilities
 from ..mapping import STATE_NAMES, RoleMapping
 from ..operations import current_operation
 
@@ -188,7 +188,7 @@ def _now_us() -> int:
     return time.time_ns() // 1000
 
 
-class RateMountLink:
+class RateMountLink(ConnectionWaits):
     """The mount link over a rate-driven driver (see the module doc)."""
 
     def __init__(self, driver: Driver, config: RateLinkConfig, *, backend: str,
@@ -296,25 +296,6 @@ class RateMountLink:
         with contextlib.suppress(Exception):
             await self.driver.close()
         self._connected.clear()
-
-    async def wait_connected(self, timeout_s: float | None = None) -> None:
-        try:
-            await asyncio.wait_for(self._connected.wait(), timeout_s)
-        except TimeoutError:
-            raise MountUnavailable(f"no connection to the mount at {self.config.url} "
-                                   f"({self.last_error or 'still trying'})") from None
-
-    async def wait_reconnected(self, connects_before: int, timeout_s: float) -> None:
-        async def newer() -> None:
-            async with self._changed:
-                await self._changed.wait_for(
-                    lambda: self.connected and self.connects > connects_before)
-
-        try:
-            await asyncio.wait_for(newer(), timeout_s)
-        except TimeoutError:
-            raise MountUnavailable(f"the mount at {self.config.url} did not come back within "
-                                   f"{timeout_s:g} s ({self.last_error or 'still trying'})") from None
 
     def mark_lost(self) -> None:
         self._lost.set()
