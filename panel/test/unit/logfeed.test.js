@@ -91,6 +91,20 @@ test('a restarted device behind a new link is read from its first event', async 
   assert.deepEqual(seqs(feed, 'emulator'), [1, 2, 3, 4, 5, 1, 2, 3]);
 });
 
+test('a restarted device that logged more than the old one before its link came back is read from its first event', async () => {
+  const { a, feed } = await polledOnce('emulator', 3);
+  a.restart(); // its log numbered from 1 again, and already past seq 3 when the panel is back
+  a.add(6, T0 + 1e9);
+  await feed.poll();
+  assert.deepEqual(seqs(feed, 'emulator'), [1, 2, 3, 1, 2, 3, 4, 5, 6]);
+  assert.equal(feed.state.status.emulator, 'following (seq 6)');
+  // the same device again behind a new link, its log gone on: nothing read twice
+  a.currentLink = {};
+  a.add(2, T0 + 1e9);
+  await feed.poll();
+  assert.deepEqual(seqs(feed, 'emulator'), [1, 2, 3, 1, 2, 3, 4, 5, 6, 7, 8]);
+});
+
 test('paused, new events wait aside and follow adds them; clear forgets without reading again', async () => {
   const { a, feed } = await polledOnce('emulator', 2);
   feed.setFollowing(false);
