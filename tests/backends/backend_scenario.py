@@ -47,9 +47,15 @@ INDI_PORT = 7624
 INDI_DEVICE = "Telescope Simulator"
 STAR_TRACK_S = 10.0
 OFFSET_ARCSEC = 60.0  # the declination offset applied during a track
+OFFSET_GUARD_S = 90.0  # hang guard of the offset's waits (a quiet host: a few seconds)
+HELD_S = 1.5  # a place is held when the places reported over this long agree ...
+HELD_ARCSEC = 1.0  # ... within this (INDI pushes a change of 0.1 s of RA: 1.5″·cos δ)
 PASS_JOIN_S = 35.0  # the followed stretch of the pass begins about this long after the command
 PASS_TRACK_S = 12.0  # ... and is stopped this long after the landing check (mid-pass)
+PASS_SETTLE_S = 2.0  # the pass is judged from this long after the landing check ...
+PASS_PLACES = 20  # ... on at least this many reported places (the track goes on until then)
 START_TIMEOUT_S = 120.0  # a loaded host takes long to start a simulator (FastAPI, indiserver)
+ASK_QUIET_S = 0.5  # the INDI observer asks for the place again after this long without one
 
 
 def now_us() -> int:
@@ -136,6 +142,40 @@ class Observer:
     def since(self, k: int) -> list[tuple[float, float, float]]:
         return [tuple(float(x) for x in line.split()) for line in self._lines()[k:]]
 
+    async def wait_places(self, n: int, guard_s: float) -> bool:
+        """Wait until `n` places in all have been recorded (False: the hang guard ran out)."""
+        deadline = time.monotonic() + guard_s
+        while self.mark() < n:
+            if time.monotonic() > deadline:
+                return False
+            await asyncio.sleep(0.1)
+        return True
+
+    async def wait_moved_and_held(self, from_s: float, k: int, moved_arcsec: float,
+                                  guard_s: float) -> float | None:
+        """Wait until a place reported after `from_s` lies `moved_arcsec` from the last one
+        before it, and the places since then have stood still (within `HELD_ARCSEC` for
+        `HELD_S`): the mount holds a new place. Returns the wall seconds waited, None if the
+        hang guard ran out (the test then judges what was seen)."""
+        start = time.monotonic()
+        while time.monotonic() - start < guard_s:
+            await asyncio.sleep(0.2)
+            s = np.asarray(self.since(k), float).reshape(-1, 3)
+            if not len(s) or not (s[:, 0] < from_s).any():
+                continue
+            base = s[s[:, 0] < from_s][-1]
+            later = s[s[:, 0] >= from_s]
+            moved = np.flatnonzero(sky_sep_arcsec(later, base) > moved_arcsec)
+            if not len(moved):
+                continue
+            later = later[moved[0]:]
+            still = later[sky_sep_arcsec(later, later[-1]) > HELD_ARCSEC]
+            since_s = still[-1, 0] if len(still) else later[0, 0]
+            tail = later[later[:, 0] > since_s]
+            if len(tail) >= 3 and later[-1, 0] - since_s >= HELD_S:
+                return time.monotonic() - start
+        return None
+
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.terminate()
@@ -177,19 +217,37 @@ def _observe_alpaca(port: int, put) -> None:
 
 
 async def _observe_indi(port: int, put) -> None:
+    """Every place the INDI server sends, pushed or asked for.
+
+    The driver pushes EQUATORIAL_EOD_COORD only when the place has changed (libindi: by
+    more than 0.1 s of RA or 0.1″ of Dec), so a well-held star is silent for seconds. When
+    nothing has come for `ASK_QUIET_S`, the observer asks for the property again
+    (getProperties with device and name): the driver answers with a definition carrying its
+    current place, so a held place is sampled at a steady pace whatever the host's load.
+    """
     from indipyclient import IPyClient
+
+    heard = [time.monotonic()]
 
     class Client(IPyClient):
         async def rxevent(self, event) -> None:
             if (event.devicename == INDI_DEVICE and event.vectorname == "EQUATORIAL_EOD_COORD"
-                    and event.eventtype == "Set"):
-                t = time.time()  # a push describes the moment it is sent
+                    and event.eventtype in ("Set", "Define")):
+                t = time.time()  # a push (or an answer) describes the moment it is sent
                 v = self[INDI_DEVICE]["EQUATORIAL_EOD_COORD"]
                 put(t, v.getfloatvalue("RA"), v.getfloatvalue("DEC"))
+                heard[0] = time.monotonic()
 
     client = Client(indihost="127.0.0.1", indiport=port)
     client.debug_verbosity(0)
-    await client.asyncrun()
+    run = asyncio.ensure_future(client.asyncrun())
+    while not run.done():
+        await asyncio.wait({run}, timeout=ASK_QUIET_S / 2)
+        if (client.connected and INDI_DEVICE in client
+                and time.monotonic() - heard[0] >= ASK_QUIET_S):
+            heard[0] = time.monotonic()  # asked: the next ask after another quiet spell
+            await client.send_getProperties(INDI_DEVICE, "EQUATORIAL_EOD_COORD")
+    run.result()
     raise ConnectionError("the INDI server closed")
 
 
@@ -235,6 +293,12 @@ def pick_star(site, eop, sun_azel):
         if best is None or s.vmag < best.vmag:
             best = s
     return best
+
+
+def sky_sep_arcsec(places: np.ndarray, ref) -> np.ndarray:
+    """Small-angle distance (arcsec) of places (t_s, ra_h, dec_deg) from one such place."""
+    d_ra = ((places[:, 1] - ref[1] + 12.0) % 24.0 - 12.0) * 15.0 * np.cos(np.radians(ref[2]))
+    return np.hypot(d_ra, places[:, 2] - ref[2]) * 3600.0
 
 
 def sep_deg(az1, el1, az2, el2) -> float:
@@ -303,6 +367,13 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     # the recorder records the backend's reports like any signal, all through (started
     # first: a loaded host takes seconds to start a process)
     store = out_dir / "store"
+    told: list[tuple[int, float, float]] = []  # every report the VSS served as a tick
+
+    def tell(row: dict) -> None:
+        if not told or row["t_us"] > told[-1][0]:  # a tick's time only moves forward
+            told.append((int(row["t_us"]), row["report.ra_deg"], row["report.dec_deg"]))
+
+    t.link.report_listeners.append(tell)
     rec = await asyncio.create_subprocess_exec(
         str(BIN / "vs"), "record", t.signals.url, "report.ra_deg", "report.dec_deg",
         "rate.axis1_arcsec_s", "error.sky_arcsec", "--rate", "50", "--duration", "600",
@@ -316,6 +387,7 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     await wait_op(op, STAR_TRACK_S + 60)
     rec.send_signal(signal.SIGINT)  # Ctrl-C: the recorder closes its store and exits
     _out, rec_err = await asyncio.wait_for(rec.communicate(), 60)
+    t.link.report_listeners.remove(tell)
     doc["star_op"] = op_doc(op)
     doc["star_samples"] = obs.since(k)
     q = await asyncio.create_subprocess_exec(
@@ -325,7 +397,7 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     doc["recorded"] = {"record_exit": rec.returncode, "record_stderr": rec_err.decode()[-1500:],
                        "query_exit": q.returncode, "query_stderr": q_err.decode()[-1500:],
                        "data": json.loads(q_out) if q.returncode == 0 else None,
-                       "report_period_s": t.link.stats.period_s()}
+                       "report_period_s": t.link.stats.period_s(), "told": told}
 
     doc["steps_s"]["star"] = time.monotonic() - t0
     # 2. vs run of a small plan: one block of the same star, planned and run by the CLI
@@ -333,15 +405,21 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     doc["steps_s"]["run"] = time.monotonic() - t0
 
     # 2b. a PWI4-style offset during a track: the rate loop follows the offset path
-    k = obs.mark()  # from the slew on: INDI pushes nothing while the star is held still
+    k = obs.mark()  # from the slew on
     op = await t.follow_target(IcrsStar.from_catalog(star), star.name, duration_s=None)
     await op.begun
-    await asyncio.sleep(2.0)
+    # on the star before: a second, and a few places of the held star (the INDI observer
+    # asks for them)
+    n = obs.mark()
+    await asyncio.sleep(1.0)
+    await obs.wait_places(n + 3, OFFSET_GUARD_S)
     answer = await t.steering.offset("dec", "add", arcsec=OFFSET_ARCSEC)
-    await asyncio.sleep(6.0)
+    # then until the mount holds the new place, however long a loaded host takes
+    held_after_s = await obs.wait_moved_and_held(answer["from_us"] / 1e6, k,
+                                                 OFFSET_ARCSEC / 2, OFFSET_GUARD_S)
     doc["offset"] = {"answer": json.loads(json.dumps(answer, default=str)),
                      "samples": obs.since(k), "arcsec": OFFSET_ARCSEC,
-                     "op_before_stop": op_doc(op)}
+                     "held_after_s": held_after_s, "op_before_stop": op_doc(op)}
     await t.stop()
     doc["steps_s"]["offset"] = time.monotonic() - t0
 
@@ -393,18 +471,25 @@ async def pass_part(doc, t, site, sun_azel, sim, obs, t0):
     await op.begun
     k = obs.mark()
     tracking_since = None
+    # followed for PASS_TRACK_S, and on until the observer has PASS_PLACES places of the
+    # followed stretch (a loaded host may deliver fewer a second), within the pass
     while not op.done.done() and time.time() < culm_s + 150:
         if op.phase.label == "tracking" and tracking_since is None:
             tracking_since = time.time()
         if tracking_since is not None and time.time() > tracking_since + PASS_TRACK_S:
-            break
+            judged_from_s = op.info.get("tracking_from_us", 0) / 1e6 + PASS_SETTLE_S
+            if sum(x[0] >= judged_from_s for x in obs.since(k)) >= PASS_PLACES:
+                break
         await asyncio.sleep(0.2)
     doc["pass_op_before_stop"] = op_doc(op)
     stop_at = time.time()
     doc["stop_result"] = await t.stop()
     doc["stop_answered_s"] = time.time() - stop_at
     doc["stop_sent_s"] = stop_at
-    await asyncio.sleep(4.0)  # the mount must stay at rest: the observer keeps reading
+    # the mount must stay at rest: the observer keeps reading, 4 s and at least 6 places
+    rest_from = obs.mark()
+    await asyncio.sleep(4.0)
+    await obs.wait_places(rest_from + 6, 60.0)
     doc["pass_op"] = op_doc(op)
     doc["pass_samples"] = obs.since(k)
     doc["steps_s"]["pass"] = time.monotonic() - t0

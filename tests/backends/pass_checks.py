@@ -25,9 +25,9 @@ def test_an_iss_pass_is_followed_on_skyfields_place(seen):
     before = seen["pass_op_before_stop"]
     assert before["phase"] == "tracking", before
     info = before["info"]
-    start = info["tracking_from_us"] / 1e6 + 2.0
+    start = info["tracking_from_us"] / 1e6 + 2.0  # backend_scenario.PASS_SETTLE_S
     samples = [s for s in seen["pass_samples"] if start <= s[0] <= seen["stop_sent_s"]]
-    assert len(samples) >= 20
+    assert len(samples) >= 20  # the scenario follows the pass until it has them
     t = np.array([s[0] for s in samples])
     err = sky_errors_arcsec(samples, satellite_apparent(seen["tle"], t, seen))
     # the reports' own times are known to milliseconds here; the satellite moves ~1°/s

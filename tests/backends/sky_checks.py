@@ -36,8 +36,9 @@ def test_the_backend_reads_geometry_and_rates_from_the_driver(seen):
         assert caps["geometry"] == "german"
         assert caps["max_rate_deg_s"] == pytest.approx((16384 - 15.041) / 3600, rel=1e-3)
     final = seen["final_backend"]
-    # measured: Alpaca reads ~20/s, INDI pushes every 250 ms (a still place is not pushed)
-    assert final["report_rate_hz"] > 2.0 and 0 <= final["reported"]["age_s"] < 60.0
+    # measured, not assumed (Alpaca: read ~20/s; INDI: pushed every 250 ms while the place
+    # changes); how fast is the benchmark's figure, here only that reports came and went on
+    assert 0.0 < final["report_rate_hz"] < 1000.0 and 0 <= final["reported"]["age_s"] < 60.0
     assert final["driver_site"]["lat_deg"] == pytest.approx(seen["site"]["lat_deg"])
 
 
@@ -94,11 +95,22 @@ def test_the_recorder_records_the_backends_reports_rates_and_errors(seen):
     rec = seen["recorded"]
     assert rec["record_exit"] == 0 and rec["query_exit"] == 0, rec
     data = rec["data"]
-    t_all = np.asarray(data["t_us"], np.int64) / 1e6
+    t_us = np.asarray(data["t_us"], np.int64)
+    t_all = t_us / 1e6
     assert len(t_all) >= 10 and np.all(np.diff(t_all) > 0)
-    # at the rate reports come (a still star: each read, or each wait for a push), at
-    # least one a second
-    assert np.median(np.diff(t_all)) < 1.0, np.diff(t_all)
+    # every stored row is a report the VSS served, at that report's own time, and the
+    # recorder kept them (not one per second or per batch): at least half of those served
+    # while it recorded (a loaded host may make it lose some, shown as gaps)
+    told = np.asarray(rec["told"], float).reshape(-1, 3)
+    told_t = told[:, 0].astype(np.int64)
+    served = np.isin(t_us, told_t)
+    assert served.all(), t_us[~served][:10]
+    k = np.searchsorted(told_t, t_us)
+    assert np.allclose(np.asarray(data["values"]["report.ra_deg"], float), told[k, 1], atol=1e-9)
+    assert np.allclose(np.asarray(data["values"]["report.dec_deg"], float), told[k, 2],
+                       atol=1e-9)
+    span = (told_t >= t_us[0]) & (told_t <= t_us[-1])
+    assert len(t_us) >= 0.5 * span.sum(), (len(t_us), span.sum())
     info = seen["star_op"]["info"]
     inside = (t_all * 1e6 >= info["tracking_from_us"]) & (t_all * 1e6 <= info["tracking_to_us"])
     assert inside.sum() >= 5, "the recording overlapped the track"
@@ -116,29 +128,37 @@ def test_the_recorder_records_the_backends_reports_rates_and_errors(seen):
 
 def test_an_offset_during_a_track_moves_the_mount_by_that_much(seen):
     """`offset dec add 60″` (PWI4-style, issue 28) on a rate mount: the loop follows the
-    offset path, so the simulator's reported place is 60″ north of astropy's star once
-    the offset is reached (and the loop has taken it up), and on the star before it."""
+    offset path, so the simulator's reported place is on astropy's star before the offset
+    and, once the mount holds a place again, 60″ north of it; on the way it never goes the
+    wrong way nor far past the offset, and once there it stays.
+
+    Judged by shape, not by speed: the scenario waits (event-driven, a hang guard only)
+    until the mount holds a new place, so a loaded host that delays the loop changes when,
+    not what. How soon the loop takes an offset up is a figure of the benchmark's."""
     off = seen["offset"]
     answer = off["answer"]
     assert answer["offsets"]["axes"]["dec"]["goal_arcsec"] == pytest.approx(off["arcsec"])
+    assert off["held_after_s"] is not None, "the mount never held the offset place (hang guard)"
     s = np.asarray(off["samples"], float)
     ra, dec = star_apparent(seen["star"], s[:, 0], seen)
     d_ra = ((s[:, 1] * 15.0 - ra + 180.0) % 360.0 - 180.0) * np.cos(np.radians(dec)) * 3600
     d_dec = (s[:, 2] - dec) * 3600
-    from_s, reached_s = answer["from_us"] / 1e6, answer["reached_us"] / 1e6
+    from_s = answer["from_us"] / 1e6
     tracking_s = off["op_before_stop"]["info"]["tracking_from_us"] / 1e6
-    # on the star before: the places reported since the landing check (INDI pushes a place
-    # only when it changed, so the last one before the offset stands for the time since)
-    last_s = s[s[:, 0] < from_s, 0].max() if (s[:, 0] < from_s).any() else from_s
-    before = (s[:, 0] < from_s) & (s[:, 0] >= min(tracking_s, last_s))
-    # the loop takes a step up in about 8 report periods (60 % of the error per period):
-    # judged from 10 periods (at least 2.5 s: a loaded host delays it) after it is reached
-    period_s = 1.0 / seen["final_backend"]["report_rate_hz"]
-    after = s[:, 0] > reached_s + max(2.5, 10 * period_s)
-    # (INDI pushes nothing once the mount holds the offset place: its last push stands)
-    assert before.sum() >= 1 and after.sum() >= 1, (before.sum(), after.sum())
-    assert np.abs(d_dec[before]).max() < 3.0 and np.abs(d_ra[before]).max() < 3.0
-    # the place it holds (the last reported) is the offset one; on the way there, converging
+    # on the star before: every place reported from the landing check to the offset
+    before = (s[:, 0] >= tracking_s) & (s[:, 0] < from_s)
+    assert before.sum() >= 1, "no place reported between the landing check and the offset"
+    assert np.abs(d_dec[before]).max() < 3.0 and np.abs(d_ra[before]).max() < 3.0, \
+        (np.round(d_ra[before], 2), np.round(d_dec[before], 2))
+    # the place it holds (the last reported) is the offset one
     assert abs(d_dec[-1] - off["arcsec"]) < 3.0 and abs(d_ra[-1]) < 3.0, (d_ra[-1], d_dec[-1])
-    assert np.abs(d_dec[after] - off["arcsec"]).max() < 10.0, np.round(d_dec[after], 2)
-    assert np.abs(d_ra[after]).max() < 10.0, np.round(d_ra[after], 2)
+    # on the way: never the wrong way, never beyond the offset by half of it (a loop whose
+    # cycles a loaded host delays keeps a rate on too long: how far is the benchmark's
+    # business), right ascension kept; and once within 3″ of the offset place, it stays
+    way = s[:, 0] >= from_s
+    dd, dr = d_dec[way], d_ra[way]
+    assert dd.min() > -3.0 and dd.max() < 1.5 * off["arcsec"], np.round(dd, 2)
+    assert np.abs(dr).max() < 10.0, np.round(dr, 2)
+    there = np.flatnonzero(np.abs(dd - off["arcsec"]) < 3.0)
+    assert len(there) >= 3, np.round(dd, 2)  # held: several places, not one passing by
+    assert np.abs(dd[there[0]:] - off["arcsec"]).max() < 3.0, np.round(dd, 2)
