@@ -156,8 +156,9 @@ class Observer:
                                   guard_s: float) -> float | None:
         """Wait until a place reported after `from_s` lies `moved_arcsec` from the last one
         before it, and the places since then have stood still (within `HELD_ARCSEC` for
-        `HELD_S`): the mount holds a new place. Returns the wall seconds waited, None if the
-        hang guard ran out (the test then judges what was seen)."""
+        `HELD_S`): the mount holds a new place. `k` is a mark taken well before the offset
+        (places must lie between it and `from_s`). Returns the wall seconds waited, None if
+        the hang guard ran out (the test then judges what was seen)."""
         start = time.monotonic()
         while time.monotonic() - start < guard_s:
             await asyncio.sleep(0.2)
@@ -316,44 +317,70 @@ def op_doc(op) -> dict:
     return json.loads(json.dumps(op.as_dict(), default=str))
 
 
-async def scenario(kind: str, part: str, out_dir: Path) -> dict:
-    from virtualstar.astro import SolarSystemBody, observe_mount_times
-    from virtualstar.server import build_server
+def site_doc(site) -> dict:
+    """The site as the truth functions (truth.py) read it."""
+    return {k: getattr(site, k) for k in ("lat_deg", "lon_deg", "height_m", "pressure_hpa",
+                                          "temperature_c", "humidity", "wavelength_um")}
 
+
+def sun_azel_now(site, eop) -> tuple[float, float]:
+    """The Sun's observed azimuth and elevation now, degrees."""
+    from virtualstar.astro import SolarSystemBody, observe_mount_times
+
+    sun = observe_mount_times(SolarSystemBody("sun"), np.array([now_us()], np.int64), site, eop)
+    return math.degrees(sun.az_rad[0]), math.degrees(sun.el_rad[0])
+
+
+class Rig:
+    """A simulator, the VSS driving it (`--mount alpaca://…|indi://…`) and the observer."""
+
+    async def open(self, kind: str, site, out_dir: Path, **build) -> Rig:
+        from virtualstar.server import build_server
+
+        self.sim = Simulator(kind, out_dir)
+        self.sim.start()
+        self.vss = build_server(mount_url=self.sim.url, site=site, **build)
+        self.url = await self.vss.start("ws://127.0.0.1:0")
+        self.t = self.vss.telescope
+        self.obs = Observer(self.sim)
+        await self.t.link.wait_connected(START_TIMEOUT_S)
+        await asyncio.sleep(1.0)
+        return self
+
+    async def close(self) -> None:
+        """Close what `open` got to (the observer, the VSS, the simulator)."""
+        if hasattr(self, "obs"):
+            self.obs.close()
+        if hasattr(self, "vss"):
+            await self.vss.close()
+        if hasattr(self, "sim"):
+            self.sim.stop()
+
+
+async def scenario(kind: str, part: str, out_dir: Path) -> dict:
     doc: dict = {"kind": kind, "part": part, "errors": [], "steps_s": {}}
     t0 = time.monotonic()
     # the pass part at night: no Sun zone between the mount and the pass (a detour would
     # only lengthen the test; the sky part proves the routes)
     site, eop = daytime_site(-37.5 if part == "sky" else 180.0)
-    doc["site"] = {"lat_deg": site.lat_deg, "lon_deg": site.lon_deg, "height_m": site.height_m,
-                   "pressure_hpa": site.pressure_hpa, "temperature_c": site.temperature_c,
-                   "humidity": site.humidity, "wavelength_um": site.wavelength_um}
-    sim = Simulator(kind, out_dir)
-    sim.start()
-    vss = build_server(mount_url=sim.url, site=site, signals_url="ws://127.0.0.1:0")
-    url = await vss.start("ws://127.0.0.1:0")
-    t = vss.telescope
-    obs = Observer(sim)
+    doc["site"] = site_doc(site)
+    rig = Rig()
     try:
-        await t.link.wait_connected(START_TIMEOUT_S)
-        await asyncio.sleep(1.0)
+        await rig.open(kind, site, out_dir, signals_url="ws://127.0.0.1:0")
+        t, obs, sim, url = rig.t, rig.obs, rig.sim, rig.url
         doc["connected"] = json.loads(json.dumps((await t.status())["backend"], default=str))
-        tnow = np.array([now_us()], np.int64)
-        sun = observe_mount_times(SolarSystemBody("sun"), tnow, site, eop)
-        sun_azel = (math.degrees(sun.az_rad[0]), math.degrees(sun.el_rad[0]))
+        sun_azel = sun_azel_now(site, eop)
         doc["sun_azel_deg"] = sun_azel
         doc["steps_s"]["connected"] = time.monotonic() - t0
         if part == "sky":
             await sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0)
         else:
-            obs = await pass_part(doc, t, site, sun_azel, sim, obs, t0)
+            rig.obs = await pass_part(doc, t, site, sun_azel, sim, obs, t0)
         doc["final_backend"] = json.loads(json.dumps((await t.status())["backend"], default=str))
     except Exception:
         doc["errors"].append(traceback.format_exc())
     finally:
-        obs.close()
-        await vss.close()
-        sim.stop()
+        await rig.close()
     doc["steps_s"]["end"] = time.monotonic() - t0
     return doc
 
@@ -615,16 +642,21 @@ async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
     return doc
 
 
+def log_vss_to(path: Path) -> None:
+    """Log the VSS at DEBUG to `path`: the rate loop's every cycle, for a post-mortem."""
+    log = logging.FileHandler(path)
+    log.setFormatter(logging.Formatter("%(created).3f %(name)s %(levelname)s %(message)s"))
+    logging.getLogger("virtualstar").addHandler(log)
+    logging.getLogger("virtualstar").setLevel(logging.DEBUG)
+
+
 def main() -> None:
     if sys.argv[1] == "--observe":
         observe(sys.argv[2], int(sys.argv[3]), Path(sys.argv[4]))
         return
     kind, part, out_dir = sys.argv[1], sys.argv[2], Path(sys.argv[3])
     out_dir.mkdir(parents=True, exist_ok=True)
-    log = logging.FileHandler(out_dir / "vss.log")  # the rate loop's every cycle, for a post-mortem
-    log.setFormatter(logging.Formatter("%(created).3f %(name)s %(levelname)s %(message)s"))
-    logging.getLogger("virtualstar").addHandler(log)
-    logging.getLogger("virtualstar").setLevel(logging.DEBUG)
+    log_vss_to(out_dir / "vss.log")
     doc = asyncio.run(scenario(kind, part, out_dir))
     text = json.dumps(doc, default=str)
     (out_dir / "scenario.json").write_text(text)

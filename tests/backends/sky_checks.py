@@ -130,7 +130,7 @@ def test_an_offset_during_a_track_moves_the_mount_by_that_much(seen):
     """`offset dec add 60″` (PWI4-style, issue 28) on a rate mount: the loop follows the
     offset path, so the simulator's reported place is on astropy's star before the offset
     and, once the mount holds a place again, 60″ north of it; on the way it never goes the
-    wrong way nor far past the offset, and once there it stays.
+    wrong way nor far past the offset, and once there it does not swing away again.
 
     Judged by shape, not by speed: the scenario waits (event-driven, a hang guard only)
     until the mount holds a new place, so a loaded host that delays the loop changes when,
@@ -154,11 +154,13 @@ def test_an_offset_during_a_track_moves_the_mount_by_that_much(seen):
     assert abs(d_dec[-1] - off["arcsec"]) < 3.0 and abs(d_ra[-1]) < 3.0, (d_ra[-1], d_dec[-1])
     # on the way: never the wrong way, never beyond the offset by half of it (a loop whose
     # cycles a loaded host delays keeps a rate on too long: how far is the benchmark's
-    # business), right ascension kept; and once within 3″ of the offset place, it stays
+    # business), right ascension kept; once within 3″ of the offset place it stays within
+    # 10″ (it may settle from a small overshoot, it does not swing), and ends within 3″
     way = s[:, 0] >= from_s
     dd, dr = d_dec[way], d_ra[way]
     assert dd.min() > -3.0 and dd.max() < 1.5 * off["arcsec"], np.round(dd, 2)
     assert np.abs(dr).max() < 10.0, np.round(dr, 2)
     there = np.flatnonzero(np.abs(dd - off["arcsec"]) < 3.0)
     assert len(there) >= 3, np.round(dd, 2)  # held: several places, not one passing by
-    assert np.abs(dd[there[0]:] - off["arcsec"]).max() < 3.0, np.round(dd, 2)
+    assert np.abs(dd[there[0]:] - off["arcsec"]).max() < 10.0, np.round(dd, 2)
+    assert np.abs(dd[-3:] - off["arcsec"]).max() < 3.0, np.round(dd, 2)
