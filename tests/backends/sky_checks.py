@@ -4,8 +4,10 @@ the Sun refused and a slew routed round it (see scenario_run.py for how the part
 
 Truth: every place the simulator reported, recorded with its time by an independent
 client (ASCOM's alpyca, indipyclient), against astropy's topocentric apparent place of
-date (truth.py). The 10-minute sidereal track and the tight figures are the benchmark's
-(benchmarks/bench_backends.py).
+date (truth.py). The checks judge shape, never speed: where one needs N places or an end
+state, the scenario waits for it (a hang guard only), so a loaded host changes when, not
+what. The 10-minute sidereal track and the tight figures are the benchmarks'
+(benchmarks/bench_backends.py; how soon an offset is taken up: bench_backend_offset.py).
 """
 
 from __future__ import annotations
