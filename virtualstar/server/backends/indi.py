@@ -78,6 +78,7 @@ class IndiDriver:
         self._pushed = asyncio.Event()
         self._place: tuple[float, float, int] | None = None  # ra_h, dec_deg, arrival µs
         self._read_place: tuple[float, float, int] | None = None
+        self._written = (SIDEREAL_RATE_ARCSEC_S, 0.0)  # the TELESCOPE_TRACK_RATE last written
 
     # ------------------------------------------------------------------ connection
     async def open(self, site: Site) -> DriverInfo:
@@ -105,8 +106,9 @@ class IndiDriver:
                          "its coordinates and track rate")
         if self._place is None:
             self._take_place(_now_us())
-        await self._set_site(site)
         rate = self._vector("TELESCOPE_TRACK_RATE")
+        self._written = (rate.getfloatvalue("TRACK_RATE_RA"), rate.getfloatvalue("TRACK_RATE_DE"))
+        await self._set_site(site)
         member = rate.member("TRACK_RATE_RA")
         max_rate = float(getattr(member, "max", 0.0) or 16384.0)
         step = float(getattr(member, "step", 0.0) or 0.0) or None
@@ -234,13 +236,24 @@ class IndiDriver:
                     m: ("On" if m == "TRACK_SIDEREAL" else "Off") for m in mode.members()})
             return
         # the axis turns at sidereal minus the place's own rate (arcsec/s)
-        await self._send("TELESCOPE_TRACK_RATE",
-                         {"TRACK_RATE_RA": SIDEREAL_RATE_ARCSEC_S - ra_deg_s * 3600.0,
-                          "TRACK_RATE_DE": dec_deg_s * 3600.0})
+        want = (SIDEREAL_RATE_ARCSEC_S - ra_deg_s * 3600.0, dec_deg_s * 3600.0)
+        if mode["TRACK_CUSTOM"] == "On" and (want[0] * self._written[0] < 0
+                                             or want[1] * self._written[1] < 0):
+            # libindi refuses, while tracking at custom rates, a rate whose sign differs from
+            # the one last *written* (refused ones included: it stores them first) and says
+            # so only in a message: an axis that must turn the other way goes through zero
+            await self._write_rates(tuple(w if w * o >= 0 else 0.0
+                                          for w, o in zip(want, self._written, strict=True)))
+        await self._write_rates(want)
         if mode["TRACK_CUSTOM"] != "On":
             # the driver's own mode, not a remembered one (a goto or abort may reset it)
             await self._send("TELESCOPE_TRACK_MODE",
                              {m: ("On" if m == "TRACK_CUSTOM" else "Off") for m in mode.members()})
+
+    async def _write_rates(self, rates: tuple[float, ...]) -> None:
+        await self._send("TELESCOPE_TRACK_RATE", {"TRACK_RATE_RA": rates[0],
+                                                  "TRACK_RATE_DE": rates[1]})
+        self._written = (float(rates[0]), float(rates[1]))
 
     async def set_tracking(self, on: bool) -> None:
         await self._send("TELESCOPE_TRACK_STATE", {"TRACK_ON": "On" if on else "Off",
