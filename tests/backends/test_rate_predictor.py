@@ -191,3 +191,48 @@ def test_the_tick_grid_recovers_a_drivers_ticks_from_late_arrivals():
     assert np.percentile(raw, 90) > 3_000
     assert np.percentile(off, 90) < 700, np.percentile(off, 90)
     assert np.percentile(off, 99) < 0.1 * np.percentile(raw, 99)
+
+
+def test_corrections_on_a_rate_mount_start_when_accepted_and_say_rate_loop():
+    from virtualstar.server.corrections import CorrectionMode, start_of_change
+
+    class Buffered:  # a feeder that has pushed points up to 5 s ahead
+        class stats:  # noqa: N801
+            pushed = 10
+            last_point_us = 6_000_000
+        next_us = 6_000_000
+
+    rate = CorrectionMode(can_replace=False, min_lead_us=20_000, margin_us=10_000, rate_loop=True)
+    assert rate.as_dict()["mode"] == "rate_loop"
+    assert "next command" in rate.as_dict()["note"]
+    assert start_of_change(rate, Buffered, 1_000_000, 10_000) == (1_000_000, "rate_loop")
+    # a change held until the join starts there
+    assert start_of_change(rate, None, 1_000_000, 0, not_before_us=3_000_000)[0] == 3_000_000
+    # an ASTCom mount without traj_replace still appends after its buffer
+    append = CorrectionMode(can_replace=False, min_lead_us=20_000, margin_us=10_000)
+    assert append.as_dict()["mode"] == "append-only"
+    assert start_of_change(append, Buffered, 1_000_000, 10_000) == (6_000_000, "appended")
+
+
+def test_a_report_stamped_late_now_and_then_does_not_throw_the_loop_off():
+    """A busy host stamps one push in twenty 25 ms late (87″ at 1°/s): the loop must not
+    answer each with a correction of that size."""
+    path_at, _accel = curved_path()
+    rng = np.random.default_rng(3)
+    period = 250_000
+    driver = TickingDriver(period, transport_us=2_000, start=path_at(0) + 50 * ARCSEC)
+    pred = RatePredictor(0.25, 0.5, 0.0)
+    errors = []
+    for t, place in driver.reports(120_000_000):
+        errors.append(np.hypot(*(path_at(t) - place)))  # truth: the tick's own time
+        stamp = t + (25_000 if rng.random() < 0.05 else 0)
+        pred.reported(stamp, tuple(place))
+        now = stamp + 3_000
+        rate, *_ = pred.command(now, path_at)
+        driver.send(now, rate)
+        pred.sent(tuple(rate), now)
+    err = np.asarray(errors[40:]) / ARCSEC
+    late_error = 1.0 * DEG * 0.025 / ARCSEC  # what one late stamp looks like, at most
+    # each late stamp moves the mount by at most the clipped correction (a few tenths of it)
+    assert np.percentile(err, 95) < 0.1 * late_error, np.percentile(err, 95)
+    assert np.sqrt(np.mean(err**2)) < 0.1 * late_error

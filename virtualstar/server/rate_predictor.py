@@ -40,6 +40,9 @@ LAG_CANDIDATES = 41  # candidate lags from 0 to LAG_MAX_PERIODS report periods
 LAG_MAX_PERIODS = 2.0
 FORGET = 0.97  # per report: the evidence of ~30 reports counts
 MIN_EVIDENCE = 3  # report intervals with a rate change before the learned lag is used
+OUTLIER_WINDOW = 16  # reports whose predicted errors set what counts as an outlier
+OUTLIER_FACTOR = 4.0  # an error this many times their median is taken at that size
+OUTLIER_FLOOR_RAD = 1.0 / 206264.806  # ... but errors up to 1″ always count in full
 
 
 @dataclass(frozen=True)
@@ -173,6 +176,7 @@ class RatePredictor:
         self.lag = ApplicationLag(period_s, initial_lag_s, learn=learn)
         self.lag.before = rates_in_force
         self._t_rep = 0
+        self._recent: deque[float] = deque(maxlen=OUTLIER_WINDOW)  # |predicted error|, rad
 
     def reported(self, t_us: int, place: tuple[float, float]) -> None:
         self._t_rep = int(t_us)
@@ -188,8 +192,17 @@ class RatePredictor:
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """(rate, feed-forward, predicted error, in force from) for a command sent now."""
         t_a = self.effect_us(now_us)
-        rate, ff, err = plan_rate(self.lag.place_at(t_a), path_at, t_a, self.period_us,
-                                  self.gain, self.wrap)
+        place = self.lag.place_at(t_a)
+        rate, ff, err = plan_rate(place, path_at, t_a, self.period_us, self.gain, self.wrap)
+        size = float(np.hypot(*err))
+        if len(self._recent) >= OUTLIER_WINDOW // 2:
+            # one report stamped late by a busy host (20 ms is 70″ at 1°/s) is not where the
+            # mount is: its error counts only up to a few times the recent ones' median
+            limit = max(OUTLIER_FACTOR * float(np.median(self._recent)), OUTLIER_FLOOR_RAD)
+            if size > limit:
+                err = err * (limit / size)
+                rate = ff + self.gain * err / (self.period_us / 1e6)
+        self._recent.append(size)
         return rate, ff, err, t_a
 
     def sent(self, rates: tuple[float, float], now_us: int) -> None:
