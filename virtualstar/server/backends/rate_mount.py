@@ -87,6 +87,7 @@ class DriverReport:
     at_park: bool
     side_of_pier: int = -1  # ASCOM's numbers: 0 east, 1 west, -1 unknown
     received_us: int | None = None  # a pushed report: when it arrived (polled: None)
+    answered: bool = False  # pushed in answer to a fresh read (off the driver's tick grid)
 
 
 @dataclass(frozen=True)
@@ -379,7 +380,8 @@ class RateMountLink(ConnectionWaits):
             # pushed: it describes its driver's tick, which it follows by the handling
             # delay (the INDI simulator ticks every 250.5 ± 0.2 ms; its property timestamps
             # have whole seconds only): the tick grid fitted to the arrivals
-            before = after = self._ticks.add(rep.received_us)
+            before = after = (rep.received_us if rep.answered
+                              else self._ticks.add(rep.received_us))
         self.stats.reads += 1
         self.stats.latency_s.append((after - before) / 1e6)
         return rep, before, after
