@@ -2,9 +2,9 @@
 
 indi_simulator_telescope pushes EQUATORIAL_EOD_COORD only when the place changed: a held
 star leaves it silent. The backend asks again after `FRESH_READ_S` of silence
-(``getProperties``); the driver's answer is a report of now. A driver that does not
-answer (frozen with SIGSTOP here, its connection still open) fails the read, so the link
-can call it lost — silence alone no longer means "unchanged". The simulator runs under
+(``getProperties``); the driver's answer is a report of now. A driver that has answered
+nothing for `FRESH_FAIL_S` (frozen with SIGSTOP here, its connection still open) fails
+its reads, so the link can call it lost; a shorter silence is a busy host. The simulator runs under
 indiserver inside its own network namespace (``unshare -n``), as the other INDI tests.
 """
 
@@ -54,7 +54,7 @@ async def _inner() -> dict:
         out["fresh_reads"], out["fresh_answers"] = driver.fresh_reads, driver.fresh_answers
         out["fresh_read_s"] = FRESH_READ_S
         proc.send_signal(signal.SIGSTOP)  # frozen, its socket still open
-        for _ in range(6):
+        for _ in range(9):  # ~2.3 s each: past FRESH_FAIL_S
             try:
                 await driver.read()
                 out["frozen"].append("ok")
@@ -84,9 +84,11 @@ def test_a_quiet_indi_driver_answers_fresh_reads_and_a_frozen_one_fails_them():
     answered = [q for q in doc["quiet"] if q[1]]
     assert len(answered) >= 3 and all(q[0] for q in answered)
     assert any(not q[0] for q in doc["quiet"])  # the silences in between
-    # frozen: the first read may still see a push in flight; then every fresh read fails
-    assert doc["frozen"][-3:] == [doc["frozen"][-1]] * 3
-    assert "no answer to a fresh read" in doc["frozen"][-1]
+    # frozen: a few silent reads pass as a busy host's, then every read fails
+    assert doc["frozen"][0] == "ok"
+    failed = [r for r in doc["frozen"] if r != "ok"]
+    assert len(failed) >= 2 and doc["frozen"][-len(failed):] == failed
+    assert all("no answer to a fresh read" in r for r in failed)
 
 
 if __name__ == "__main__":
