@@ -331,8 +331,12 @@ def star_rms(doc: dict) -> tuple[float, float, int]:
 
 def report_sidereal(doc: dict) -> None:
     kind = doc["kind"]
-    rms, peak, n = star_rms(doc)
     info = doc["star_op"]["info"]
+    if not doc["star_samples"]:
+        print(f"[{kind}] sidereal {doc['star']}: no reported place in the window "
+              f"({info.get('error')})")
+        return
+    rms, peak, n = star_rms(doc)
     if "tracking_to_us" in info:
         span = (info["tracking_to_us"] - info["tracking_from_us"]) / 1e6
         print(f"[{kind}] sidereal {doc['star']} {span:.0f} s: RMS {rms:.3f}″, peak {peak:.2f}″ "
