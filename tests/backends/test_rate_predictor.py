@@ -236,3 +236,33 @@ def test_a_report_stamped_late_now_and_then_does_not_throw_the_loop_off():
     # each late stamp moves the mount by at most the clipped correction (a few tenths of it)
     assert np.percentile(err, 95) < 0.1 * late_error, np.percentile(err, 95)
     assert np.sqrt(np.mean(err**2)) < 0.1 * late_error
+
+
+def test_a_real_step_of_the_path_is_followed_at_once_not_taken_for_an_outlier():
+    """An offset of 60″ accepted at some moment (not known ahead) is seen in every report
+    after it: clipped in the first at most, in full from the second."""
+    base, _ = steady_path((300.0, 100.0))
+    accepted_us = 30_000_000
+    clock = [0]
+
+    def path_at(t_us: int) -> np.ndarray:
+        on = clock[0] >= accepted_us and t_us >= accepted_us
+        return base(t_us) + (np.array([0.0, 60.0 * ARCSEC]) if on else 0.0)
+
+    driver = TickingDriver(250_000, transport_us=2_000, start=path_at(0))
+    pred = RatePredictor(0.25, 0.6, 0.0)
+    errors = []
+    for t, place in driver.reports(40_000_000):
+        clock[0] = t
+        errors.append(np.hypot(*(path_at(t) - place)) / ARCSEC)
+        pred.reported(t, tuple(place))
+        clock[0] = now = t + 8_000
+        rate, *_ = pred.command(now, path_at)
+        driver.send(now, rate)
+        pred.sent(tuple(rate), now)
+    after = np.asarray(errors[accepted_us // 250_000:])
+    # the first tick after acceptance still at the old place, then 60 % of the error
+    # removed per tick (one tick lost to the outlier check at most): 12 ticks on, < 0.1″
+    assert after[0] > 50.0
+    assert after[12] < 0.1, after[:14]
+    assert after[4] < 0.2 * 60.0, after[:14]

@@ -72,7 +72,7 @@ __all__ = ["FollowStats", "NativeFrame", "RateFollower", "RateJoin", "run_up_s",
 
 log = logging.getLogger("virtualstar.server")
 
-GAIN = 0.5  # fraction of the predicted error removed per report period (1: deadbeat; less
+GAIN = 0.6  # fraction of the predicted error removed per report period (1: deadbeat; less
 # feeds back less of the report time's noise: a 1-ms stamp error is 3.6″ at 1°/s)
 INITIAL_LAG_PERIODS = 0.25  # when a command takes effect, until the reports have told
 RATE_STEP_H_S = 0.2  # mount seconds between the two samples that give the path's rate
