@@ -432,6 +432,9 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, default=None, help="keep the stores here")
     parser.add_argument("--sets", default="tuning,check,night",
                         help="what to run: tuning, check, night (comma-separated)")
+    parser.add_argument("--check-seeds", default=",".join(map(str, CHECK_SEEDS)),
+                        help="the check set's patterns (comma-separated seeds; seeds never "
+                             "scored before make a set not used for tuning)")
     parser.add_argument("--rescore", type=Path, default=None,
                         help="score the stores a --keep run left in this directory again "
                              "(after a change to the detectors) instead of recording")
@@ -447,7 +450,8 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="bench-anomalies-"))
     results = {}
     try:
-        for name, seeds in (("tuning", TUNING_SEEDS), ("check", CHECK_SEEDS)):
+        check_seeds = tuple(int(x) for x in args.check_seeds.split(","))
+        for name, seeds in (("tuning", TUNING_SEEDS), ("check", check_seeds)):
             if name in sets:
                 results[name] = run_set(name, seeds[:args.patterns], sky, work, args.keep)
         if "night" in sets:
