@@ -1,4 +1,25 @@
-"""The current detector: the current minus its motion model, per class and speed."""
+"""The current detector: the current minus its motion model, per class and speed.
+
+Three statistics per window, each against the reference's windows:
+
+* the **mean residual** (current − model), at speeds the reference held (or above its
+  saturated friction): an offset of the current;
+* the **gain**: the residual regressed on the modelled current, Σr·m / Σm². A winding
+  fault (turns shorted, torque constant down by f) scales the whole current by 1/(1 − f),
+  so its gain is f/(1 − f) in every phase — in a slew, where the current changes sign and
+  a mean residual averages out, as much as in a track;
+* the **friction scale**: the residual regressed on the model's dry-friction current. A
+  bearing wearing or drying raises the Coulomb friction, which scales that term — by the
+  same fraction at every speed, so a sidereal track at a speed the reference never held
+  is compared with it through the model's friction law.
+
+The scale statistics are scored at every speed the axis moves at, wherever the current
+they regress on is large enough (`gain_min_a`, `friction_min_a`) to measure a scale; their
+limit adds the model's uncertainty there, divided by that current — its reference RMS,
+and, at speeds the reference did not hold, how far the model's current moves between the
+nearest speed it held steadily and this one (the part of the prediction that is
+extrapolated).
+"""
 
 from __future__ import annotations
 
@@ -32,6 +53,8 @@ class CurrentDetector(Detector):
         self.model: CurrentModel | None = None
         self.rest_rad_s = math.radians(self.cfg.phases.rest_rate_arcsec_s / 3600.0)
         self.ref_speeds: dict[int, np.ndarray] = {}
+        self.window_sigma_a = math.nan  # robust sigma of the reference's window residuals
+        self.scale_ref: dict[str, tuple[float, float]] = {}  # statistic: (centre, limit)
         self.saturated_rad_s = math.inf
         self.ref_angles = (-math.inf, math.inf)
         self.cogging_a = 0.0
@@ -46,6 +69,7 @@ class CurrentDetector(Detector):
 
     def _arrays(self, chunk: Chunk) -> dict[str, np.ndarray]:
         arrays = super()._arrays(chunk)
+        arrays["use_any"] = arrays["use"].copy()  # the scale statistics: any speed
         arrays["use"] = arrays["use"] & arrays["covered"]
         return arrays
 
@@ -90,13 +114,31 @@ class CurrentDetector(Detector):
         # short travel the fit cannot always tell N from N ± 1) puts the cogging term out
         # of phase: up to its amplitude, growing with the distance (rad) from that travel.
         beyond = np.maximum(self.ref_angles[0] - p, p - self.ref_angles[1]).clip(min=0.0)
-        allowance += self.cogging_a * np.minimum(1.0, beyond)
-        return {"resid": resid, "allowance": allowance, "covered": covered}
+        cogging = self.cogging_a * np.minimum(1.0, beyond)
+        allowance += cogging
+        # the scale statistics' uncertainty: what the reference leaves open at this motion
+        # (friction shapes and knees it cannot tell apart), and the cogging's phase where N
+        # is not certain
+        uncertainty = self.model.spread_a(p, v, a)
+        if not self.model.cogging_certain:
+            uncertainty += cogging
+        return {"resid": resid, "allowance": allowance, "covered": covered,
+                "model": i - resid, "friction": self.model.friction_a(v),
+                "uncertainty": uncertainty}
 
     def stats(self, arrays, starts):
-        return {"mean": window_mean(arrays["resid"], starts, arrays["use"], need=self.need),
-                "allowance": window_mean(arrays["allowance"], starts, arrays["use"],
-                                         need=self.need)}
+        out = {"mean": window_mean(arrays["resid"], starts, arrays["use"], need=self.need),
+               "allowance": window_mean(arrays["allowance"], starts, arrays["use"],
+                                        need=self.need)}
+        use, r = arrays["use_any"], arrays["resid"]
+        unc = window_mean(arrays["uncertainty"], starts, use, need=self.need)
+        for name, x in (("gain", arrays["model"]), ("friction", arrays["friction"])):
+            power = window_mean(x * x, starts, use, need=self.need)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out[name] = window_mean(r * x, starts, use, need=self.need) / power
+                out[f"{name}_rms_a"] = np.sqrt(power)
+        out["uncertainty"] = unc
+        return out
 
     def fit(self, chunk: Chunk, ref: np.ndarray) -> Check:
         p, v, a, i = self._motion(chunk)
@@ -143,6 +185,7 @@ class CurrentDetector(Detector):
         pooled = mean[np.isfinite(mean) & (cls != REST) & (cls >= 0)]
         if len(pooled) >= self.cfg.min_windows:
             med, sigma = robust_center_scale(pooled)
+            self.window_sigma_a = float(sigma)
             self.center[POOLED] = float(med)
             self.limit[POOLED] = max(self.cfg.threshold * float(sigma),
                                      self.cfg.current_ref_factor * float(
@@ -153,6 +196,20 @@ class CurrentDetector(Detector):
                     self.plan[c] = (POOLED, "scored against all the reference's windows with "
                                     "twice the floor (" + note.removeprefix("not scored: ")
                                     + ")")
+        # The scale statistics: the reference's moving windows together (a scale is one
+        # number for the motor whatever the motion), where the current was large enough
+        self.scale_ref = {}
+        for name, least, floor in (("gain", self.cfg.gain_min_a, self.cfg.gain_floor),
+                                   ("friction", self.cfg.friction_min_a,
+                                    self.cfg.friction_scale_floor)):
+            x = stats[name][(stats[f"{name}_rms_a"] >= least) & (cls != REST) & (cls >= 0)]
+            x = x[np.isfinite(x)]
+            if len(x) < self.cfg.min_windows:
+                continue
+            med, sigma = robust_center_scale(x)
+            self.scale_ref[name] = (float(med), max(
+                floor, self.cfg.threshold * float(sigma),
+                self.cfg.current_ref_factor * float(np.max(np.abs(x - med)))))
         for c in AXIS_CLASSES:
             m = mean[(cls == c) & np.isfinite(mean)]
             if not held[c] or len(m) == 0:
@@ -163,16 +220,59 @@ class CurrentDetector(Detector):
             self.limit[c] = max(self.cfg.threshold * float(sigma),
                                 self.cfg.current_ref_factor * widest, self.cfg.current_floor_a)
 
+    def _scale_limits(self, stats, name: str, cls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(deviation, limit) per window of the scale statistic `name` (NaN where it is not
+        scored: no reference for it, at rest, or too little current to measure a scale)."""
+        n = len(cls)
+        if name not in self.scale_ref:
+            return np.full(n, np.nan), np.full(n, np.nan)
+        center, base = self.scale_ref[name]
+        rms = stats[f"{name}_rms_a"]
+        least = self.cfg.gain_min_a if name == "gain" else self.cfg.friction_min_a
+        assert self.model is not None
+        with np.errstate(invalid="ignore", divide="ignore"):
+            # a scale measured on a smaller current is noisier: the reference's window
+            # noise (A) over this window's current, in the same robust sigmas; and the
+            # model's own error — its residual RMS on the reference (slow wanders of the
+            # current do not average out in a window) and what the reference leaves open
+            # at this motion — over the same current
+            noise = self.cfg.threshold * self.window_sigma_a / rms
+            limit = np.maximum(base, noise) + self.cfg.scale_uncertainty_factor * (
+                self.model.reference_rms_a + stats["uncertainty"]) / rms
+        ok = (rms >= least) & (cls != REST) & (cls >= 0)
+        return np.where(ok, stats[name] - center, np.nan), np.where(ok, limit, np.nan)
+
     def window_scores(self, stats, cls):
         center = self._lookup(self.center, cls)
         limit = self._lookup(self.limit, cls) + self.cfg.coverage_factor * stats["allowance"]
         dev = stats["mean"] - center
-        score = np.abs(dev) / limit
-        details = [f"current {dev[k]:+.3f} A off its motion model while "
-                   f"{CLASS_NAMES.get(int(cls[k]), '?')} (limit {limit[k]:.3f} A)"
-                   if np.isfinite(score[k]) and score[k] >= 1.0 else ""
-                   for k in range(len(score))]
-        return score, details
+        with np.errstate(invalid="ignore"):
+            score = np.abs(dev) / limit
+            gain_dev, gain_lim = self._scale_limits(stats, "gain", cls)
+            fric_dev, fric_lim = self._scale_limits(stats, "friction", cls)
+            gain_score = np.abs(gain_dev) / gain_lim
+            fric_score = np.abs(fric_dev) / fric_lim
+        scores = np.stack([score, gain_score, fric_score])
+        best = np.argmax(np.nan_to_num(scores, nan=-1.0), axis=0)
+        total = np.where(np.all(np.isnan(scores), axis=0), np.nan,
+                         np.nanmax(np.where(np.isnan(scores), -np.inf, scores), axis=0))
+        details = []
+        for k in range(len(total)):
+            if not (np.isfinite(total[k]) and total[k] >= 1.0):
+                details.append("")
+                continue
+            while_ = CLASS_NAMES.get(int(cls[k]), "?")
+            if best[k] == 0:
+                details.append(f"current {dev[k]:+.3f} A off its motion model while "
+                               f"{while_} (limit {limit[k]:.3f} A)")
+            elif best[k] == 1:
+                details.append(f"current {gain_dev[k]:+.1%} of its modelled value off its "
+                               f"model while {while_} (limit {gain_lim[k]:.1%}): a "
+                               "torque-constant change scales the current")
+            else:
+                details.append(f"dry friction {fric_dev[k]:+.1%} off its model while "
+                               f"{while_} (limit {fric_lim[k]:.1%})")
+        return total, details
 
     def check(self) -> Check:
         c = super().check()

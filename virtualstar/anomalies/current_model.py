@@ -47,6 +47,10 @@ MAX_PERIODOGRAM_POINTS = 20_000
 # value of the sine-experiment days, biased the gravity term by 0.015 A on elevation
 # blocks outside the reference's elevations).
 RIDGE = 1e-7
+# Alternatives the reference cannot tell from the best fit: a friction shape and knee, or
+# a cogging N ± 1, whose fit leaves at most this much more residual RMS. The spread of
+# their predictions is the model's uncertainty at a motion (CurrentModel.spread_a).
+ALTERNATIVE_RMS_RATIO = 1.05
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,22 @@ class CurrentModel:
     reference_rms_a: float  # residual RMS on the rows it was fitted on
     friction: Friction = Friction()
     segment_s: float = 0.0  # the segments' span (s): the cogging averages over it
+    # fits the reference explains almost as well (ALTERNATIVE_RMS_RATIO): (friction,
+    # coefficients, scales) each, with the same cogging N
+    alternatives: tuple = ()
+    cogging_certain: bool = False  # N ± 1 explains the reference clearly worse
+
+    def spread_a(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """The largest difference between this model's current and an alternative's at
+        each motion (A): what the reference leaves undetermined there (0 without
+        alternatives)."""
+        best = self.predict(p, v, a)
+        out = np.zeros(len(best))
+        for friction, coef, scales in self.alternatives:
+            x = _regressors(p, v, a, self.gravity, self.cogging_periods, friction,
+                            self.segment_s)
+            np.maximum(out, np.abs((x / scales) @ coef - best), out=out)
+        return out
 
     def predict(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         x = _regressors(p, v, a, self.gravity, self.cogging_periods, self.friction,
@@ -89,6 +109,12 @@ class CurrentModel:
             return 0.0
         c = self.coefficients[-4:] / self.scales[-4:]
         return float(math.hypot(c[0], c[1]) + math.hypot(c[2], c[3]))
+
+    def friction_a(self, v: np.ndarray) -> np.ndarray:
+        """The dry-friction part of the model's current at each rate (A): the term a
+        bearing's friction growth scales."""
+        k = 3  # the column of g(v/v_k) in _regressors
+        return self.friction(v) * (self.coefficients[k] / self.scales[k])
 
     def slope_a_per_rad_s(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """d(current)/d|v| of the model at each motion (A per rad/s): how much the current
@@ -201,5 +227,20 @@ def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray
     x = _regressors(p, v, a, gravity, n, friction, segment_s)
     coef, scales = _lstsq(x, i)
     res = i - (x / scales) @ coef
-    return CurrentModel(coef, scales, gravity, n, float(np.sqrt(np.mean(res * res))),
-                        friction, segment_s)
+    rms = float(np.sqrt(np.mean(res * res)))
+    alternatives = []
+    for shape in FRICTION_SHAPES:
+        for knee in FRICTION_KNEES_RAD_S:
+            f = Friction(shape, knee)
+            if f == friction:
+                continue
+            xf = _regressors(p, v, a, gravity, n, f, segment_s)
+            cf, sf = _lstsq(xf, i)
+            r = i - (xf / sf) @ cf
+            if np.sqrt(np.mean(r * r)) <= ALTERNATIVE_RMS_RATIO * rms:
+                alternatives.append((f, cf, sf))
+    certain = bool(n) and all(
+        _rms(_regressors(p, v, a, gravity, m, friction, segment_s), i)
+        > ALTERNATIVE_RMS_RATIO * rms for m in (n - 1, n + 1) if m > 0)
+    return CurrentModel(coef, scales, gravity, n, rms, friction, segment_s,
+                        tuple(alternatives), certain)

@@ -60,6 +60,18 @@ class DetectorConfig:
     coverage_ratio: float = 1.1
     coverage_min_s: float = 10.0
     coverage_factor: float = 2.0
+    # Scale statistics (CurrentDetector): per window, the residual regressed on the
+    # modelled current (its gain: a winding fault scales the whole current) and on the
+    # model's dry-friction current (a bearing's friction growth scales that term), scored
+    # at every speed and in slews where that current is at least *_min_a RMS. The limit
+    # is the larger of the floor and `threshold` robust sigmas of the reference windows,
+    # plus the model's uncertainty there (scale_uncertainty_factor × (its reference RMS +
+    # the speed allowance) ÷ the window's RMS current).
+    gain_floor: float = 0.035
+    gain_min_a: float = 0.05
+    friction_scale_floor: float = 0.08
+    friction_min_a: float = 0.03
+    scale_uncertainty_factor: float = 3.0
     vibration_window_s: float = 30.0
     vibration_floor_ratio: float = 16.0  # power × this at least (amplitude × 4)
     spike_factor: float = 5.0  # × the largest spike of the class on the reference
@@ -237,7 +249,8 @@ class Detector:
     def fit(self, chunk: Chunk, ref: np.ndarray) -> Check:
         """Learn the reference's statistics per class from the rows `ref` of `chunk`."""
         arrays = self._arrays(chunk)
-        arrays["use"] = arrays["use"] & ref
+        for key in [k for k in arrays if k.startswith("use")]:  # "use" and its variants
+            arrays[key] = arrays[key] & ref
         starts = class_window_starts(arrays["cls"], self.per, arrays["breaks"])
         stats = self.stats(arrays, starts)
         cls = arrays["cls"][starts]
