@@ -3,16 +3,26 @@
 astropy never downloads (the IERS tables come from astropy-iers-data); virtualstar's cache
 of the Earth-orientation table (virtualstar.astro.earth_orientation) goes to a directory of
 this test session, not the user's: each session reads the table once, as a fresh machine does.
+The pytest-xdist workers share their session's directory (they inherit it from the process
+that started them), and the first of them to need the table reads it while the others wait.
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import tempfile
 
-_CACHE = tempfile.mkdtemp(prefix="virtualstar-test-cache-")
-os.environ["VIRTUALSTAR_CACHE_DIR"] = _CACHE  # before any test (or subprocess) reads it
+import pytest
+
+_OWNER_VAR = "VIRTUALSTAR_TEST_CACHE_OWNER"  # the pid of the process that made the directory
+if os.environ.get(_OWNER_VAR) and os.path.isdir(os.environ.get("VIRTUALSTAR_CACHE_DIR", "")):
+    _CACHE = os.environ["VIRTUALSTAR_CACHE_DIR"]  # an xdist worker: its session's directory
+else:
+    _CACHE = tempfile.mkdtemp(prefix="virtualstar-test-cache-")
+    os.environ["VIRTUALSTAR_CACHE_DIR"] = _CACHE  # before any test (or subprocess) reads it
+    os.environ[_OWNER_VAR] = str(os.getpid())
 
 
 def pytest_configure(config) -> None:
@@ -21,5 +31,20 @@ def pytest_configure(config) -> None:
     iers.conf.auto_download = False
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _earth_orientation_read_once_per_session():
+    """Read astropy's IERS table into the session's cache once, whatever the workers (each
+    reading costs ~2 s of CPU); later processes, servers included, load the cached arrays."""
+    from virtualstar.astro.earth_orientation import EarthOrientation
+
+    with open(os.path.join(_CACHE, "fill.lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            EarthOrientation.from_astropy_iers_data()
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
 def pytest_unconfigure(config) -> None:
-    shutil.rmtree(_CACHE, ignore_errors=True)
+    if os.environ.get(_OWNER_VAR) == str(os.getpid()):
+        shutil.rmtree(_CACHE, ignore_errors=True)
