@@ -47,6 +47,7 @@ class StateLog:
     def __init__(self) -> None:
         self.events: list[tuple[str, str]] = []
         self.lock = threading.Lock()
+        self.abort_on_busy: str | None = None  # a vector whose next Busy is aborted at once
         threading.Thread(target=lambda: asyncio.run(self._run()), daemon=True).start()
 
     async def _run(self) -> None:
@@ -60,6 +61,15 @@ class StateLog:
                 if event.devicename == D and event.vectorname and state:
                     with log.lock:
                         log.events.append((event.vectorname, state))
+                        abort = log.abort_on_busy == event.vectorname and state == "Busy"
+                        if abort:
+                            log.abort_on_busy = None
+                    if abort:
+                        # from this connection, as soon as the goto is announced: an
+                        # indi_setprop process started after it may arrive (on a loaded
+                        # host) when a slew of ~1 s of wall time at x20 has already landed
+                        await self.send_newVector(D, "TELESCOPE_ABORT_MOTION",
+                                                  members={"ABORT": "On"})
 
         await Recorder(indihost="127.0.0.1", indiport=7624).asyncrun()
 
@@ -289,9 +299,9 @@ def main() -> None:
         put("ON_COORD_SET.TRACK=On")
         # abort a long slew: Alert on the coordinates, the mount at rest
         mark = log.mark()
+        log.abort_on_busy = "HORIZONTAL_COORD"
         put("HORIZONTAL_COORD.AZ;ALT=300;30")
         log.wait("HORIZONTAL_COORD", "Busy", mark, 30)
-        put("TELESCOPE_ABORT_MOTION.ABORT=On")
         seen["abort_state"] = wait_state("HORIZONTAL_COORD", ("Alert", "Ok"), 30)
         seen["after_abort"] = phase()
         seen.update(asyncio.run(python_client()))
