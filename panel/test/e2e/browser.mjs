@@ -36,7 +36,7 @@ export async function openAndConnect(page, panelUrl, endpoint, password) {
   await page.fill('input[name=url]', endpoint);
   await page.fill('input[name=password]', password || '');
   await page.click('button.connect');
-  await page.waitForFunction(() => window.panelProbe?.session.status === 'connected', null, { timeout: 15_000 });
+  await page.waitForFunction(() => window.panelProbe?.session.status === 'connected', null, { timeout: 60_000 });
 }
 
 /** Tick signals on the Signals tab and start streaming them at `rateHz`. */
@@ -49,7 +49,7 @@ export async function streamSignals(page, names, rateHz) {
   await page.fill('input[name=signal-filter]', '');
   await page.fill('input[name=rate]', String(rateHz));
   await page.click('button.start-stream');
-  await page.waitForFunction(() => window.panelProbe.session.stream.samples > 0, null, { timeout: 10_000 });
+  await page.waitForFunction(() => window.panelProbe.session.stream.samples > 0, null, { timeout: 60_000 });
 }
 
 /**
@@ -99,7 +99,7 @@ export async function writeParameter(page, name, value) {
   await page.fill(`input[data-param="${name}"]`, value);
   await page.click(`button[data-set="${name}"]`);
   await page.waitForFunction(([n, v]) => document.querySelector(`[data-param-value="${n}"]`)?.textContent.trim() === v,
-    [name, value], { timeout: 10_000 });
+    [name, value], { timeout: 60_000 });
   return page.textContent(`[data-param-value="${name}"]`);
 }
 
