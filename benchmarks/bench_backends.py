@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
-import logging
 import math
 import os
 import subprocess
@@ -290,10 +289,9 @@ def main() -> None:
     if args.inner:
         out = Path(os.environ.get("BENCH_OUT", "/tmp")) / f"{args.inner}-{args.part}"
         out.mkdir(parents=True, exist_ok=True)
-        log = logging.FileHandler(out / "vss.log")  # the rate loop's every cycle
-        log.setFormatter(logging.Formatter("%(created).3f %(name)s %(levelname)s %(message)s"))
-        logging.getLogger("virtualstar").addHandler(log)
-        logging.getLogger("virtualstar").setLevel(logging.DEBUG)
+        from backend_scenario import log_vss_to
+
+        log_vss_to(out / "vss.log")  # the rate loop's every cycle
         doc = asyncio.run(inner(args.inner, args.part, args.sidereal_s, args.window_s, out))
         print(json.dumps(doc, default=str))
         return
