@@ -115,6 +115,12 @@ class CurrentDetector(Detector):
         # of phase: up to its amplitude, growing with the distance (rad) from that travel.
         beyond = np.maximum(self.ref_angles[0] - p, p - self.ref_angles[1]).clip(min=0.0)
         cogging = self.cogging_a * np.minimum(1.0, beyond)
+        # Where the reference did not pin N down (held at a few clustered angles, several
+        # N fit it), the cogging may be off between the angles it held too: by what the
+        # rival N predict there, and up to twice its amplitude half a period away from
+        # every angle held slowly
+        if not self.model.cogging_certain:
+            cogging = np.maximum(cogging, self.model.cogging_uncertainty_a(p, v, a))
         allowance += cogging
         # the scale statistics' uncertainty: what the reference leaves open at this motion
         # (friction shapes and knees it cannot tell apart), and the cogging's phase where N
@@ -283,5 +289,10 @@ class CurrentDetector(Detector):
         return Check(c.detector, c.axis, c.signals, c.ran,
                      f"model fitted on the reference: dry friction {m.friction.shape} with its "
                      f"knee at {math.degrees(m.friction.knee_rad_s) * 3600:.3g}″/s, cogging "
-                     f"{m.cogging_periods} periods/rev, residual {m.reference_rms_a:.4f} A RMS",
+                     f"{m.cogging_periods} periods/rev"
+                     + ("" if m.cogging_certain or not m.cogging_periods else
+                        " (not certain: the reference fits "
+                        + (", ".join(str(x[0]) for x in m.cogging_alternatives) or "N ± 1")
+                        + " almost as well; limits widened between the angles it held)")
+                     + f", residual {m.reference_rms_a:.4f} A RMS",
                      c.classes)
