@@ -323,3 +323,44 @@ def test_goto_budget_and_axis_travel():
     meter.landed(30.0, 2.0)
     meter.landed(60.0, 4.0)
     assert meter.rate_deg_s() == pytest.approx(15.0)
+
+
+# ---------------------------------------------------------------------- through the VSS
+def test_a_slew_on_a_goto_that_never_lands_ends_with_mount_fault_shown_and_logged(eop,
+                                                                                 monkeypatch):
+    """The VSS (`vs server --mount alpaca://…` with the driver swapped for `SimGotoDriver`):
+    the slew operation fails with `mount_fault`, `status` shows the fault and the stopped
+    mount, the event log has it, and the server closes (no hang)."""
+    from virtualstar.server import assembly, build_server
+
+    driver = SimGotoDriver(stuck=True)
+
+    def open_sim(url, site, eop_=None, **options):
+        return _link(driver, eop, goto_budget=GotoBudget(margin_s=0.5, report_periods=2),
+                     rest_wait_s=2.0)
+
+    monkeypatch.setattr(assembly, "open_rate_mount", open_sim)
+
+    async def main():
+        vss = build_server(mount_url="alpaca://127.0.0.1:9/0", site=SITE)
+        await vss.start("ws://127.0.0.1:0")
+        try:
+            t = vss.telescope
+            await t.link.wait_connected(10)
+            await asyncio.sleep(0.5)
+            op = await t.slew_altaz(200.0, 50.0)
+            await asyncio.wait_for(asyncio.shield(op.done), HANG_GUARD_S)
+            status = await t.status()
+            events = [(e.level, e.kind, e.message) for e in t.log.since(0)]
+            return op.as_dict(), op.done.exception() if op.done.done() else None, status, \
+                events
+        finally:
+            await asyncio.wait_for(vss.close(), HANG_GUARD_S)
+
+    op, exc, status, events = asyncio.run(main())
+    assert op["phase"] == "failed", op
+    assert getattr(exc, "code", None) == "mount_fault" or "mount_fault" in str(op), (op, exc)
+    assert status["backend"]["goto_fault"] and "did not land" in status["backend"]["goto_fault"]
+    assert driver.rates == (0.0, 0.0) and not driver.tracking and driver.target is None
+    assert any(level == "error" and kind == "fault" and "did not land" in message
+               for level, kind, message in events), events

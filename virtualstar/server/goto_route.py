@@ -7,7 +7,8 @@ between two waypoints: it slews its own way, each native axis from its start to 
 azimuth/elevation on an alt-az one. Any such way stays inside the *box* its two ends span
 in the native axes (the right ascension the shorter way round). So a leg is safe when
 that whole box, sampled on a grid and seen from the site at the times the gotos run, keeps
-`GOTO_PATH_MARGIN_DEG` out of every body's zone (and above the horizon mask); a leg whose
+`GOTO_PATH_MARGIN_DEG` out of every body's zone (like the envelope's own route check, the
+way may pass low: the horizon is the targets' and waypoints' check); a leg whose
 box does not is cut in two along the route the safety envelope checked, until every box
 clears. As the legs shorten, the boxes shrink onto that route, which the envelope keeps
 `avoidance._CROSSING_MARGIN_DEG` clear of the zones: the splitting ends.
@@ -63,11 +64,8 @@ def _box_samples(a0: float, e0: float, a1: float, e1: float, t_us: int, equatori
     return g_az.ravel(), g_el.ravel()
 
 
-def _clear_deg(name: str, hit: tuple) -> np.ndarray:
-    """How far outside a zone (deg) from `zone_hits`' entry: the horizon's is the height
-    above the mask; a body's the separation beyond its radius and `GOTO_PATH_MARGIN_DEG`."""
-    if name == "horizon":
-        return np.asarray(hit[4], float)
+def _clear_deg(hit: tuple) -> np.ndarray:
+    """How far (deg) beyond a body's zone and `GOTO_PATH_MARGIN_DEG`, from `zone_hits`."""
     return np.asarray(hit[4], float) - np.asarray(hit[5], float) - GOTO_PATH_MARGIN_DEG
 
 
@@ -80,10 +78,12 @@ def leg_clearance_deg(a0: float, e0: float, a1: float, e1: float, times_us: list
     for t_us in times_us:
         az, el = _box_samples(a0, e0, a1, e1, t_us, equatorial, site, eop)
         ends_az, ends_el = np.array([a0, a1]), np.array([e0, e1])
-        box = zone_hits(az, el, t_us, zones, site, eop)
-        ends = zone_hits(ends_az, ends_el, t_us, zones, site, eop)
+        # bodies only: like the envelope's route check, a slew's way may pass low (a mount
+        # parked low leaves from there), never near the Sun or Moon
+        box = zone_hits(az, el, t_us, zones, site, eop, horizon=False)
+        ends = zone_hits(ends_az, ends_el, t_us, zones, site, eop, horizon=False)
         for name in box:
-            clear, end_sep = _clear_deg(name, box[name]), _clear_deg(name, ends[name])
+            clear, end_sep = _clear_deg(box[name]), _clear_deg(ends[name])
             # a leg that starts or ends inside may reach as deep as its ends, no deeper
             floor = min(0.0, float(np.min(end_sep)))
             worst = min(worst, float(np.min(clear)) - floor)
