@@ -40,7 +40,6 @@ if TYPE_CHECKING:
 __all__ = ["GOTO_PATH_MARGIN_DEG", "driver_legs", "leg_clearance_deg", "split_for_driver"]
 
 GOTO_PATH_MARGIN_DEG = 1.0  # a driver's box keeps this far outside every body's zone
-MAX_LEG_DEG = 20.0  # and no goto leg round a zone is longer than this (as before)
 MIN_LEG_DEG = 0.25  # a leg this short whose box still touches a zone: no safe way
 BOX_GRID = 9  # samples per native axis of a leg's box
 ROUTE_WINDOW_S = 120.0  # the boxes are judged against the bodies now and this much later
@@ -98,11 +97,7 @@ def split_for_driver(here_az: float, here_el: float, legs: list[tuple[float, flo
     out: list[tuple[float, float]] = []
     a0, e0 = here_az, here_el
     for a1, e1 in legs:
-        span = math.degrees(math.hypot((a1 - a0) * math.cos(0.5 * (e0 + e1)), e1 - e0))
-        n = max(1, math.ceil(span / MAX_LEG_DEG))
-        pending = [(a0 + (a1 - a0) * k / n, e0 + (e1 - e0) * k / n,
-                    a0 + (a1 - a0) * (k + 1) / n, e0 + (e1 - e0) * (k + 1) / n)
-                   for k in range(n)]
+        pending = [(a0, e0, a1, e1)]  # a leg whose box clears stays one goto
         while pending:
             b0, f0, b1, f1 = pending.pop(0)
             if leg_clearance_deg(b0, f0, b1, f1, times_us, equatorial, zones, site, eop) >= 0:
