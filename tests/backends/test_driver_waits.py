@@ -45,6 +45,7 @@ class SimGotoDriver:
         self.rate_deg_s = rate_deg_s
         self.stuck = stuck  # a goto reaches its place but the driver never clears Slewing
         self.stuck_after_abort = stuck_after_abort  # ... not even after an abort
+        self.drop_gotos = 0  # this many gotos are accepted and dropped (the mount stays)
         self.ra_h, self.dec_deg = 6.0, 10.0
         self.target: tuple[float, float] | None = None
         self.slewing = False
@@ -93,6 +94,9 @@ class SimGotoDriver:
     async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
         self._advance()
         self.calls.append("goto")
+        if self.drop_gotos:
+            self.drop_gotos -= 1
+            return
         self.target, self.slewing = (ra_h, dec_deg), True
 
     async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
@@ -364,3 +368,37 @@ def test_a_slew_on_a_goto_that_never_lands_ends_with_mount_fault_shown_and_logge
     assert driver.rates == (0.0, 0.0) and not driver.tracking and driver.target is None
     assert any(level == "error" and kind == "fault" and "did not land" in message
                for level, kind, message in events), events
+
+
+@pytest.mark.parametrize("dropped", [1, 2])
+def test_a_waypoint_goto_the_driver_drops_is_sent_again_then_a_fault(eop, dropped):
+    """A driver that accepts a goto and stays (the Alpaca simulator can lose a goto sent as
+    its previous slew completes): the detour's next leg would start from the wrong place."""
+    async def main():
+        driver = SimGotoDriver()
+        link = _link(driver, eop, rest_wait_s=2.0)
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        here = link._report
+        az, el = link._observed(here.ra_rad, here.dec_rad, here.read_us)
+        driver.calls.clear()
+        driver.drop_gotos = dropped
+        try:
+            await asyncio.wait_for(link.call("goto_place", math.degrees(az) + 10.0,
+                                             math.degrees(el) + 5.0), HANG_GUARD_S)
+            outcome = None
+        except MountFault as exc:
+            outcome = str(exc)
+        off = link._off_place_deg(math.degrees(az) + 10.0, math.degrees(el) + 5.0)
+        state = link.state_name()
+        await link.stop()
+        return driver, outcome, off, state
+
+    driver, outcome, off, state = asyncio.run(main())
+    assert driver.calls.count("goto") == 2
+    if dropped == 1:
+        assert outcome is None and off < 0.25 and state != "fault"
+    else:
+        assert outcome and "landed, twice" in outcome and state == "fault"
+        assert driver.rates == (0.0, 0.0) and not driver.tracking

@@ -64,6 +64,7 @@ GOTO_TOLERANCE_ARCSEC = 15.0  # a fixed place held by a goto mount is verified w
 REST_TOLERANCE_ARCSEC = 1.0  # two reports this close, a driver period apart: at rest
 STALE_S = 3.0  # wall seconds without an answer from the driver: lost
 GOTO_ROLES = frozenset({"slew", "goto_place", "goto_native"})  # bounded by their own budget
+WAYPOINT_TOLERANCE_DEG = 0.25  # a waypoint goto that lands farther away is sent again
 REST_WAIT_S = 10.0  # after a stop, wall seconds (plus a few report periods) to see it at rest
 CALL_LOG = 4096
 _ROLES = ("az_position", "el_position", "axis1_position", "axis2_position", "report_time",
@@ -686,8 +687,31 @@ class RateMountLink(ConnectionWaits):
         self._signs_side = side
 
     async def _do_goto_place(self, az_deg: float, el_deg: float) -> None:
-        """One goto to a fixed observed place (a waypoint round a zone), tracking off."""
-        await self._do_slew(az_deg, el_deg, attempts=1)
+        """One goto to a fixed observed place (a waypoint round a zone), tracking off.
+
+        The next leg's way is planned from this place (`goto_route`): a driver that says it
+        landed elsewhere (a goto it dropped) is sent once more, then it is a fault."""
+        for attempt in (1, 2):
+            await self._do_slew(az_deg, el_deg, attempts=1)
+            off_deg = self._off_place_deg(az_deg, el_deg)
+            if off_deg <= WAYPOINT_TOLERANCE_DEG:
+                return
+            log.warning("%s waypoint goto to az %.3f° el %.3f° landed %.3f° away (attempt %d)",
+                        self.backend, az_deg, el_deg, off_deg, attempt)
+        await self._halt_driver()
+        self._latch_fault(
+            f"the {self.backend} driver said its goto to the waypoint az {az_deg:.3f}° el "
+            f"{el_deg:.3f}° landed, twice, {off_deg:.3f}° away from it: the detour's next leg "
+            "was planned from there; the mount was told to stop. Reset the fault to go on "
+            "(vs stop --reset-faults)")
+
+    def _off_place_deg(self, az_deg: float, el_deg: float) -> float:
+        """How far (deg) the newest report's observed place is from (az, el)."""
+        rep = self._require()
+        az, el = self._observed(rep.ra_rad, rep.dec_rad, rep.read_us)
+        a, e = math.radians(az_deg), math.radians(el_deg)
+        c = math.sin(e) * math.sin(el) + math.cos(e) * math.cos(el) * math.cos(az - a)
+        return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
     async def _do_slew(self, az_deg: float, el_deg: float, attempts: int = 3) -> None:
         """Go to a fixed observed place and stay there (tracking off): gotos to where that
@@ -779,10 +803,15 @@ class RateMountLink(ConnectionWaits):
                 f"{' s, then '.join(f'{b:.1f}' for b in overdue)} s (aborted, sent again, "
                 f"aborted); the mount was told to stop and {rest}. Reset the fault to go on "
                 "(vs stop --reset-faults)")
+        self._latch_fault(text, at_rest=still)
+
+    def _latch_fault(self, text: str, **data: Any) -> None:
+        """Latch a goto fault (state ``fault`` until ``reset_faults``), log it, tell the
+        server (its event log, its clients) and end the operation with `MountFault`."""
         self.goto_fault = self.fault_text = text
         log.error("%s", text)
         self.on_event("fault", {"state": "fault", "faults": text, "backend": self.backend,
-                                "at_rest": still})
+                                **data})
         raise MountFault(text)
 
     async def _wait_still(self, timeout_s: float) -> bool:
