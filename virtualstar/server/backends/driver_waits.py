@@ -42,23 +42,24 @@ async def within(aw: Awaitable[T], timeout_s: float) -> T:
 
 
 def axis_travel_deg(ra1_h: float, dec1_deg: float, ra2_h: float, dec2_deg: float,
-                    geometry: str) -> float:
-    """The larger of the two native axes' turns for a goto between two places of date (deg).
+                    geometry: str) -> tuple[float, float]:
+    """(direct, worst): the larger of the native axes' turns for a goto between two places
+    of date (deg), the direct way, and the worst way the driver may take.
 
     Equatorial: the right-ascension axis by the shorter way round, the declination axis by
     the difference; a German mount may instead flip, its declination axis then passing the
-    pole (``180 - |δ1 + δ2|`` in the same hemisphere's sense) and its hour-angle axis the
-    other way round: the larger of the two ways is taken, so a flip is never overdue.
-    An alt-az driver takes its goto in RA/Dec as well (the way the drivers report), so the
-    same measure holds for the time it takes.
+    pole and its hour-angle axis going the other way round: *worst* allows for that, so a
+    flip is never overdue, while the slew rate is measured on *direct* (a flip then only
+    makes the measure slower, never faster). An alt-az driver takes its goto in RA/Dec as
+    well (the way the drivers report), so the same measure holds for the time it takes.
     """
     d_ra = abs((ra2_h - ra1_h) * 15.0 + 180.0) % 360.0 - 180.0
     direct = max(abs(d_ra), abs(dec2_deg - dec1_deg))
     if geometry != "german":
-        return direct
+        return direct, direct
     pole = 90.0 if dec1_deg + dec2_deg >= 0 else -90.0
     flip_dec = abs(pole - dec1_deg) + abs(pole - dec2_deg)
-    return max(direct, 180.0 - abs(d_ra), flip_dec)
+    return direct, max(direct, 180.0 - abs(d_ra), flip_dec)
 
 
 @dataclass
