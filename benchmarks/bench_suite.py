@@ -24,6 +24,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _suite_env() -> dict[str, str]:
+    """The environment `make test` gives pytest: bytecode written (the Makefile unexports
+    PYTHONDONTWRITEBYTECODE, so that its hundreds of processes do not compile the same sources
+    again)."""
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--workers", type=int, default=4, help="pytest-xdist workers (make test: 4)")
@@ -41,7 +50,7 @@ def main() -> int:
         proc = subprocess.run(
             [sys.executable, "-m", "pytest", "-q", "-n", str(args.workers), "--dist",
              "loadscope", "-p", "no:cacheprovider", *args.pytest_args],
-            cwd=ROOT, capture_output=True, text=True)
+            cwd=ROOT, capture_output=True, text=True, env=_suite_env())
         wall_s = time.monotonic() - t0
         after = os.times()
     finally:

@@ -1,0 +1,50 @@
+"""What every test session needs once, made before its first test, outside any test's time:
+astropy's IERS table read into the session's cache (virtualstar.astro.earth_orientation), and
+numba's compiled kernels (cache=True: the emulator's tick loop, the server's error kernels,
+SGP4's topocentric rotation) compiled into numba's cache beside their sources.
+
+tests/conftest.py runs this script in a child process as the session starts, so that it works
+while the pytest-xdist workers collect; each process that runs tests waits for it (a lock on a
+file in the session's cache directory) before its first test. Without it, in a clean clone each
+worker, and each server a test started before numba's cache was written, compiled the kernels
+again (~9 s of CPU apiece) and each worker read the IERS table again (~2 s).
+
+    python tests/session_warmup.py LOCK_FILE   (prints "locked" once it holds the lock)
+"""
+
+from __future__ import annotations
+
+import fcntl
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository's packages
+
+
+def warm_up() -> None:
+    """Fill the IERS cache and compile (or load from numba's cache) every kernel."""
+    from catalogs import load_tle_file, sample_tle_path, select_satellite
+    from mount_emulator.model import MountModel
+    from virtualstar.astro import UtcTimes, load_site
+    from virtualstar.astro.earth_orientation import EarthOrientation
+    from virtualstar.astro.satellites import Satellite
+    from virtualstar.server import on_target, tracking_errors
+
+    EarthOrientation.from_astropy_iers_data()
+    MountModel(start_us=1_716_061_200_000_000).run(10)
+    tracking_errors.warm_up()
+    on_target.warm_up()
+    iss = select_satellite(load_tle_file(sample_tle_path("stations")), "ISS")
+    Satellite.from_tle(iss.line1, iss.line2).observe(
+        UtcTimes.from_iso(["2024-05-18T19:55:00Z", "2024-05-18T19:55:01Z"]), load_site())
+
+
+def main(lock_path: str) -> None:
+    with open(lock_path, "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        print("locked", flush=True)
+        warm_up()  # the lock goes with this process, whether the warm-up ends or fails
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
