@@ -289,7 +289,11 @@ class Client:
             if client._ready.done() and client._ready.exception() is not None:
                 raise client._ready.exception()
             await client._flush()
-            ready = await asyncio.wait_for(asyncio.shield(client._ready), timeout_s)
+            # asyncio.timeout, not wait_for: Python 3.11's wait_for swallows a cancellation
+            # that arrives as the handshake completes, and the caller's task runs on as if
+            # never cancelled (a `vs server` whose start failed then waited forever to stop)
+            async with asyncio.timeout(timeout_s):
+                ready = await asyncio.shield(client._ready)
         except ConnectionClosed as exc:
             await client._abort()
             refusal = client._ready.exception() if client._ready.done() else None
