@@ -1,20 +1,20 @@
-"""What every test session needs once, made before its first test, outside any test's time:
-astropy's IERS table read into the session's cache (virtualstar.astro.earth_orientation), and
-numba's compiled kernels (cache=True: the emulator's tick loop, the server's error kernels,
-SGP4's topocentric rotation) compiled into numba's cache beside their sources.
+"""What every test session needs once, started as the session starts: astropy's IERS table read
+into the session's cache (virtualstar.astro.earth_orientation), and numba's compiled kernels
+(cache=True: the emulator's tick loop, the server's error kernels, SGP4's topocentric
+rotation) compiled into numba's cache beside their sources.
 
-tests/conftest.py runs this script in a child process as the session starts, so that it works
-while the pytest-xdist workers collect; each process that runs tests waits for it (a lock on a
-file in the session's cache directory) before its first test. Without it, in a clean clone each
-worker, and each server a test started before numba's cache was written, compiled the kernels
-again (~9 s of CPU apiece) and each worker read the IERS table again (~2 s).
+tests/conftest.py runs this script in a child process while the pytest-xdist workers start and
+collect (~6 s of CPU each). Nothing waits for it: whoever needs a kernel or the table before
+it is written makes it, as without it (numba's cache files and the IERS cache are written
+whole or not at all), only later than the warm-up would. In a clean clone this saves each
+worker, and each server a test starts early, its own compile (~9 s of CPU apiece) and each
+worker its own IERS read (~2 s).
 
-    python tests/session_warmup.py LOCK_FILE   (prints "locked" once it holds the lock)
+    python tests/session_warmup.py
 """
 
 from __future__ import annotations
 
-import fcntl
 import sys
 from pathlib import Path
 
@@ -39,12 +39,5 @@ def warm_up() -> None:
         UtcTimes.from_iso(["2024-05-18T19:55:00Z", "2024-05-18T19:55:01Z"]), load_site())
 
 
-def main(lock_path: str) -> None:
-    with open(lock_path, "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        print("locked", flush=True)
-        warm_up()  # the lock goes with this process, whether the warm-up ends or fails
-
-
 if __name__ == "__main__":
-    main(sys.argv[1])
+    warm_up()
