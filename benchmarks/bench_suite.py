@@ -1,8 +1,9 @@
 """The suite's own speed: `make test`'s pytest, wall time beside what the CPU it used allows
 (goal ≤ 4 min on a quiet 2-core machine, ≤ 6 min beside two CPU burners; issue 26).
 
-One run of the suite exactly as `make test` runs it (`pytest -q -n WORKERS --dist loadscope`),
-optionally beside N processes that burn a core each (as `make test-under-load` does). The
+One run of the suite exactly as `make test` runs it (`pytest -q -n WORKERS --dist loadscope
+--no-loadscope-reorder`), optionally beside N processes that burn a core each (as
+`make test-under-load` does). The
 reference, measured in the same run, is the CPU the suite's processes used (the kernel's
 figure for this process's children: pytest, its workers, the servers, browsers and compilers
 they start) divided by the cores left to it: the wall time a perfectly packed run would take.
@@ -65,7 +66,8 @@ def main() -> int:
         t0 = time.monotonic()
         proc = subprocess.run(
             [sys.executable, "-m", "pytest", "-q", "-n", str(args.workers), "--dist",
-             "loadscope", "-p", "no:cacheprovider", *plugin, *args.pytest_args],
+             "loadscope", "--no-loadscope-reorder", "-p", "no:cacheprovider", *plugin,
+             *args.pytest_args],
             cwd=ROOT, capture_output=True, text=True, env=env)
         wall_s = time.monotonic() - t0
         after = os.times()
