@@ -289,9 +289,6 @@ class Client:
             if client._ready.done() and client._ready.exception() is not None:
                 raise client._ready.exception()
             await client._flush()
-            # asyncio.timeout, not wait_for: Python 3.11's wait_for swallows a cancellation
-            # that arrives as the handshake completes, and the caller's task runs on as if
-            # never cancelled (a `vs server` whose start failed then waited forever to stop)
             async with asyncio.timeout(timeout_s):
                 ready = await asyncio.shield(client._ready)
         except ConnectionClosed as exc:
@@ -328,7 +325,8 @@ class Client:
         """Say BYE (when still connected) and close."""
         if self.connected:
             with contextlib.suppress(AstcomError, TimeoutError, asyncio.TimeoutError):
-                await asyncio.wait_for(self._request(Bye()), 2.0)
+                async with asyncio.timeout(2.0):
+                    await self._request(Bye())
         await self._abort()
 
     async def _abort(self) -> None:
