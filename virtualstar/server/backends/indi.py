@@ -30,6 +30,7 @@ from virtualstar.astro.constants import SIDEREAL_RATE_ARCSEC_S
 
 from ..exceptions import BadRequest, MountRejected
 from .alpaca import geometry_override
+from .driver_waits import within
 from .rate_mount import DriverInfo, DriverReport
 
 __all__ = ["IndiDriver", "parse_indi_url"]
@@ -185,7 +186,7 @@ class IndiDriver:
     async def read(self) -> DriverReport:
         self._alive()
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._pushed.wait(), PUSH_WAIT_S)
+            await within(self._pushed.wait(), PUSH_WAIT_S)  # never drops a cancel
         self._pushed.clear()
         self._alive()
         place = self._place
