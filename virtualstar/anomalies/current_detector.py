@@ -52,10 +52,11 @@ class CurrentDetector(Detector):
         super().__init__(*args, **kwargs)
         self.model: CurrentModel | None = None
         self.rest_rad_s = math.radians(self.cfg.phases.rest_rate_arcsec_s / 3600.0)
-        self.ref_speeds: dict[int, np.ndarray] = {}
+        # (class, direction ±1): the sorted speeds the reference held steadily that way
+        self.ref_speeds: dict[tuple[int, int], np.ndarray] = {}
         self.window_sigma_a = math.nan  # robust sigma of the reference's window residuals
         self.scale_ref: dict[str, tuple[float, float]] = {}  # statistic: (centre, limit)
-        self.saturated_rad_s = math.inf
+        self.saturated_rad_s = {1: math.inf, -1: math.inf}  # per direction
         self.ref_angles = (-math.inf, math.inf)
         self.cogging_a = 0.0
         self.center: dict[int, float] = {}
@@ -93,13 +94,19 @@ class CurrentDetector(Detector):
         # limit widens by coverage_factor × the model's slope × its distance to their
         # median speed), or when it is as fast as the saturated friction the reference
         # showed (`saturated_rad_s`): there the friction is flat and only the viscous
-        # term grows, linearly.
+        # term grows, linearly. Both per direction: the dry friction changes sign with
+        # the motion, and a reference that moved one way at speed only (a night's first
+        # quarter-hour slewing and tracking westwards, a few slow steps eastwards) leaves
+        # the split between the offset and the friction open — the other way at speed
+        # the model is an extrapolation (0.10 A off on a fresh night's azimuth).
         allowance = np.zeros(len(p))
-        covered = np.abs(v) >= self.saturated_rad_s
+        direction = np.where(v >= 0, 1, -1)
+        covered = np.abs(v) >= np.where(direction > 0, self.saturated_rad_s[1],
+                                        self.saturated_rad_s[-1])
         cls = self.classes(chunk)
         need = max(1, round(self.cfg.coverage_min_s / self.seg_s))
-        for c, speeds in self.ref_speeds.items():
-            rows = np.flatnonzero(cls == c)
+        for (c, sign), speeds in self.ref_speeds.items():
+            rows = np.flatnonzero((cls == c) & (direction == sign))
             if len(rows) == 0 or len(speeds) < need:
                 continue
             s = np.abs(v[rows])
@@ -115,6 +122,12 @@ class CurrentDetector(Detector):
         # of phase: up to its amplitude, growing with the distance (rad) from that travel.
         beyond = np.maximum(self.ref_angles[0] - p, p - self.ref_angles[1]).clip(min=0.0)
         cogging = self.cogging_a * np.minimum(1.0, beyond)
+        # Where the reference did not pin N down (held at a few clustered angles, several
+        # N fit it), the cogging may be off between the angles it held too: by what the
+        # rival N predict there, and up to twice its amplitude half a period away from
+        # every angle held slowly
+        if not self.model.cogging_certain:
+            cogging = np.maximum(cogging, self.model.cogging_uncertainty_a(p, v, a))
         allowance += cogging
         # the scale statistics' uncertainty: what the reference leaves open at this motion
         # (friction shapes and knees it cannot tell apart), and the cogging's phase where N
@@ -157,19 +170,22 @@ class CurrentDetector(Detector):
         # speeds held steadily (changing by under 10 % within a segment): a run-up
         # sweeping through a speed says little about the friction there
         steady = np.abs(a) * self.seg_s <= 0.1 * np.abs(v)
-        self.ref_speeds = {c: np.sort(np.abs(v[rows & steady & (cls == c)]))
-                           for c in AXIS_CLASSES}
+        self.ref_speeds = {(c, sign): np.sort(np.abs(v[rows & steady & (cls == c)
+                                                       & (np.sign(v) == sign)]))
+                           for c in AXIS_CLASSES for sign in (1, -1)}
         # Where the friction is saturated: three knees above its knee, and no lower than
         # the lowest speed the reference held steadily for coverage_min_s (a knee fitted
         # on speeds all above it is a guess); trusted when the reference held that long
-        # at such speeds.
+        # at such speeds in that direction.
         held = np.sort(np.abs(v[rows & steady]))
         need = max(1, round(self.cfg.coverage_min_s / self.seg_s))
-        self.saturated_rad_s = math.inf
+        self.saturated_rad_s = {1: math.inf, -1: math.inf}
         if len(held) >= need:
             start = max(3.0 * self.model.friction.knee_rad_s, float(held[need - 1]))
-            if np.sum(held >= start) >= need:
-                self.saturated_rad_s = start
+            for sign in (1, -1):
+                way = np.abs(v[rows & steady & (np.sign(v) == sign)])
+                if np.sum(way >= start) >= need:
+                    self.saturated_rad_s[sign] = start
         return super().fit(chunk, ref)
 
     def fit_classes(self, stats, cls, seconds):
@@ -283,5 +299,10 @@ class CurrentDetector(Detector):
         return Check(c.detector, c.axis, c.signals, c.ran,
                      f"model fitted on the reference: dry friction {m.friction.shape} with its "
                      f"knee at {math.degrees(m.friction.knee_rad_s) * 3600:.3g}″/s, cogging "
-                     f"{m.cogging_periods} periods/rev, residual {m.reference_rms_a:.4f} A RMS",
+                     f"{m.cogging_periods} periods/rev"
+                     + ("" if m.cogging_certain or not m.cogging_periods else
+                        " (not certain: the reference fits "
+                        + (", ".join(str(x[0]) for x in m.cogging_alternatives) or "N ± 1")
+                        + " almost as well; limits widened between the angles it held)")
+                     + f", residual {m.reference_rms_a:.4f} A RMS",
                      c.classes)

@@ -15,21 +15,23 @@ explain the reference best are kept. Sidereal rates sit on that knee, so its sha
 decides the current of a star the reference never tracked; a fixed family with one
 knee extrapolates where a flexible curve (tried: a linear spline with six knots) swung
 by 0.07 A between the speeds the reference held. The cogging's N is an integer (a
-motor's cogging repeats every revolution): the candidates are the highest peaks of a
-Lomb–Scargle periodogram (scipy) of the base model's residual against position at whole
-N, and the one whose full fit explains the reference best wins — the periodogram alone
-cannot tell N from N ± 1 over the short travel of an elevation axis in 15 minutes, the
-joint fit can. Everything is fitted on the reference only, so a fault after it cannot
+motor's cogging repeats every revolution): the joint fit is scanned over every whole N
+(a periodogram of the residual aliases when the reference held the axis at a few
+clustered angles, and missed the true N on a fresh night), and the N that explains the
+reference best wins. N is *certain* only when every other N explains the reference
+clearly worse; a reference held at a few clustered angles lets several N fit, which part
+between the clusters — then the detector widens its limits by what those rivals disagree
+on and by the distance to the nearest angle the reference held
+(`CurrentModel.cogging_uncertainty_a`). Everything is fitted on the reference only, so a fault after it cannot
 hide in the fit, and live detection fits the same model.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import lombscargle
 
 __all__ = ["CurrentModel", "Friction", "estimate_cogging_periods", "fit_current_model",
            "fit_friction"]
@@ -38,9 +40,10 @@ FRICTION_SHAPES = ("clip", "tanh", "exp")
 FRICTION_KNEES_RAD_S = tuple(float(x) for x in np.logspace(-6, -2, 41))
 MIN_COGGING_PERIODS = 8  # below: a slow drift of the residual, not a motor property
 MAX_COGGING_PERIODS = 1024
-COGGING_CANDIDATES = 8  # periodogram peaks whose neighbourhoods are fitted in full
+COGGING_CANDIDATES = 8  # the scan's best N whose neighbourhoods are fitted in full
 MIN_COGGING_SHARE = 0.1  # the harmonic must explain this share of the residual variance
-MAX_PERIODOGRAM_POINTS = 20_000
+SCAN_POINTS = 2_000  # rows (evenly strided) the scan over every N fits
+SCAN_BATCH = 64  # N fitted at once (a batch's columns: SCAN_BATCH × SCAN_POINTS × 4)
 # Relative ridge on the scaled columns: the offset and gravity terms are nearly collinear
 # over a few degrees of elevation; unbounded, the fit cancels large coefficients against
 # each other. Small: with one friction shape there is little else to tame (3e-4, the
@@ -83,7 +86,36 @@ class CurrentModel:
     # fits the reference explains almost as well (ALTERNATIVE_RMS_RATIO): (friction,
     # coefficients, scales) each, with the same cogging N
     alternatives: tuple = ()
-    cogging_certain: bool = False  # N ± 1 explains the reference clearly worse
+    cogging_certain: bool = False  # every other N explains the reference clearly worse
+    # other N the reference fits almost as well (ALTERNATIVE_RMS_RATIO): (N, coefficients,
+    # scales) each, with the same friction
+    cogging_alternatives: tuple = ()
+    # the reference's angles (rad, sorted) where the cogging shows (slow enough that a
+    # segment does not average it out): where the fitted phase was seen
+    held_angles_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def cogging_uncertainty_a(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """How far off the cogging term may be at each motion (A) when the reference did
+        not pin N down (0 when it did): the largest difference between this model's
+        current and a rival N's, and at least twice the cogging amplitude (the fitted wave
+        and the true one in antiphase) once the angle is half a cogging period from every
+        angle the reference held slowly, growing linearly up to there."""
+        out = np.zeros(len(p))
+        if not self.cogging_periods or self.cogging_certain:
+            return out
+        best = self.predict(p, v, a)
+        for m, coef, scales in self.cogging_alternatives:
+            x = _regressors(p, v, a, self.gravity, m, self.friction, self.segment_s)
+            np.maximum(out, np.abs((x / scales) @ coef - best), out=out)
+        held = self.held_angles_rad
+        if len(held) == 0:
+            return np.maximum(out, 2.0 * self.cogging_amplitude_a())
+        k = np.searchsorted(held, p)
+        d = np.minimum(np.abs(p - held[np.maximum(k - 1, 0)]),
+                       np.abs(p - held[np.minimum(k, len(held) - 1)]))
+        half_period = math.pi / self.cogging_periods
+        return np.maximum(out, 2.0 * self.cogging_amplitude_a()
+                          * np.minimum(1.0, np.nan_to_num(d, nan=np.inf) / half_period))
 
     def spread_a(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """The largest difference between this model's current and an alternative's at
@@ -140,6 +172,16 @@ def _regressors(p, v, a, gravity: bool, cogging_periods: int,
     return np.stack(cols, axis=1)
 
 
+def _held_angles(p: np.ndarray, v: np.ndarray, n: int, segment_s: float) -> np.ndarray:
+    """The sorted angles of the rows whose segment shows the cogging at N (its fade, the
+    segment mean of the wave, at least half the amplitude)."""
+    if not n:
+        return np.zeros(0)
+    fade = np.abs(np.sinc(n * v * segment_s / (2 * math.pi)))
+    keep = (fade >= 0.5) & np.isfinite(p)
+    return np.sort(p[keep])
+
+
 def _lstsq(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return (coefficients, column scales) of a ridge-stabilised least-squares fit."""
     scales = np.sqrt(np.mean(x * x, axis=0)) if len(x) else np.ones(x.shape[1])
@@ -156,19 +198,65 @@ def _rms(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.sqrt(np.mean(r * r)))
 
 
-def _candidates(p: np.ndarray, r: np.ndarray) -> list[int]:
-    """Whole N near the highest peaks of the periodogram of `r` against position `p`."""
-    step_n = max(1, len(p) // MAX_PERIODOGRAM_POINTS)
-    p, r = p[::step_n], r[::step_n] - r[::step_n].mean()
+def scan_cogging_periods(p: np.ndarray, v: np.ndarray, x0: np.ndarray, i: np.ndarray,
+                         segment_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(N, residual RMS) of the joint fit of the base columns `x0` and the cogging at every
+    whole N from the lowest with a period inside the travel to MAX_COGGING_PERIODS.
+
+    Every N is fitted, not only a periodogram's peaks: over a reference whose slow
+    segments sit in a few clusters of angle the periodogram of the residual aliases (on a
+    fresh night's elevation its eight highest peaks missed the emulator's N = 96, and the
+    best of them, 247, left ten times its residual). The scan uses the normal equations of
+    at most SCAN_POINTS evenly strided rows: the base block is shared by every N."""
+    step_n = max(1, len(p) // SCAN_POINTS)
+    p, v, x0, i = p[::step_n], v[::step_n], x0[::step_n], i[::step_n]
     span = float(np.ptp(p))
-    lo = max(MIN_COGGING_PERIODS, math.ceil(2 * math.pi / span))  # a period in the travel
-    freqs = np.arange(lo, MAX_COGGING_PERIODS + 1, dtype=np.float64)
-    if len(freqs) == 0 or not np.any(r):
-        return []
-    power = lombscargle(p, r, freqs)
-    best = np.argsort(power)[-COGGING_CANDIDATES:]
-    return sorted({int(freqs[k]) + d for k in best for d in (-1, 0, 1)
-                   if lo <= int(freqs[k]) + d <= MAX_COGGING_PERIODS})
+    lo = max(MIN_COGGING_PERIODS, math.ceil(2 * math.pi / span)) if span > 0 else \
+        MAX_COGGING_PERIODS + 1
+    ns = np.arange(lo, MAX_COGGING_PERIODS + 1)
+    rms = np.full(len(ns), np.inf)
+    s0 = np.sqrt(np.mean(x0 * x0, axis=0))
+    s0[s0 == 0] = 1.0
+    x0 = x0 / s0
+    g00, b0, yy = x0.T @ x0, x0.T @ i, float(i @ i)
+    k0 = x0.shape[1]
+    eye = np.eye(k0 + 4)
+    z1 = np.exp(1j * p)
+    zn = np.exp(1j * (ns[0] - 1) * p)
+    for first in range(0, len(ns), SCAN_BATCH):
+        nb = ns[first:first + SCAN_BATCH].astype(np.float64)
+        # e^(iNp) for the batch's N by recurrence (a product per N, not four cosines)
+        z = np.empty((len(nb), len(p)), dtype=np.complex128)
+        for j in range(len(nb)):
+            zn = zn * z1
+            z[j] = zn
+        c = np.empty((len(nb), len(p), 4))
+        for k, zk in ((1, z), (2, z * z)):  # the same columns as _regressors
+            fade = np.sinc(k * nb[:, None] * v[None, :] * (segment_s / (2 * math.pi)))
+            c[:, :, 2 * k - 2] = zk.real * fade
+            c[:, :, 2 * k - 1] = zk.imag * fade
+        sc = np.sqrt(np.mean(c * c, axis=1))
+        sc[sc == 0] = 1.0
+        c = c / sc[:, None, :]
+        gram = np.empty((len(nb), k0 + 4, k0 + 4))
+        gram[:, :k0, :k0] = g00
+        gram[:, :k0, k0:] = x0.T[None] @ c
+        gram[:, k0:, :k0] = np.transpose(gram[:, :k0, k0:], (0, 2, 1))
+        ct = np.transpose(c, (0, 2, 1))
+        gram[:, k0:, k0:] = ct @ c
+        b = np.concatenate([np.broadcast_to(b0, (len(nb), k0)), ct @ i], axis=1)
+        ridge = RIDGE * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-30) / (k0 + 4)
+        coef = np.linalg.solve(gram + ridge[:, None, None] * eye, b[:, :, None])[:, :, 0]
+        sse = yy - 2 * np.sum(coef * b, axis=1) + np.sum(
+            coef * (gram @ coef[:, :, None])[:, :, 0], axis=1)
+        rms[first:first + SCAN_BATCH] = np.sqrt(np.maximum(sse, 0.0) / len(p))
+    return ns, rms
+
+
+def _equivalent(n: int, m: int) -> bool:
+    """N and 2N (either way) fit the same cogging: the second harmonic of one is the
+    fundamental of the other."""
+    return n == m or n == 2 * m or m == 2 * n
 
 
 def fit_friction(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray, *,
@@ -184,28 +272,52 @@ def fit_friction(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray, *,
     return best
 
 
-def estimate_cogging_periods(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray, *,
-                             gravity: bool, friction: Friction = Friction(),
-                             segment_s: float = 0.0) -> int:
-    """Return the cogging periods per revolution that best explain `i` (see the module
-    docstring), or 0 when none explains MIN_COGGING_SHARE of what the base model leaves
-    (or the travel is too short to tell)."""
+def _cogging_choice(p, v, a, i, *, gravity: bool, friction: Friction,
+                    segment_s: float) -> tuple[int, list[int]]:
+    """(N, the other N the reference cannot tell from it): N is 0 when no cogging explains
+    MIN_COGGING_SHARE of what the base model leaves (or the travel is too short to tell).
+
+    Every N is scanned (`scan_cogging_periods`); the COGGING_CANDIDATES best and their
+    neighbours are fitted on every row. Where N and 2N both fit, 2N is taken (one harmonic
+    explains it). The others are the candidates whose fit leaves at most
+    ALTERNATIVE_RMS_RATIO × the best's residual RMS, 2N and N/2 aside: a reference whose
+    slow segments sit in a few clusters of angle lets several N fit it, and they part
+    between the clusters."""
     ok = np.isfinite(p) & np.isfinite(v) & np.isfinite(a) & np.isfinite(i)
     p, v, a, i = p[ok], v[ok], a[ok], i[ok]
     if len(p) < 100 or float(np.ptp(p)) <= 0:
-        return 0
+        return 0, []
     x0 = _regressors(p, v, a, gravity, 0, friction)
     coef, scales = _lstsq(x0, i)
     base = i - (x0 / scales) @ coef
     base_var = float(np.mean(base * base))
-    best, best_rms = 0, math.inf
-    for n in _candidates(p, base):
-        rms = _rms(_regressors(p, v, a, gravity, n, friction, segment_s), i)
-        if rms < best_rms:
-            best, best_rms = n, rms
-    if best == 0 or base_var <= 0 or 1.0 - best_rms ** 2 / base_var < MIN_COGGING_SHARE:
-        return 0
-    return best
+    ns, scan = scan_cogging_periods(p, v, x0, i, segment_s)
+    if len(ns) == 0 or base_var <= 0:
+        return 0, []
+    top = ns[np.argsort(scan)[:COGGING_CANDIDATES]]
+    cands = sorted({int(n) + d for n in top for d in (-1, 0, 1)
+                    if ns[0] <= int(n) + d <= MAX_COGGING_PERIODS})
+    cands = sorted(set(cands) | {2 * n for n in cands if 2 * n <= MAX_COGGING_PERIODS})
+    full = {n: _rms(_regressors(p, v, a, gravity, n, friction, segment_s), i) for n in cands}
+    best = min(full, key=full.__getitem__)
+    if 2 * best in full and full[2 * best] <= ALTERNATIVE_RMS_RATIO * full[best]:
+        best = 2 * best
+    if 1.0 - min(full.values()) ** 2 / base_var < MIN_COGGING_SHARE:
+        return 0, []
+    bound = ALTERNATIVE_RMS_RATIO * min(full.values())
+    others = [n for n, r in sorted(full.items(), key=lambda kv: kv[1])
+              if r <= bound and not _equivalent(n, best)]
+    return best, others
+
+
+def estimate_cogging_periods(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray, *,
+                             gravity: bool, friction: Friction = Friction(),
+                             segment_s: float = 0.0) -> int:
+    """Return the cogging periods per revolution that best explain `i` (see the module
+    docstring and `_cogging_choice`), or 0 when none explains MIN_COGGING_SHARE of what
+    the base model leaves (or the travel is too short to tell)."""
+    return _cogging_choice(p, v, a, i, gravity=gravity, friction=friction,
+                           segment_s=segment_s)[0]
 
 
 def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray,
@@ -217,9 +329,10 @@ def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray
     if len(p) < 10:
         raise ValueError(f"the current model needs rows to learn from; got {len(p)}")
     friction = fit_friction(p, v, a, i, gravity=gravity)
+    rivals: list[int] = []
     if cogging_periods is None:
-        cogging_periods = estimate_cogging_periods(p, v, a, i, gravity=gravity,
-                                                   friction=friction, segment_s=segment_s)
+        cogging_periods, rivals = _cogging_choice(p, v, a, i, gravity=gravity,
+                                                  friction=friction, segment_s=segment_s)
     n = int(round(cogging_periods))
     if n:
         friction = fit_friction(p, v, a, i, gravity=gravity, cogging_periods=n,
@@ -239,8 +352,16 @@ def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray
             r = i - (xf / sf) @ cf
             if np.sqrt(np.mean(r * r)) <= ALTERNATIVE_RMS_RATIO * rms:
                 alternatives.append((f, cf, sf))
-    certain = bool(n) and all(
+    # N is certain when the reference rules out every other N it was scanned against (an
+    # N given by the caller has no rivals) and N ± 1 explain it clearly worse
+    cogging_alternatives = []
+    for m in rivals[:COGGING_CANDIDATES]:
+        xm = _regressors(p, v, a, gravity, m, friction, segment_s)
+        cm, sm = _lstsq(xm, i)
+        cogging_alternatives.append((m, cm, sm))
+    certain = bool(n) and not rivals and all(
         _rms(_regressors(p, v, a, gravity, m, friction, segment_s), i)
         > ALTERNATIVE_RMS_RATIO * rms for m in (n - 1, n + 1) if m > 0)
+    held = _held_angles(p, v, n, segment_s)
     return CurrentModel(coef, scales, gravity, n, rms, friction, segment_s,
-                        tuple(alternatives), certain)
+                        tuple(alternatives), certain, tuple(cogging_alternatives), held)

@@ -62,7 +62,10 @@ def build_detectors(axes: dict[str, dict[str, str]], cfg: DetectorConfig, seg_s:
             missing.append(Check("vibration", axis, (), False,
                                  f"needs axis.{axis}.error_arcsec; the store has none"))
         if "temperature" in names:
-            dets.append(TemperatureDetector(axis, (names["temperature"],), cfg, seg_s))
+            # with the current, the temperature's trend is compared with the heat it
+            # explains (I²R); without, with the reference's usual trend
+            dets.append(TemperatureDetector(axis, (names["temperature"],) + (
+                (names["current"],) if "current" in names else ()), cfg, seg_s))
         else:
             missing.append(Check("temperature", axis, (), False,
                                  f"needs axis.{axis}.temperature; the store has none"))

@@ -6,7 +6,7 @@ keeps a 12-hour night (43 M rows per signal at 1 kHz) to 170 k rows per feature,
 reshape and one vectorised numpy call. Per segment and axis: the mean time; the
 position, velocity and acceleration (a least-squares parabola through the samples, so
 the encoder's quantisation averages out) and the smallest position step (one encoder
-count, when the axis moves slowly); the mean current; the
+count, when the axis moves slowly); the mean current and its mean square; the
 power of the tracking error in octave bands (FFT); the largest second difference of
 error and current (a one-sample spike); the mean temperature; and the mean sample
 spacing in mount µs (the clock).
@@ -116,6 +116,7 @@ def _reduce(t: np.ndarray, cols: dict[str, np.ndarray], axes: dict[str, dict[str
         if "current" in roles:
             c = seg("current")
             feats[f"{ax}.current_a"] = c.mean(axis=1)
+            feats[f"{ax}.current_sq_a2"] = (c * c).mean(axis=1)  # the winding's I²R heat
             feats[f"{ax}.current_spike_a"] = _spike(c)
         if "error_arcsec" in roles:
             e = seg("error_arcsec")
