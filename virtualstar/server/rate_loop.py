@@ -17,11 +17,14 @@ Alpaca ``MoveAxis``, INDI ``TELESCOPE_TRACK_RATE``), the VSS closes the loop its
    differ): measured, not assumed.
 3. **Loop** (`RateFollower.run`): at every new report of the driver (its period is
    measured by the backend), the place the mount will have when the next command takes
-   effect is predicted from the report and the rates in force; the command for the next
-   report period is the feed-forward (the path's mean rate over that period) plus a
-   fraction `gain` of the predicted error per period, within the driver's rate limit.
-   Rates too close to the last to matter are not sent, so a sidereal target on an
-   equatorial mount is left to the mount's own tracking.
+   effect is predicted from the report and the commands in force; when a command takes
+   effect is *learned* from the reports (`rate_predictor.ApplicationLag`: both simulators
+   apply a rate retroactively from their last update, a real mount may take it later).
+   The command for the next report period is the feed-forward (the path's chord from the
+   time it takes effect to the next command's) plus a fraction `gain` of the predicted
+   error then, within the driver's rate limit (`rate_predictor.plan_rate`). Rates too
+   close to the last to matter are not sent, so a sidereal target on an equatorial mount
+   is left to the mount's own tracking.
 
 Every report is compared with the path *at that report's own mount time* (the middle
 of the interval in which it appeared): that error goes to the tracking-error history,
@@ -62,13 +65,16 @@ from .exceptions import (
     TargetUnreachable,
 )
 from .link_interface import MountCapabilities
+from .rate_predictor import RatePredictor
 from .trajectories import Path, Points
 
 __all__ = ["FollowStats", "NativeFrame", "RateFollower", "RateJoin", "run_up_s", "run_up_start"]
 
 log = logging.getLogger("virtualstar.server")
 
-GAIN = 0.6  # fraction of the predicted error removed per report period
+GAIN = 0.6  # fraction of the predicted error removed per report period (1: deadbeat; less
+# feeds back less of the report time's noise: a 1-ms stamp error is 3.6″ at 1°/s)
+INITIAL_LAG_PERIODS = 0.25  # when a command takes effect, until the reports have told
 RATE_STEP_H_S = 0.2  # mount seconds between the two samples that give the path's rate
 STALE_REPORTS = 12  # reports missed (or STALE_MIN_S, the larger) before the driver counts as lost
 STALE_MIN_S = 5.0  # a loaded host (load average 20+ on 2 cores) was seen to leave 3 s without a push
@@ -173,6 +179,8 @@ class FollowStats:
     max_report_age_s: float = 0.0
     signs: tuple[float, float] = (1.0, 1.0)
     ended: str = ""
+    application_lag_s: float | None = None  # learned: a rate is in force this long after
+    # the report it answers
     last_error_arcsec: float | None = None
     last_error_uncertainty_arcsec: float = 0.0
     recent_errors: list[tuple[float, float]] = field(default_factory=list)  # (error, its
@@ -181,7 +189,8 @@ class FollowStats:
     def as_dict(self) -> dict:
         return {"reports": self.reports, "commands": self.commands, "skipped": self.skipped,
                 "clipped": self.clipped, "max_report_age_s": self.max_report_age_s,
-                "axis_signs": list(self.signs), "ended": self.ended}
+                "axis_signs": list(self.signs), "ended": self.ended,
+                "application_lag_s": self.application_lag_s}
 
 
 @dataclass(frozen=True)
@@ -216,6 +225,7 @@ class RateFollower:
         self.stats = FollowStats(first_point_us=self.join_us)
         self.done = False
         self._rates = (0.0, 0.0)
+        self._predictor: RatePredictor | None = None  # created at the first report (its period)
         self._side: float | None = None  # the sign of the hour angle at the join (German)
         caps = link.capabilities
         self.max_rate = math.radians(caps.max_rate_deg_s or 1.0)
@@ -267,6 +277,12 @@ class RateFollower:
                 continue
             last_t = t_rep
             self._check_state(int(v["mount_state"]))
+            if self._predictor is None:
+                self._predictor = RatePredictor(period, self.gain, INITIAL_LAG_PERIODS * period,
+                                                self._rates, _wrap)
+            self._predictor.reported(t_rep, (float(v["axis1_position"]),
+                                             float(v["axis2_position"])))
+            self.stats.application_lag_s = self._predictor.lag.lag_s
             started = time.monotonic()
             await self._cycle(float(v["axis1_position"]), float(v["axis2_position"]), t_rep, now,
                               period)
@@ -286,37 +302,37 @@ class RateFollower:
             raise OperationAborted("the mount was parked outside the VSS while following")
 
     async def _cycle(self, a1: float, a2: float, t_rep: int, now: int, period_s: float) -> None:
-        period_us = int(period_s * 1e6)
+        self._predictor.period_us = int(period_s * 1e6)  # as measured now
         end = self.path.end_us
         if t_rep >= self.join_us:
             self._record(a1, a2, t_rep)
-        # the place the mount will have when this command takes effect, and the path then
-        t_a = now + period_us // 4
+        # when this command will be in force (learned), and the next one
+        pred = self._predictor
+        t_a = pred.effect_us(now)
         if end is not None and t_a >= end:
             await self._set((0.0, 0.0))
             self.done, self.stats.ended = True, "path ended"
             return
-        t_b = t_a + period_us
-        # before the run-up the demand is its start (the mount's own tracking holds it),
-        # then the run-up line, then the path
-        native = _run_up_points(self.frame, self.path, self.join_us, self.run_up_us,
-                                np.array([t_a, t_b], np.int64))
+        t_b = t_a + pred.period_us
         self._guard_meridian(t_b)
-        p1 = a1 + self._rates[0] * (t_a - t_rep) / 1e6
-        p2 = a2 + self._rates[1] * (t_a - t_rep) / 1e6
-        e1 = float(_wrap(native.az_rad[0] - p1))
-        e2 = float(native.el_rad[0] - p2)
-        # feed-forward: the path's mean rate over the next period (its chord)
-        f1 = float(_wrap(native.az_rad[1] - native.az_rad[0])) / period_s
-        f2 = float(native.el_rad[1] - native.el_rad[0]) / period_s
-        r = (f1 + self.gain * e1 / period_s, f2 + self.gain * e2 / period_s)
+
+        def path_at(t_us: int) -> np.ndarray:
+            # before the run-up the demand is its start (the mount's own tracking holds
+            # it), then the run-up line, then the path
+            p = _run_up_points(self.frame, self.path, self.join_us, self.run_up_us,
+                               np.array([t_us], np.int64))
+            return np.array([float(p.az_rad[0]), float(p.el_rad[0])])
+
+        rate, ff, err, _ = pred.command(now, path_at)
         if self.note_rates is not None:
-            self.note_rates(native)
+            self.note_rates(_run_up_points(self.frame, self.path, self.join_us, self.run_up_us,
+                                           np.array([t_a, t_b], np.int64)))
         self.stats.last_point_us = t_b
-        log.debug("rate loop: report %d now %d e=(%.2f, %.2f)″ ff=(%.2f, %.2f)″/s cmd=(%.2f, %.2f)″/s",
-                  t_rep, now, e1 * ARCSEC_PER_RAD, e2 * ARCSEC_PER_RAD, f1 * ARCSEC_PER_RAD,
-                  f2 * ARCSEC_PER_RAD, r[0] * ARCSEC_PER_RAD, r[1] * ARCSEC_PER_RAD)
-        await self._set(r)
+        log.debug("rate loop: report %d now %d lag %.1f ms e=(%.2f, %.2f)″ ff=(%.2f, %.2f)″/s "
+                  "cmd=(%.2f, %.2f)″/s", t_rep, now, (t_a - t_rep) / 1e3, err[0] * ARCSEC_PER_RAD,
+                  err[1] * ARCSEC_PER_RAD, ff[0] * ARCSEC_PER_RAD, ff[1] * ARCSEC_PER_RAD,
+                  rate[0] * ARCSEC_PER_RAD, rate[1] * ARCSEC_PER_RAD)
+        await self._set((float(rate[0]), float(rate[1])))
 
     def _record(self, a1: float, a2: float, t_rep: int) -> None:
         d = self.frame.sample(self.path, np.array([t_rep], np.int64))
@@ -380,6 +396,8 @@ class RateFollower:
                 await self._stop(str(again))
         self._rates = r
         self.stats.commands += 1
+        if self._predictor is not None:
+            self._predictor.sent(r, time.time_ns() // 1000)
 
     async def _stop(self, why: str) -> None:
         """Tell the mount to stop (it may not listen) and end with a fault."""
