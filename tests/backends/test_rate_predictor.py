@@ -266,3 +266,69 @@ def test_a_real_step_of_the_path_is_followed_at_once_not_taken_for_an_outlier():
     assert after[0] > 50.0
     assert after[12] < 0.1, after[:14]
     assert after[4] < 0.2 * 60.0, after[:14]
+
+
+class SlippingDriver(TickingDriver):
+    """INDI's simulator re-arms its timer after each tick: a tick the driver's process was
+    late for delays every tick after it (its grid slips). `slips`: tick index → µs."""
+
+    def __init__(self, *args, slips: dict[int, int], **kw) -> None:
+        super().__init__(*args, **kw)
+        self.slips = slips
+
+    def reports(self, t_end_us: int):
+        t, k = 0, 0
+        while t < t_end_us:
+            dt = self.period_us + self.slips.get(k, 0)
+            t += dt
+            k += 1
+            for arrival, r in self.commands:
+                if arrival <= t:
+                    self.rates = r
+            self.commands = [c for c in self.commands if c[0] > t]
+            # the place moves by the time since the last tick (the simulator's own clock)
+            self.place = self.place + self.rates * dt / 1e6
+            yield t, self.place.copy()
+
+
+def _slipping_pass(slip_ms: int, stamp) -> tuple[np.ndarray, dict[int, int]]:
+    """The loop on a slipping driver whose pushes reach the host 0.5 ms + exp(1 ms) after
+    their tick; `stamp(arrival)` gives each push its time. The errors at the true ticks."""
+    path_at, _accel = curved_path()
+    rng = np.random.default_rng(11)
+    slip_at = {80 + 40 * i: slip_ms * 1000 for i in range(5)}  # five slips, 10 s apart
+    driver = SlippingDriver(250_500, transport_us=2_000, start=path_at(0) + 20 * ARCSEC,
+                            slips=slip_at)
+    pred = RatePredictor(0.25, 0.6, 0.0)
+    errors = []
+    for t, place in driver.reports(80_000_000):
+        errors.append(np.hypot(*(path_at(t) - place)) / ARCSEC)  # truth: the tick's time
+        arrival = t + 500 + int(rng.exponential(1_000))  # the host's handling delay
+        pred.reported(stamp(arrival), tuple(place))
+        now = arrival + 3_000
+        rate, *_ = pred.command(now, path_at)
+        driver.send(now, rate)
+        pred.sent(tuple(rate), now)
+    return np.asarray(errors), slip_at
+
+
+@pytest.mark.parametrize("slip_ms", [20, 50, 100])
+def test_a_driver_whose_ticks_slip_is_followed_on_its_new_ticks(slip_ms):
+    """The INDI pass lost on main (8 good reports, then ~100″ to the end): the driver's tick
+    slipped by more than the grid's one-late-push tolerance, every push after it was given
+    the old grid's tick (stamped early by the slip) and the loop held the mount that far
+    behind the path for ever. After a slip the grid must follow the driver's new ticks."""
+    err, slip_at = _slipping_pass(slip_ms, TickGrid().add)
+    # what one slip costs if never noticed: the path's rate (~1°/s here) × the slip
+    unnoticed = 1.0 * 3600 * slip_ms / 1000
+    before = np.median(err[60:80])
+    assert before < 4.0, before
+    for k in slip_at:
+        # within six ticks of each slip the mount is back on the path (the loop removes
+        # 60 % of an error per tick once the stamps are right again)
+        assert np.max(err[k + 6:k + 40]) < max(0.1 * unnoticed, 2.5 * before), \
+            (slip_ms, k, np.round(err[k:k + 40], 1))
+    # and the grid still beats stamping each push when it arrived (the reference)
+    raw, _ = _slipping_pass(slip_ms, lambda arrival: arrival)
+    assert np.median(err[80:]) < 0.8 * np.median(raw[80:]), (np.median(err[80:]),
+                                                              np.median(raw[80:]))
