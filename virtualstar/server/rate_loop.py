@@ -135,10 +135,22 @@ class NativeFrame:
         return observed_to_apparent_radec(p.az_rad, p.el_rad, p.t_us, self.site, self.eop)
 
     def sample(self, path: Path, t_us: np.ndarray) -> Points:
-        """Native places at `t_us` and their rates (central differences of ±RATE_STEP_H_S/2)."""
+        """Native places at `t_us` and their rates (differences over RATE_STEP_H_S).
+
+        The difference is central, but kept inside the path: a finite path (a pass, or
+        the stretch of it on one side of the meridian) stands still outside its ends, and
+        a central difference at its start would see half the motion (the run-up, whose
+        rate is the path's at the join, ran at half of it on main: a step of ~900″/s at
+        the join of an ISS pass that the loop removed only after it)."""
         t = np.asarray(t_us, np.int64)
         h = int(RATE_STEP_H_S * 1e6)
-        a1, a2 = self.place(path, np.concatenate([t, t - h // 2, t + h // 2]))
+        lo, hi = t - h // 2, t + h // 2
+        start = getattr(path, "start_us", None)
+        end = getattr(path, "end_us", None)
+        if start is not None and end is not None and end - start >= h:
+            shift = np.clip(start - lo, 0, None) - np.clip(hi - end, 0, None)
+            lo, hi = lo + shift, hi + shift
+        a1, a2 = self.place(path, np.concatenate([t, lo, hi]))
         n = len(t)
         d1 = _wrap(a1[2 * n:] - a1[n:2 * n])
         d2 = a2[2 * n:] - a2[n:2 * n]
