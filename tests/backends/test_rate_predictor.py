@@ -332,3 +332,47 @@ def test_a_driver_whose_ticks_slip_is_followed_on_its_new_ticks(slip_ms):
     raw, _ = _slipping_pass(slip_ms, lambda arrival: arrival)
     assert np.median(err[80:]) < 0.8 * np.median(raw[80:]), (np.median(err[80:]),
                                                               np.median(raw[80:]))
+
+
+def test_a_large_error_that_persists_is_removed_at_the_loops_full_speed():
+    """A mount that missed a command (INDI's simulator may take a custom rate's first write
+    a tick late) is 200″ off after seconds of tiny errors. The first report of it may be an
+    outlier; the next ones are not: 60 % of the error removed per tick from the second on.
+    (The first clipping rule clipped every other report while the error stayed large: the
+    run-up's start converged at half speed, 215 → 88 → 34 → 13″ every two ticks.)"""
+    path_at, _ = steady_path((300.0, 100.0))
+    driver = TickingDriver(250_000, transport_us=2_000, start=path_at(0))
+    pred = RatePredictor(0.25, 0.6, 0.0)
+    kicked_at = 40  # ticks
+    errors = []
+    for k, (t, place) in enumerate(driver.reports(20_000_000)):
+        if k == kicked_at:
+            driver.place = driver.place + np.array([200.0, 0.0]) * ARCSEC
+            place = driver.place.copy()
+        errors.append(np.hypot(*(path_at(t) - place)) / ARCSEC)
+        pred.reported(t, tuple(place))
+        now = t + 8_000
+        rate, *_ = pred.command(now, path_at)
+        driver.send(now, rate)
+        pred.sent(tuple(rate), now)
+    after = np.asarray(errors[kicked_at:])
+    assert after[0] > 199.0
+    # one tick clipped at most, then × 0.4 per tick: 200 × 0.4⁶ = 0.8″ seven ticks on
+    assert after[7] < 1.0, np.round(after[:12], 1)
+
+
+def test_a_push_between_ticks_does_not_move_the_tick_grid():
+    """A driver may push its place between two ticks (an answer, a property change): that
+    push is stamped when it arrived, and the ticks after it keep their grid (carried
+    forward, the early push would have stamped the next ticks up to 0.6 period early)."""
+    period = 250_500
+    ticks = 1_000_000 + period * np.arange(80)
+    grid = TickGrid()
+    out = []
+    for i, tick in enumerate(ticks):
+        out.append(grid.add(int(tick) + 700))
+        if i in (30, 50):
+            between = int(tick) + int(0.4 * period)
+            assert grid.add(between) == between
+    off = np.abs(np.asarray(out) - ticks - 700)
+    assert np.max(off[20:]) < 300, off[28:40]

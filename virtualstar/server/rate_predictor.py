@@ -177,7 +177,7 @@ class RatePredictor:
         self.lag.before = rates_in_force
         self._t_rep = 0
         self._recent: deque[float] = deque(maxlen=OUTLIER_WINDOW)  # |predicted error|, rad
-        self._suspect = False  # the last report's error was taken as an outlier
+        self._large = False  # the last report's error was beyond the outlier limit
 
     def reported(self, t_us: int, place: tuple[float, float]) -> None:
         self._t_rep = int(t_us)
@@ -196,17 +196,19 @@ class RatePredictor:
         place = self.lag.place_at(t_a)
         rate, ff, err = plan_rate(place, path_at, t_a, self.period_us, self.gain, self.wrap)
         size = float(np.hypot(*err))
-        suspect = False
+        large = False
         if len(self._recent) >= OUTLIER_WINDOW // 2:
             # one report stamped late by a busy host (20 ms is 70″ at 1°/s) is not where the
-            # mount is: its error counts only up to a few times the recent ones' median. Two
-            # such reports in a row are a real change (an offset, a guide pulse): in full
+            # mount is: its error counts only up to a few times the recent ones' median. A
+            # large error after a large one is a real change (an offset, a guide pulse, the
+            # run-up's start): in full, and so on while they stay large (clipping every
+            # other one, as the first version did, halved the speed of a real convergence)
             limit = max(OUTLIER_FACTOR * float(np.median(self._recent)), OUTLIER_FLOOR_RAD)
-            if size > limit and not self._suspect:
-                suspect = True
+            large = size > limit
+            if large and not self._large:
                 err = err * (limit / size)
                 rate = ff + self.gain * err / (self.period_us / 1e6)
-        self._suspect = suspect
+        self._large = large
         self._recent.append(size)
         return rate, ff, err, t_a
 
