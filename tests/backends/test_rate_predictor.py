@@ -376,3 +376,35 @@ def test_a_push_between_ticks_does_not_move_the_tick_grid():
             assert grid.add(between) == between
     off = np.abs(np.asarray(out) - ticks - 700)
     assert np.max(off[20:]) < 300, off[28:40]
+
+
+def test_a_faster_reporting_driver_gets_the_same_gain_in_time_and_averages_its_stamp_noise():
+    """Alpaca reports every ~55 ms, each known to a few ms (its read's own length): at INDI's
+    0.6 per report the loop would feed that noise back 4.5 times as often. The same removal
+    per second — 0.6 per 0.25 s — is 0.18 per 55-ms report, and the error the stamps' noise
+    leaves falls (against the same driver and noise at 0.6 per report)."""
+    from virtualstar.server.rate_loop import GAIN, gain_per_period
+
+    assert gain_per_period(0.25) == pytest.approx(GAIN)
+    assert gain_per_period(0.5) == pytest.approx(GAIN)  # a slower driver: never more
+    g = gain_per_period(0.055)
+    assert 1 - (1 - g) ** (0.25 / 0.055) == pytest.approx(GAIN)
+
+    def rms_at(gain: float) -> float:
+        rng = np.random.default_rng(1)
+        path_at, _ = curved_path()
+        driver = CausalDriver(55_000, 0, start=path_at(0) + 50 * ARCSEC)
+        pred = RatePredictor(0.055, gain, 0.0)
+        errors = []
+        for t, place in driver.reports(30_000_000):
+            errors.append(np.hypot(*(path_at(t) - place)) / ARCSEC)
+            pred.reported(t + int(rng.normal(0, 3_000)), tuple(place))  # stamp: ± 3 ms
+            now = t + 5_000 + int(rng.exponential(3_000))
+            rate, *_ = pred.command(now, path_at)
+            driver.send(now, rate)
+            pred.sent(tuple(rate), now)
+        e = np.asarray(errors[200:])
+        return float(np.sqrt(np.mean(e**2)))
+
+    per_time, per_report = rms_at(g), rms_at(GAIN)
+    assert per_time < 0.7 * per_report, (per_time, per_report)

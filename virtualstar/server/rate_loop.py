@@ -68,12 +68,16 @@ from .link_interface import MountCapabilities
 from .rate_predictor import RatePredictor
 from .trajectories import Path, Points
 
-__all__ = ["FollowStats", "NativeFrame", "RateFollower", "RateJoin", "run_up_s", "run_up_start"]
+__all__ = ["FollowStats", "NativeFrame", "RateFollower", "RateJoin", "gain_per_period", "run_up_s",
+           "run_up_start"]
 
 log = logging.getLogger("virtualstar.server")
 
-GAIN = 0.6  # fraction of the predicted error removed per report period (1: deadbeat; less
-# feeds back less of the report time's noise: a 1-ms stamp error is 3.6″ at 1°/s)
+GAIN = 0.6  # fraction of the predicted error removed per GAIN_PERIOD_S (1: deadbeat; less
+GAIN_PERIOD_S = 0.25  # feeds back less of the report time's noise: a 1-ms stamp error is
+# 3.6″ at 1°/s). A driver that reports more often gets the same rate of removal in time,
+# so a smaller fraction per report (`gain_per_period`): 0.18 at Alpaca's ~55 ms, whose
+# reports' time noise is then averaged over ~5 reports instead of fed back at 0.6 each
 INITIAL_LAG_PERIODS = 0.25  # when a command takes effect, until the reports have told
 RATE_STEP_H_S = 0.2  # mount seconds between the two samples that give the path's rate
 STALE_REPORTS = 12  # reports missed (or STALE_MIN_S, the larger) before the driver counts as lost
@@ -87,6 +91,12 @@ RUN_UP_PERIODS = 8  # ... and this many report periods (the loop removes 60 % pe
 SETTLE_PERIODS = 8  # report periods from the join to the landing check
 LANDING_REPORTS = 4  # the landing check takes the median of this many last reports
 LANDING_GRACE_PERIODS = 12  # ... and may wait this many more periods for them to come within
+
+
+def gain_per_period(period_s: float) -> float:
+    """The fraction of the predicted error removed per report period of `period_s`: GAIN
+    per GAIN_PERIOD_S, the same removal in time whatever the report rate (at most GAIN)."""
+    return 1.0 - (1.0 - GAIN) ** min(1.0, max(period_s, 1e-3) / GAIN_PERIOD_S)
 
 
 def run_up_s(period_s: float | None) -> float:
@@ -225,14 +235,14 @@ class RateFollower:
     """Hold a rate-driven mount on a path from `join_us` (see the module doc)."""
 
     def __init__(self, link, frame: NativeFrame, path: Path, join_us: int, *, errors,
-                 gain: float = GAIN, note_rates=None, run_up_us: int = 0) -> None:
+                 gain: float | None = None, note_rates=None, run_up_us: int = 0) -> None:
         self.link = link
         self.frame = frame
         self.path = path
         self.join_us = int(join_us)
         self.run_up_us = int(run_up_us)
         self.errors = errors
-        self.gain = gain
+        self.gain = gain  # None: `gain_per_period` of the measured report period
         self.note_rates = note_rates
         self.stats = FollowStats(first_point_us=self.join_us)
         self.done = False
@@ -290,7 +300,8 @@ class RateFollower:
             last_t = t_rep
             self._check_state(int(v["mount_state"]))
             if self._predictor is None:
-                self._predictor = RatePredictor(period, self.gain, INITIAL_LAG_PERIODS * period,
+                self._predictor = RatePredictor(period, self._gain(period),
+                                                INITIAL_LAG_PERIODS * period,
                                                 self._rates, _wrap)
             self._predictor.reported(t_rep, (float(v["axis1_position"]),
                                              float(v["axis2_position"])))
@@ -300,6 +311,9 @@ class RateFollower:
                               period)
             # at most one command per driver period (a still place is reported at every poll)
             await self._sleep(max(0.0, 0.8 * period - (time.monotonic() - started)))
+
+    def _gain(self, period_s: float) -> float:
+        return self.gain if self.gain is not None else gain_per_period(period_s)
 
     def _period_s(self) -> float:
         stats = getattr(self.link, "stats", None)
@@ -315,6 +329,7 @@ class RateFollower:
 
     async def _cycle(self, a1: float, a2: float, t_rep: int, now: int, period_s: float) -> None:
         self._predictor.period_us = int(period_s * 1e6)  # as measured now
+        self._predictor.gain = self._gain(period_s)
         end = self.path.end_us
         if t_rep >= self.join_us:
             self._record(a1, a2, t_rep)
