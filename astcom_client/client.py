@@ -289,7 +289,8 @@ class Client:
             if client._ready.done() and client._ready.exception() is not None:
                 raise client._ready.exception()
             await client._flush()
-            ready = await asyncio.wait_for(asyncio.shield(client._ready), timeout_s)
+            async with asyncio.timeout(timeout_s):
+                ready = await asyncio.shield(client._ready)
         except ConnectionClosed as exc:
             await client._abort()
             refusal = client._ready.exception() if client._ready.done() else None
@@ -324,7 +325,8 @@ class Client:
         """Say BYE (when still connected) and close."""
         if self.connected:
             with contextlib.suppress(AstcomError, TimeoutError, asyncio.TimeoutError):
-                await asyncio.wait_for(self._request(Bye()), 2.0)
+                async with asyncio.timeout(2.0):
+                    await self._request(Bye())
         await self._abort()
 
     async def _abort(self) -> None:

@@ -227,9 +227,10 @@ class Endpoint:
             if waker:
                 waker.set()
         for task in list(self._sessions):
-            # wait_for cancels a session still stuck on a peer that stopped reading.
+            # the timeout cancels a session still stuck on a peer that stopped reading.
             with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError, Exception):
-                await asyncio.wait_for(task, 2.0)
+                async with asyncio.timeout(2.0):
+                    await task
 
     async def __aenter__(self) -> Endpoint:
         return self
@@ -341,7 +342,8 @@ class Endpoint:
                 conn.close(1000, "")
             wake.set()
             with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer, 2.0)
+                async with asyncio.timeout(2.0):
+                    await writer
             self._wakers.pop(conn.client_id, None)
 
     async def _execute(self, conn: ServerConnection, event: RequestReceived) -> None:
@@ -438,7 +440,8 @@ class Endpoint:
     async def _send_pending(self, conn: ServerConnection, transport: Transport) -> None:
         with contextlib.suppress(Exception):
             while (frame := conn.next_frame()) is not None:
-                await asyncio.wait_for(transport.send(frame), 2.0)
+                async with asyncio.timeout(2.0):
+                    await transport.send(frame)
 
 
 def _limit_frames(transport: Transport, max_bytes: int) -> None:

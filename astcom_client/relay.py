@@ -345,7 +345,8 @@ class Relay:
                 self._send_link(chan, LinkKind.CLOSE)
                 client.end(1000, "")
             with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer, 5.0)
+                async with asyncio.timeout(5.0):
+                    await writer
 
     async def _write_client(self, client: _Client) -> None:
         try:
@@ -372,7 +373,8 @@ class Relay:
         """Open the link and listen; return the bound URLs."""
         self._tasks.append(asyncio.create_task(self._run_link()))
         with contextlib.suppress(asyncio.TimeoutError):
-            await asyncio.wait_for(self.link_up.wait(), 5.0)
+            async with asyncio.timeout(5.0):
+                await self.link_up.wait()
         for url in self.config.listen:
             handle = await start_server(parse_url(url), self._serve_client,
                                         max_frame_bytes=1 << 24,

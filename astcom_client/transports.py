@@ -204,7 +204,8 @@ class TcpTransport:
                             dropped += len(data)
             self._writer.close()
         with contextlib.suppress(Exception):
-            await asyncio.wait_for(self._writer.wait_closed(), 2.0)
+            async with asyncio.timeout(2.0):
+                await self._writer.wait_closed()
 
 
 def server_ssl_context(certfile: str, keyfile: str | None = None) -> ssl.SSLContext:
@@ -261,7 +262,8 @@ async def start_server(url: str | EndpointUrl, on_connection: Callable[[Transpor
         async def close_ws() -> None:
             server.close()
             with contextlib.suppress(Exception):
-                await asyncio.wait_for(server.wait_closed(), 5.0)
+                async with asyncio.timeout(5.0):
+                    await server.wait_closed()
 
         bound = EndpointUrl(where.scheme, where.host, port, where.path)
         return ServerHandle(str(bound), close_ws)
@@ -279,6 +281,7 @@ async def start_server(url: str | EndpointUrl, on_connection: Callable[[Transpor
     async def close_tcp() -> None:
         tcp_server.close()
         with contextlib.suppress(Exception):
-            await asyncio.wait_for(tcp_server.wait_closed(), 5.0)
+            async with asyncio.timeout(5.0):
+                await tcp_server.wait_closed()
 
     return ServerHandle(str(EndpointUrl(where.scheme, where.host, port)), close_tcp)

@@ -95,9 +95,11 @@ class VssClient:
         from websockets.exceptions import InvalidURI, WebSocketException
 
         try:
-            ws = await asyncio.wait_for(connect(self.url, max_size=1 << 24, ping_interval=None,
-                                                open_timeout=timeout_s), timeout_s)
-            first = json.loads(await asyncio.wait_for(ws.recv(), timeout_s))
+            async with asyncio.timeout(timeout_s):
+                ws = await connect(self.url, max_size=1 << 24, ping_interval=None,
+                                   open_timeout=timeout_s)
+            async with asyncio.timeout(timeout_s):
+                first = json.loads(await ws.recv())
         except (OSError, TimeoutError, WebSocketException, InvalidURI, ValueError) as exc:
             raise ServerUnavailable(
                 f"cannot reach the VirtualStar Server at {self.url}: {exc or type(exc).__name__}; "
@@ -130,7 +132,8 @@ class VssClient:
         await ws.send(json.dumps({"id": "auth", "cmd": "auth", "params": {
             "client_nonce": client_nonce.hex(), "mac": mac.hex()}}))
         while True:
-            doc = json.loads(await asyncio.wait_for(ws.recv(), timeout_s))
+            async with asyncio.timeout(timeout_s):
+                doc = json.loads(await ws.recv())
             if doc.get("id") == "auth":
                 break
         if not doc.get("ok"):
@@ -175,7 +178,8 @@ class VssClient:
             return
         try:
             while True:
-                text = await asyncio.wait_for(ws.recv(), self.silence_s)
+                async with asyncio.timeout(self.silence_s):
+                    text = await ws.recv()
                 doc = json.loads(text)
                 if "event" in doc:
                     self._put((doc["event"], doc.get("data", {})))
@@ -188,7 +192,8 @@ class VssClient:
         finally:
             self._ws = None
             with contextlib.suppress(Exception):
-                await asyncio.wait_for(ws.close(), 1.0)
+                async with asyncio.timeout(1.0):
+                    await ws.close()
 
     def _put(self, item: tuple[str, dict[str, Any]]) -> None:
         if self._events.full():
@@ -221,7 +226,8 @@ class VssClient:
         except ConnectionClosed:
             self._pending.pop(rid, None)
             raise ServerUnavailable(f"lost the connection to {self.url}") from None
-        doc = await asyncio.wait_for(fut, timeout_s)
+        async with asyncio.timeout(timeout_s):
+            doc = await fut
         if doc.get("ok"):
             return doc.get("result")
         err = doc.get("error") or {}
@@ -239,7 +245,8 @@ class VssClient:
             if isinstance(doc, dict) and isinstance(doc.get("id"), int | str):
                 self._pending[doc["id"]] = self._pending.pop(None)
         await ws.send(text)
-        return await asyncio.wait_for(fut, timeout_s)
+        async with asyncio.timeout(timeout_s):
+            return await fut
 
     async def events(self) -> AsyncIterator[tuple[str, dict[str, Any]]]:
         """Yield (event name, data) as they arrive; ends after a final disconnect."""
@@ -257,7 +264,8 @@ class VssClient:
                     return data
             raise ServerUnavailable(f"disconnected from {self.url} before a {name} event")
 
-        return await asyncio.wait_for(find(), timeout_s)
+        async with asyncio.timeout(timeout_s):
+            return await find()
 
     async def close(self) -> None:
         """Close the connection (no reconnect)."""

@@ -378,11 +378,14 @@ class Recorder:
             while True:
                 ended = await self._consume(stream, deadline)
                 with contextlib.suppress(Exception):  # the device's last events, if it is there
-                    await asyncio.wait_for(self.poll_device_log(), 2.0)
+                    async with asyncio.timeout(2.0):
+                        await self.poll_device_log()
                 with contextlib.suppress(Exception):
-                    await asyncio.wait_for(self.poll_event_sources(), 2.0)
+                    async with asyncio.timeout(2.0):
+                        await self.poll_event_sources()
                 with contextlib.suppress(Exception):
-                    await asyncio.wait_for(client.close(), 2.0)
+                    async with asyncio.timeout(2.0):
+                        await client.close()
                 if not ended:
                     break  # stopped or out of time
                 log.warning("connection lost; reconnecting")
@@ -412,7 +415,8 @@ class Recorder:
                 close = getattr(source, "close", None)
                 if close is not None:
                     with contextlib.suppress(Exception):
-                        await asyncio.wait_for(close(), 2.0)
+                        async with asyncio.timeout(2.0):
+                            await close()
             try:
                 if self._watch_end is not None and self.sink.session:
                     try:
@@ -433,7 +437,8 @@ class Recorder:
         if deadline is not None:
             seconds = max(0.0, min(seconds, deadline - time.monotonic()))
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._stop.wait(), seconds)
+            async with asyncio.timeout(seconds):
+                await self._stop.wait()
 
     async def _consume(self, stream, deadline: float | None) -> bool:
         """Feed packets to the sink; return True when the connection ended under us.
@@ -475,7 +480,8 @@ class Recorder:
                 await asyncio.gather(getter, return_exceptions=True)
                 getter = None
             with contextlib.suppress(Exception):
-                await asyncio.wait_for(stream.stop(), 2.0)
+                async with asyncio.timeout(2.0):
+                    await stream.stop()
             async for packet in stream:  # what was queued before the stop
                 self.sink.accept(packet)
             self._progress.set()

@@ -121,7 +121,8 @@ class ConnectionWaits:
     async def wait_connected(self, timeout_s: float | None = None) -> None:
         """Wait until the mount is connected; raise MountUnavailable after `timeout_s`."""
         try:
-            await asyncio.wait_for(self._connected.wait(), timeout_s)
+            async with asyncio.timeout(timeout_s):
+                await self._connected.wait()
         except TimeoutError:
             raise MountUnavailable(f"no connection to the mount at {self.config.url} "
                                    f"({self.last_error or 'still trying'})") from None
@@ -135,7 +136,8 @@ class ConnectionWaits:
                     lambda: self.connected and self.connects > connects_before)
 
         try:
-            await asyncio.wait_for(newer(), timeout_s)
+            async with asyncio.timeout(timeout_s):
+                await newer()
         except TimeoutError:
             raise MountUnavailable(f"the mount at {self.config.url} did not come back within "
                                    f"{timeout_s:g} s ({self.last_error or 'still trying'})") from None

@@ -34,7 +34,8 @@ class LocalVssClient:
                       timeout_s: float | None = None) -> Any:
         """Run one command; return its result as JSON would carry it, or raise VssRequestError."""
         try:
-            result = await asyncio.wait_for(self.server.call(cmd, params), timeout_s)
+            async with asyncio.timeout(timeout_s):
+                result = await self.server.call(cmd, params)
         except VssError as exc:
             raise VssRequestError(exc.code, str(exc)) from None
         return _as_json(result)
@@ -51,7 +52,8 @@ class LocalVssClient:
                     return data
             raise AssertionError("unreachable")
 
-        return await asyncio.wait_for(find(), timeout_s)
+        async with asyncio.timeout(timeout_s):
+            return await find()
 
     async def close(self) -> None:
         self.server.unsubscribe(self._events)

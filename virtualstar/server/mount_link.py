@@ -166,7 +166,8 @@ class MountLink(ConnectionWaits):
             self.on_event("mount_connected", {"url": self.config.url, "connects": self.connects})
             while client.connected and not self._lost.is_set():
                 with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(self._lost.wait(), self.config.poll_s)
+                    async with asyncio.timeout(self.config.poll_s):
+                        await self._lost.wait()
             self._connected.clear()
             self._client = None
             await self._notify()

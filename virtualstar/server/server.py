@@ -225,7 +225,8 @@ class VssServer:
         if self._server is not None:
             self._server.close()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._server.wait_closed(), 5.0)
+                async with asyncio.timeout(5.0):
+                    await self._server.wait_closed()
         await self.telescope.close()
 
     async def __aenter__(self) -> VssServer:

@@ -222,7 +222,8 @@ class Telescope:
                 await self.clock.sleep(0.01)
 
         try:
-            await asyncio.wait_for(arrived(), timeout_s)
+            async with asyncio.timeout(timeout_s):
+                await arrived()
         except TimeoutError:
             raise MountUnavailable(f"no tracking-error samples from the mount at "
                                    f"{self.link.config.url} within {timeout_s:g} s") from None
