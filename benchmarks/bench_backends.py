@@ -198,12 +198,9 @@ class AxisObserver:
         return [tuple(float(x) for x in line.split()) for line in self._lines()[k:]]
 
     def close(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        from backend_scenario import stop_process
+
+        stop_process(self.proc)
 
 
 def observe_alpaca(port: int, path: str) -> None:
