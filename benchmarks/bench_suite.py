@@ -1,27 +1,43 @@
 """The suite's own speed: `make test`'s pytest, wall time beside what the CPU it used allows
 (goal ≤ 4 min on a quiet 2-core machine, ≤ 6 min beside two CPU burners; issue 26).
 
-One run of the suite exactly as `make test` runs it (`pytest -q -n WORKERS --dist loadscope`),
-optionally beside N processes that burn a core each (as `make test-under-load` does). The
+One run of the suite exactly as `make test` runs it (`pytest -q -n WORKERS --dist loadscope
+--no-loadscope-reorder`), optionally beside N processes that burn a core each (as
+`make test-under-load` does). The
 reference, measured in the same run, is the CPU the suite's processes used (the kernel's
 figure for this process's children: pytest, its workers, the servers, browsers and compilers
 they start) divided by the cores left to it: the wall time a perfectly packed run would take.
 The difference is what waiting (real-time tests, a worker's last long module) costs.
 
-    python benchmarks/bench_suite.py [--workers 4] [--burners 0|2] [-- extra pytest args]
+With `--modules N` it also prints the N modules that used the most CPU (own + the children
+they waited for; benchmarks/suite_cpu_plugin.py), with their wall time: where to cut.
+
+    python benchmarks/bench_suite.py [--workers 4] [--burners 0|2] [--modules 30]
+                                     [-- extra pytest args, e.g. --durations=40]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _suite_env() -> dict[str, str]:
+    """The environment `make test` gives pytest: bytecode written (the Makefile unexports
+    PYTHONDONTWRITEBYTECODE, so that its hundreds of processes do not compile the same sources
+    again)."""
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
 
 
 def main() -> int:
@@ -29,8 +45,18 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=4, help="pytest-xdist workers (make test: 4)")
     ap.add_argument("--burners", type=int, default=0,
                     help="processes burning a core each beside the suite (test-under-load: 2)")
+    ap.add_argument("--modules", type=int, default=0, metavar="N",
+                    help="print the N modules that used the most CPU")
     ap.add_argument("pytest_args", nargs="*", help="more pytest arguments (after --)")
     args = ap.parse_args()
+    env = _suite_env()
+    per_module = tempfile.TemporaryDirectory(prefix="suite-cpu-") if args.modules else None
+    plugin: list[str] = []
+    if per_module is not None:
+        env["SUITE_CPU_DIR"] = per_module.name
+        env["PYTHONPATH"] = os.pathsep.join(
+            [str(ROOT / "benchmarks"), *filter(None, [env.get("PYTHONPATH")])])
+        plugin = ["-p", "suite_cpu_plugin"]
     cores = os.cpu_count() or 1
     load_before = os.getloadavg()[0]
     burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
@@ -40,8 +66,9 @@ def main() -> int:
         t0 = time.monotonic()
         proc = subprocess.run(
             [sys.executable, "-m", "pytest", "-q", "-n", str(args.workers), "--dist",
-             "loadscope", "-p", "no:cacheprovider", *args.pytest_args],
-            cwd=ROOT, capture_output=True, text=True)
+             "loadscope", "--no-loadscope-reorder", "-p", "no:cacheprovider", *plugin,
+             *args.pytest_args],
+            cwd=ROOT, capture_output=True, text=True, env=env)
         wall_s = time.monotonic() - t0
         after = os.times()
     finally:
@@ -64,7 +91,36 @@ def main() -> int:
     print(f"ours: wall {wall_s:.0f} s ({wall_s / 60:.1f} min) with {args.workers} workers")
     print(f"reference: CPU used {cpu_s:.0f} s / {share:.2f} cores left to it = "
           f"{cpu_s / share:.0f} s, a perfectly packed run ({wall_s / (cpu_s / share):.2f}× that)")
+    if per_module is not None:
+        with per_module:
+            _print_modules(Path(per_module.name), args.modules)
+    for line in proc.stdout.splitlines():  # --durations, if asked for
+        if re.match(r"\d+\.\d+s (setup|call|teardown) ", line):
+            print(f"  {line}")
     return proc.returncode
+
+
+def _print_modules(directory: Path, n: int) -> None:
+    modules: dict[str, list[float]] = {}
+    own = children = 0.0
+    for path in directory.glob("*.json"):
+        if path.stem == "main" and len(list(directory.glob("gw*.json"))):
+            continue  # the xdist controller runs no test
+        data = json.loads(path.read_text())
+        own += data["own_cpu_s"]
+        children += data["children_cpu_s"]
+        for name, row in data["modules"].items():
+            total = modules.setdefault(name, [0.0, 0.0, 0.0, 0])
+            for i, value in enumerate(row):
+                total[i] += value
+    in_tests = sum(r[0] + r[1] for r in modules.values())
+    print(f"per module: the test processes used {own:.0f} s of CPU themselves and "
+          f"{children:.0f} s in children they reaped; {in_tests:.0f} s inside tests "
+          f"(the rest: start-up, collection, children reaped after their test)")
+    print("   CPU s   own  children   wall s  tests  module")
+    for name, (o, c, wall, count) in sorted(modules.items(),
+                                            key=lambda kv: -(kv[1][0] + kv[1][1]))[:n]:
+        print(f"  {o + c:6.1f} {o:5.1f} {c:9.1f} {wall:8.1f} {count:6d}  {name}")
 
 
 if __name__ == "__main__":

@@ -1,25 +1,55 @@
-"""Settings for every test: offline astropy, and a private cache directory.
+"""Settings for every test: offline astropy, a private cache directory, a warm-up of what every
+session needs once (tests/session_warmup.py), and the longest modules first.
 
 astropy never downloads (the IERS tables come from astropy-iers-data); virtualstar's cache
 of the Earth-orientation table (virtualstar.astro.earth_orientation) goes to a directory of
 this test session, not the user's: each session reads the table once, as a fresh machine does.
+The pytest-xdist workers share their session's directory (they inherit it from the process
+that started them).
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import subprocess
+import sys
 import tempfile
+from pathlib import Path
 
-_CACHE = tempfile.mkdtemp(prefix="virtualstar-test-cache-")
-os.environ["VIRTUALSTAR_CACHE_DIR"] = _CACHE  # before any test (or subprocess) reads it
+from session_order import longest_first
+
+_OWNER_VAR = "VIRTUALSTAR_TEST_CACHE_OWNER"  # the pid of the process that made the directory
+if os.environ.get(_OWNER_VAR) and os.path.isdir(os.environ.get("VIRTUALSTAR_CACHE_DIR", "")):
+    _CACHE = os.environ["VIRTUALSTAR_CACHE_DIR"]  # an xdist worker: its session's directory
+else:
+    _CACHE = tempfile.mkdtemp(prefix="virtualstar-test-cache-")
+    os.environ["VIRTUALSTAR_CACHE_DIR"] = _CACHE  # before any test (or subprocess) reads it
+    os.environ[_OWNER_VAR] = str(os.getpid())
+_warmup: subprocess.Popen | None = None
 
 
 def pytest_configure(config) -> None:
+    global _warmup
     from astropy.utils import iers
 
     iers.conf.auto_download = False
+    if hasattr(config, "workerinput") or _warmup is not None:
+        return  # an xdist worker: the process that started it started the warm-up
+    _warmup = subprocess.Popen(
+        [sys.executable, str(Path(__file__).with_name("session_warmup.py"))],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+
+
+def pytest_collection_modifyitems(session, config, items) -> None:
+    """The longest modules first (tests/session_order.py)."""
+    longest_first(items)
 
 
 def pytest_unconfigure(config) -> None:
-    shutil.rmtree(_CACHE, ignore_errors=True)
+    if _warmup is not None:
+        if _warmup.poll() is None:
+            _warmup.kill()
+        _warmup.wait()
+    if os.environ.get(_OWNER_VAR) == str(os.getpid()):
+        shutil.rmtree(_CACHE, ignore_errors=True)

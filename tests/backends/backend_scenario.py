@@ -46,7 +46,9 @@ BIN = Path(sys.executable).parent
 INDI_PORT = 7624
 INDI_DEVICE = "Telescope Simulator"
 STAR_TRACK_S = 6.0  # the INDI observer asks for a held place: ~8 places in it
-ROUTE_OFF_DEG = 50.0  # the route's ends: this far (× 1/cos el in azimuth) either side of the Sun
+ROUTE_OFF_DEG = 40.0  # the route's ends: this far (× 1/cos el in azimuth) either side of the Sun
+# (10° outside the 30° zone: the drivers' own slews between the detour's waypoints are what
+# must keep out of it, goto_route.py)
 OFFSET_ARCSEC = 60.0  # the declination offset applied during a track
 OFFSET_GUARD_S = 90.0  # hang guard of the offset's waits (a quiet host: a few seconds)
 HELD_S = 1.5  # a place is held when the places reported over this long agree ...
@@ -465,10 +467,9 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
                               "message": str(exc)}
 
     # 4. a slew whose straight path would cross the Sun zone goes round it
-    # on either side of the Sun in azimuth, 50° of azimuth × cos el from it (nearer, the INDI
-    # simulator's gotos between the detour's corners cut into the 30° zone: 29.7° seen at
-    # 40°), both on the same side of north (the VSS reports azimuths 0..360°): the straight
-    # way passes the Sun
+    # on either side of the Sun in azimuth, `ROUTE_OFF_DEG` of azimuth × cos el from it, both
+    # on the same side of north (the VSS reports azimuths 0..360°): the straight way passes
+    # the Sun, and the detour's gotos run 30-odd degrees from it
     el = 35.0 if sun_azel[1] > 30 else 25.0
     off = ROUTE_OFF_DEG / math.cos(math.radians(el))
     if not off < sun_azel[0] < 360.0 - off:

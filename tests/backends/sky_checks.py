@@ -16,7 +16,12 @@ import math
 
 import numpy as np
 import pytest
-from truth import _eop, _site, observed_azel_deg, sky_errors_arcsec, star_apparent
+from truth import (
+    observed_azel_deg,
+    sky_errors_arcsec,
+    star_apparent,
+    sun_separation_deg,
+)
 
 __all__ = ["test_the_backend_reads_geometry_and_rates_from_the_driver",
            "test_a_star_is_reached_and_tracked_on_astropys_place",
@@ -69,16 +74,13 @@ def test_a_slew_past_the_sun_goes_round_its_zone(seen):
     op = seen["route_op"]
     assert op["phase"] == "done", op
     assert op["info"].get("detour_deg"), "the straight path crossed the zone: a detour is due"
-    from virtualstar.astro import SolarSystemBody, observe_mount_times
-
+    # every place the simulator reported on the way (its own slews between the waypoints,
+    # not our path) stays out of the 30° zone round astropy's Sun at that place's time
     s = np.asarray(seen["route_samples"], float)
-    az, el = observed_azel_deg(s, seen)
-    t_us = (s[:, 0] * 1e6).astype(np.int64)
-    sun = observe_mount_times(SolarSystemBody("sun"), t_us, _site(seen), _eop())
-    sep = np.degrees(np.arccos(np.clip(
-        np.sin(np.radians(el)) * np.sin(sun.el_rad) + np.cos(np.radians(el))
-        * np.cos(sun.el_rad) * np.cos(np.radians(az) - sun.az_rad), -1, 1)))
+    assert len(s) >= 20, len(s)
+    sep = sun_separation_deg(s, seen)
     assert sep.min() > 30.0, f"came within {sep.min():.2f}° of the Sun"
+    az, el = observed_azel_deg(s, seen)
     end_az, end_el = seen["route_ends"][1]
     assert math.hypot((az[-1] - end_az + 180) % 360 - 180, el[-1] - end_el) < 0.05
 

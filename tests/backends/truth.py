@@ -101,3 +101,20 @@ def observed_azel_deg(samples, doc) -> tuple[np.ndarray, np.ndarray]:
     return aa.az.deg, aa.alt.deg
 
 
+
+
+def sun_separation_deg(samples, doc) -> np.ndarray:
+    """astropy's angle (deg) between reported places of date and the Sun, each at its time."""
+    import astropy.units as u
+    from astropy.coordinates import TETE, EarthLocation, SkyCoord, get_body
+    from astropy.time import Time
+
+    s = np.asarray(samples, float)
+    site = doc["site"]
+    loc = EarthLocation.from_geodetic(site["lon_deg"] * u.deg, site["lat_deg"] * u.deg,
+                                      site["height_m"] * u.m)
+    t = Time(s[:, 0], format="unix", scale="utc")
+    frame = TETE(obstime=t, location=loc)
+    places = SkyCoord(s[:, 1] * 15.0 * u.deg, s[:, 2] * u.deg, frame=frame)
+    sun = get_body("sun", t, location=loc).transform_to(frame)
+    return places.separation(sun).deg

@@ -22,13 +22,16 @@ Screenshots of each case land in artifacts/panel/trust/ (docs/panel.md).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
+import queue
 import re
 import signal
 import subprocess
 import sys
 import threading
+import time
 
 import pytest
 from panel_helpers import ARTIFACTS, CHROMIUM, ensure_browser_ready, free_port, run_asking_script
@@ -41,6 +44,7 @@ START = "2024-05-18T21:00:00Z"  # Poznań (the default site): night, Vega high, 
 SHOTS = ARTIFACTS / "trust"
 SIZES = ("1400x900", "1024x700")
 STALE_RGB = "rgb(138, 143, 153)"
+START_GUARD_S = 150.0  # a hang guard for the server's start line, far above its ~5 s
 LINE_RE = re.compile(r"VirtualStar Server on (ws://\S+) .*other clients: (ws://\S+?)\)")
 
 
@@ -61,8 +65,13 @@ class EmbeddedServer:
              "--operator-password", OPERATOR_PASSWORD, "--observer-password", OBSERVER_PASSWORD,
              "--listen", self.url, "--endpoint-port", "0"],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"})
-        for line in self.proc.stdout:
+            env={**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONFAULTHANDLER": "1"})
+        lines: queue.Queue[str | None] = queue.Queue()
+        out = self.proc.stdout
+        threading.Thread(target=lambda: ([lines.put(x) for x in out], lines.put(None)),
+                         daemon=True).start()
+        deadline = time.monotonic() + START_GUARD_S
+        while (line := self._next_line(lines, deadline)) is not None:
             self.output.append(line)
             match = LINE_RE.search(line)
             if match:
@@ -71,8 +80,26 @@ class EmbeddedServer:
                 break
         else:
             raise RuntimeError("vs server did not start:\n" + "".join(self.output))
-        out = self.proc.stdout
-        threading.Thread(target=lambda: self.output.extend(out), daemon=True).start()
+        threading.Thread(target=self._keep, args=(lines,), daemon=True).start()
+
+    def _next_line(self, lines: queue.Queue, deadline: float) -> str | None:
+        """The server's next line; past the hang guard, its threads' stacks (faulthandler
+        prints them on SIGABRT) and None."""
+        try:
+            return lines.get(timeout=max(deadline - time.monotonic(), 0.0))
+        except queue.Empty:
+            self.proc.send_signal(signal.SIGABRT)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.proc.wait(10)
+            with contextlib.suppress(queue.Empty):
+                while (line := lines.get(timeout=10)) is not None:
+                    self.output.append(line)
+            self.output.append(f"(no start line in {START_GUARD_S:.0f} s: stacks above)\n")
+            return None
+
+    def _keep(self, lines: queue.Queue) -> None:
+        while (line := lines.get()) is not None:
+            self.output.append(line)
 
     def kill(self) -> None:
         self.proc.send_signal(signal.SIGKILL)

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import socket
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -77,6 +81,26 @@ def test_vs_server_speed_max_keeps_idle_time_real_and_runs_ahead_while_a_client_
         info = json.loads(res.stdout)["info"]
         assert info["tracking_to_us"] - info["tracking_from_us"] == 600_000_000
     assert server.returncode == 0, server.err
+
+
+def test_vs_server_whose_port_is_taken_says_so_and_exits_instead_of_hanging():
+    """The start fails after the emulator and the VSS's mount link have started: everything
+    started must stop. (The link's reconnect loop once swallowed its cancellation, which
+    Python 3.11's wait_for loses when the ASTCom handshake completes at that moment, and the
+    server waited forever to stop, printing nothing: a panel test's setup hung 300 s.)"""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        url = f"ws://127.0.0.1:{taken.getsockname()[1]}"
+        proc = subprocess.run(
+            [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
+             "--emulator", "--speed", "20", "--start", "2024-05-18T21:00:00Z",
+             "--password", "secret", "--listen", url, "--endpoint-port", "0"],
+            capture_output=True, text=True, timeout=240,  # a hang guard, not a speed bound
+            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    assert proc.returncode == 1, (proc.stdout, proc.stderr)
+    assert f"cannot listen on {url}" in proc.stderr and "address already in use" in proc.stderr
+    assert "VirtualStar Server on" not in proc.stdout
 
 
 def test_vs_server_refuses_contradictory_options():

@@ -84,6 +84,7 @@ class MountLink(ConnectionWaits):
         self._changed = asyncio.Condition()
         self._lost = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
+        self._stopping = False  # stop() was called: the manager ends, cancelled or not
         self._scale: dict[str, float] = {}
         self._call_seq = itertools.count(1)
         self.calls: deque[MountCall] = deque(maxlen=CALL_LOG)
@@ -111,10 +112,12 @@ class MountLink(ConnectionWaits):
     def start(self) -> None:
         """Start connecting (and reconnecting) in the background."""
         if self._task is None:
+            self._stopping = False
             self._task = asyncio.get_running_loop().create_task(self._manage(), name="mount-link")
 
     async def stop(self) -> None:
         """Stop reconnecting and close the connection."""
+        self._stopping = True
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -136,7 +139,10 @@ class MountLink(ConnectionWaits):
 
     async def _manage(self) -> None:
         delay = self.config.backoff_min_s
-        while True:
+        # `_stopping` as well as the cancellation: a cancellation swallowed below us (Python
+        # 3.11's wait_for returns a result that was ready instead of raising it) must not
+        # leave this loop reconnecting forever while stop() waits for it
+        while not self._stopping:
             try:
                 client = await self._open()
             except (OSError, AstcomError, TimeoutError) as exc:
@@ -164,7 +170,7 @@ class MountLink(ConnectionWaits):
             await self._notify()
             log.info("mount connected at %s", self.config.url)
             self.on_event("mount_connected", {"url": self.config.url, "connects": self.connects})
-            while client.connected and not self._lost.is_set():
+            while client.connected and not self._lost.is_set() and not self._stopping:
                 with contextlib.suppress(TimeoutError):
                     async with asyncio.timeout(self.config.poll_s):
                         await self._lost.wait()
@@ -173,6 +179,8 @@ class MountLink(ConnectionWaits):
             await self._notify()
             with contextlib.suppress(Exception):
                 await client.close()
+            if self._stopping:
+                return
             self.last_error = "connection lost"
             log.warning("mount connection lost")
             self.on_event("mount_disconnected", {"url": self.config.url})

@@ -48,7 +48,7 @@ from virtualstar.astro import (
 from virtualstar.astro.exceptions import SatelliteError
 
 from . import closed_loop as guided
-from . import rate_procedures
+from . import goto_route, rate_procedures
 from .corrections import Corrections
 from .exceptions import InExclusionZone, StaleElements, TargetUnreachable
 from .feeder import Feeder, FeederConfig
@@ -187,8 +187,9 @@ async def goto_safely(t: Station, op: Operation, az_rad: float, el_rad: float, w
         op.info["detour_deg"] = [[round(math.degrees(a), 3), round(math.degrees(e), 3)]
                                  for a, e in legs[:-1]]
     if not t.link.capabilities.trajectory_buffer:
-        # a driver's goto takes its own path: short legs keep it near the checked one
-        legs = rate_procedures.short_legs(here, legs)
+        # a driver's goto takes its own path: legs short enough that its own way (any way
+        # within the box of its native axes) keeps out of the zones too
+        legs = goto_route.driver_legs(t, here, legs, what, allow_sun=allow_sun, stow=stow)
     pos = None
     for k, (leg_az, leg_el) in enumerate(legs):
         if k < len(legs) - 1 and not t.link.capabilities.trajectory_buffer:

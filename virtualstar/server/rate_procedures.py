@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .exceptions import TargetUnreachable, Unsupported
+from .goto_route import driver_legs
 from .operations import Operation, Phase
 from .rate_loop import (
     MERIDIAN_LIMIT_DEG,
@@ -46,29 +47,6 @@ SOONER_MARGIN_US = 3_000_000  # ... this long after the goto landed, for the loo
 GOTO_SETTLE_S = 1.5  # a goto's end is seen a few reports after the driver lands
 MAX_JOIN_PLANS = 6
 POLE_RATE_FRACTION = 0.9  # the right-ascension axis may use this much of its rate limit
-
-
-ROUTE_STEP_DEG = 20.0  # a goto leg round a zone is at most this long
-
-
-def short_legs(here, legs: list[tuple[float, float]]) -> list[tuple[float, float]]:
-    """Split route legs (encoder az/el, rad) into steps of at most `ROUTE_STEP_DEG`.
-
-    A driver's goto moves its own axes its own way; on a short leg that way stays near
-    the straight one the route was checked along.
-    """
-    if len(legs) < 2:
-        return legs  # the straight way is clear: one goto
-    out: list[tuple[float, float]] = []
-    az0, el0 = here.az_rad, here.el_rad
-    for az1, el1 in legs:
-        d_az = az1 - az0  # the way the route was checked (not the shortest way round)
-        span = math.degrees(math.hypot(d_az * math.cos(0.5 * (el0 + el1)), el1 - el0))
-        n = max(1, math.ceil(span / ROUTE_STEP_DEG))
-        for k in range(1, n + 1):
-            out.append((az0 + d_az * k / n, el0 + (el1 - el0) * k / n))
-        az0, el0 = az1, el1
-    return out
 
 
 def frame_of(t: Station) -> NativeFrame:
@@ -116,9 +94,10 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
         join_us = max(here.t_us, not_before_us or 0)
         for _ in range(2):  # the route (a detour round a zone) sets the goto's length
             at = path.sample(np.array([join_us], np.int64))
-            legs = short_legs(here, t.safety.route(
+            what = f"the join point of {op.target}"
+            legs = driver_legs(t, here, t.safety.route(
                 here.az_rad, here.el_rad, float(at.az_rad[0]), float(at.el_rad[0]), here.t_us,
-                f"the join point of {op.target}", allow_sun=allow_sun))
+                what, allow_sun=allow_sun), what, allow_sun=allow_sun)
             slew_s = route_estimate_s(t, here, legs)
             join_us = here.t_us + int((slew_s + margin_s) * 1e6)
             if not_before_us is not None:
@@ -140,7 +119,7 @@ async def acquire_by_rates(t: Station, op: Operation, path: Path, *,
         if len(legs) > 1:
             op.info["detour_deg"] = [[round(math.degrees(a), 3), round(math.degrees(e), 3)]
                                      for a, e in legs[:-1]]
-        steps = short_legs(here, legs)
+        steps = driver_legs(t, here, legs, f"the run-up to {op.target}", allow_sun=allow_sun)
         for leg_az, leg_el in steps[:-1]:  # waypoints round a zone
             await t.link.call("goto_place", math.degrees(leg_az), math.degrees(leg_el))
         await t.link.call("goto_native", start[0], start[1])

@@ -35,6 +35,7 @@ from virtualstar.astro.constants import SIDEREAL_RATE_ARCSEC_S
 
 from ..exceptions import BadRequest, MountRejected
 from .alpaca import geometry_override
+from .driver_waits import within
 from .rate_mount import DriverInfo, DriverReport
 
 __all__ = ["IndiDriver", "parse_indi_url"]
@@ -204,7 +205,7 @@ class IndiDriver:
     async def read(self) -> DriverReport:
         self._alive()
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._pushed.wait(), PUSH_WAIT_S)
+            await within(self._pushed.wait(), PUSH_WAIT_S)  # never drops a cancel
         if not self._pushed.is_set() and self._place is not None \
                 and _now_us() - self._place[2] > FRESH_READ_S * 1e6:
             await self._fresh_read()
@@ -240,7 +241,7 @@ class IndiDriver:
         await self._client.send_getProperties(self.device, "EQUATORIAL_EOD_COORD")
         self.fresh_reads += 1
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._pushed.wait(), FRESH_WAIT_S)
+            await within(self._pushed.wait(), FRESH_WAIT_S)
         if not self._pushed.is_set():
             silent_s = (_now_us() - self._place[2]) / 1e6 if self._place else math.inf
             if silent_s > FRESH_FAIL_S:

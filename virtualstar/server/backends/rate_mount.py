@@ -48,10 +48,11 @@ from virtualstar.astro import EarthOrientation, Site
 from virtualstar.astro.constants import ARCSEC_PER_RAD, SIDEREAL_RATE_ARCSEC_S
 from virtualstar.astro.mount_frames import apparent_radec_to_observed, observed_to_apparent_radec
 
-from ..exceptions import MountRejected, MountUnavailable
+from ..exceptions import MountFault, MountRejected, MountUnavailable
 from ..link_interface import ConnectionWaits, MountCapabilities
 from ..mapping import STATE_NAMES, RoleMapping
 from ..operations import current_operation
+from .driver_waits import GotoBudget, SlewRateMeter, axis_travel_deg, within
 from .tick_grid import TickGrid
 
 __all__ = ["Driver", "DriverInfo", "DriverReport", "RateLinkConfig", "RateMountLink"]
@@ -63,6 +64,9 @@ PLACE_TOLERANCE_ARCSEC = 2.0  # a fixed place is reached within this (then held,
 GOTO_TOLERANCE_ARCSEC = 15.0  # a fixed place held by a goto mount is verified within this
 REST_TOLERANCE_ARCSEC = 1.0  # two reports this close, a driver period apart: at rest
 STALE_S = 3.0  # wall seconds without an answer from the driver: lost
+GOTO_ROLES = frozenset({"slew", "goto_place", "goto_native"})  # bounded by their own budget
+GOTO_LANDED_DEG = 0.1  # a goto has landed when the reports are this close to its place
+REST_WAIT_S = 10.0  # after a stop, wall seconds (plus a few report periods) to see it at rest
 CALL_LOG = 4096
 _ROLES = ("az_position", "el_position", "axis1_position", "axis2_position", "report_time",
           "report_age", "az_state", "el_state", "az_faults", "el_faults", "mount_state",
@@ -142,6 +146,8 @@ class RateLinkConfig:
     backoff_max_s: float = 5.0
     stale_s: float = STALE_S
     accel_deg_s2: float = 5.0  # the drivers say nothing about it: a cautious figure
+    goto_budget: GotoBudget = field(default_factory=GotoBudget)  # when a goto is overdue
+    rest_wait_s: float = REST_WAIT_S
 
 
 @dataclass(frozen=True)
@@ -186,6 +192,13 @@ class ReportStats:
         return statistics.median(abs(x - mid) for x in last)
 
 
+def _sep_deg(ra1: float, dec1: float, ra2: float, dec2: float) -> float:
+    """Angle between two places (rad in), degrees."""
+    c = (math.sin(dec1) * math.sin(dec2)
+         + math.cos(dec1) * math.cos(dec2) * math.cos(ra1 - ra2))
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+
+
 def _now_us() -> int:
     return time.time_ns() // 1000
 
@@ -208,6 +221,8 @@ class RateMountLink(ConnectionWaits):
         self.connects = 0
         self.last_error = ""
         self.fault_text = ""
+        self.goto_fault = ""  # a goto that never landed: latched until `reset_faults`
+        self.slew_rate = SlewRateMeter()
         self.stats = ReportStats()
         self._ticks = TickGrid()  # a pushing driver's ticks
         self._lock = asyncio.Lock()
@@ -267,6 +282,8 @@ class RateMountLink(ConnectionWaits):
             "commanded_rates_arcsec_s": [r * ARCSEC_PER_RAD for r in self._rates_rad_s],
             "error_arcsec": self.last_error_arcsec,
             "fault": self.fault_text or None,
+            "goto_fault": self.goto_fault or None,
+            "measured_slew_rate_deg_s": self.slew_rate.rate_deg_s(),
         }
         if rep is not None:
             out["reported"] = {"ra_deg": math.degrees(rep.ra_rad) % 360.0,
@@ -311,8 +328,8 @@ class RateMountLink(ConnectionWaits):
         delay = self.config.backoff_min_s
         while True:
             try:
-                self.info = await asyncio.wait_for(self.driver.open(self.config.site),
-                                                   self.config.timeout_s * 5)
+                self.info = await within(self.driver.open(self.config.site),
+                                         self.config.timeout_s * 5)
                 await self._first_report()
                 # whatever moved before (a VSS that crashed, a restarted driver): at rest
                 await self._halt_driver()
@@ -325,7 +342,7 @@ class RateMountLink(ConnectionWaits):
                 continue
             delay = self.config.backoff_min_s
             self._lost.clear()
-            self.fault_text = ""
+            self.fault_text = self.goto_fault = ""
             self.axis_signs, self.signs_measured = (1.0, 1.0), False
             self.connects += 1
             self._connected.set()
@@ -346,7 +363,7 @@ class RateMountLink(ConnectionWaits):
             self.fault_text = f"the driver stopped answering ({reason})"
             # tell it to stop, should it still listen (a rate once sent keeps the mount moving)
             with contextlib.suppress(Exception):
-                await asyncio.wait_for(self._halt_driver(), self.config.timeout_s)
+                await within(self._halt_driver(), self.config.timeout_s)
             self._connected.clear()
             await self._notify()
             with contextlib.suppress(Exception):
@@ -374,7 +391,7 @@ class RateMountLink(ConnectionWaits):
 
     async def _driver_read(self) -> tuple[DriverReport, int, int]:
         before = _now_us()
-        rep = await asyncio.wait_for(self.driver.read(), self.config.timeout_s)
+        rep = await within(self.driver.read(), self.config.timeout_s)
         after = _now_us()
         if rep.received_us is not None:
             # pushed: it describes its driver's tick, which it follows by the handling
@@ -519,7 +536,7 @@ class RateMountLink(ConnectionWaits):
 
     def state_name(self) -> str:
         rep = self._report
-        if self.fault_text and not self.connected:
+        if self.goto_fault or (self.fault_text and not self.connected):
             return "fault"
         if rep is None:
             return "off"
@@ -616,7 +633,9 @@ class RateMountLink(ConnectionWaits):
                                 "trajectory buffer (capabilities: rate axes and goto)")
         async with self._lock:
             try:
-                return await asyncio.wait_for(fn(*args), self.config.timeout_s * 30)
+                if role in GOTO_ROLES:  # bounded by their goto budget, then a fault
+                    return await fn(*args)
+                return await within(fn(*args), self.config.timeout_s * 30)
             except (OSError, TimeoutError) as exc:
                 self.last_error = f"{role}: {exc or type(exc).__name__}"
                 err = MountUnavailable(f"the {self.backend} driver did not answer {role}: "
@@ -626,7 +645,7 @@ class RateMountLink(ConnectionWaits):
                 raise err from None
 
     async def _send(self, coro) -> None:
-        await asyncio.wait_for(coro, self.config.timeout_s)
+        await within(coro, self.config.timeout_s)
 
     async def _halt_driver(self) -> None:
         """Abort a goto, zero the rates, tracking off (a parked mount refuses them: it is at rest)."""
@@ -644,7 +663,7 @@ class RateMountLink(ConnectionWaits):
         await self._halt_driver()
 
     async def _do_reset_faults(self) -> None:
-        self.fault_text = ""
+        self.fault_text = self.goto_fault = ""
 
     async def _do_power_on(self) -> None:
         if self._report is not None and self._report.flags.at_park:
@@ -682,7 +701,9 @@ class RateMountLink(ConnectionWaits):
         self._signs_side = side
 
     async def _do_goto_place(self, az_deg: float, el_deg: float) -> None:
-        """One goto to a fixed observed place (a waypoint round a zone), tracking off."""
+        """One goto to a fixed observed place (a waypoint round a zone), tracking off: it
+        has landed only when the reports show that place (`_goto_once`), the next leg's way
+        being planned from it."""
         await self._do_slew(az_deg, el_deg, attempts=1)
 
     async def _do_slew(self, az_deg: float, el_deg: float, attempts: int = 3) -> None:
@@ -713,17 +734,106 @@ class RateMountLink(ConnectionWaits):
         self._rest, self._at_rest = None, False
 
     async def _goto_and_wait(self, ra_rad: float, dec_rad: float) -> None:
+        """Goto a place of date and wait until the driver says it landed, within a bound.
+
+        A goto overdue by its budget (`driver_waits.GotoBudget`: the axis travel at the
+        measured slew rate, doubled, plus a margin) is aborted and sent once more; overdue
+        again, the mount is told to stop, its rest is checked from its reported places, and
+        the link latches a fault (`goto_fault`, state ``fault`` until ``reset_faults``)
+        that ends the operation with `MountFault`.
+        """
+        overdue = []
+        for attempt in (1, 2):
+            bound_s = await self._goto_once(ra_rad, dec_rad)
+            if bound_s is None:
+                return
+            overdue.append(bound_s)
+            log.warning("%s goto to RA %.4f h Dec %.4f° did not land within %.1f s "
+                        "(attempt %d): aborting it", self.backend,
+                        math.degrees(ra_rad) % 360.0 / 15.0, math.degrees(dec_rad), bound_s,
+                        attempt)
+            with contextlib.suppress(MountRejected):
+                await self._send(self.driver.abort())
+        await self._goto_fault(ra_rad, dec_rad, overdue)
+
+    async def _goto_once(self, ra_rad: float, dec_rad: float) -> float | None:
+        """One goto; None when it landed, else the budget (s) it overran."""
         ra_h = math.degrees(ra_rad) % 360.0 / 15.0
+        rep = self._require()
+        direct, worst = axis_travel_deg(math.degrees(rep.ra_rad) / 15.0,
+                                        math.degrees(rep.dec_rad), ra_h, math.degrees(dec_rad),
+                                        self.info.geometry if self.info else "german")
+        bound_s = self.config.goto_budget.bound_s(
+            worst, measured_deg_s=self.slew_rate.rate_deg_s(),
+            declared_deg_s=self.info.slew_rate_deg_s if self.info else None,
+            period_s=self.stats.period_s())
         await self._send(self.driver.goto_radec(ra_h, math.degrees(dec_rad)))
         self._rest, self._at_rest = None, False
         sent = _now_us()
+        deadline = time.monotonic() + bound_s
         # a driver that flags the goto a little later than it accepted it: see it start first
-        await self.wait_report(sent, 1.0)
+        await self.wait_report(sent, min(1.0, bound_s))
         while True:
             rep = self._require()
-            if not rep.flags.slewing and rep.read_us > sent:
-                return
+            # landed: the driver says it no longer slews *and* reports the place it was sent
+            # to (a driver may flag the end early, or not yet have flagged the start: the
+            # INDI simulator's star goto was taken as landed 4.6° short, and the rate loop
+            # then measured its axis signs on a moving mount)
+            if (not rep.flags.slewing and rep.read_us > sent
+                    and _sep_deg(rep.ra_rad, rep.dec_rad, ra_rad, dec_rad) <= GOTO_LANDED_DEG):
+                self.slew_rate.landed(direct, (rep.read_us - sent) / 1e6)
+                return None
+            if time.monotonic() > deadline:
+                return bound_s
             await asyncio.sleep(max(self.driver.poll_s, 0.02))
+
+    async def _goto_fault(self, ra_rad: float, dec_rad: float, overdue: list[float]) -> None:
+        """Stop the mount, check it came to rest, latch the fault and end the operation."""
+        await self._halt_driver()
+        still = await self._wait_still(self.config.rest_wait_s
+                                       + 4 * (self.stats.period_s() or 0.25))
+        rep = self._report
+        flag = " (the driver still flags a slew)" if rep is not None and rep.flags.slewing else ""
+        rest = ("it is at rest" + flag if still else
+                "its reported place was still moving: check the mount")
+        text = (f"the {self.backend} goto to RA {math.degrees(ra_rad) % 360.0 / 15.0:.4f} h "
+                f"Dec {math.degrees(dec_rad):.4f}° did not land within "
+                f"{' s, then '.join(f'{b:.1f}' for b in overdue)} s (aborted, sent again, "
+                f"aborted); the mount was told to stop and {rest}. Reset the fault to go on "
+                "(vs stop --reset-faults)")
+        self._latch_fault(text, at_rest=still)
+
+    def _latch_fault(self, text: str, **data: Any) -> None:
+        """Latch a goto fault (state ``fault`` until ``reset_faults``), log it, tell the
+        server (its event log, its clients) and end the operation with `MountFault`."""
+        self.goto_fault = self.fault_text = text
+        log.error("%s", text)
+        self.on_event("fault", {"state": "fault", "faults": text, "backend": self.backend,
+                                **data})
+        raise MountFault(text)
+
+    async def _wait_still(self, timeout_s: float) -> bool:
+        """Wait until the reported place stands still (the observed place, within
+        `REST_TOLERANCE_ARCSEC`) over a report period or more: judged from the places alone,
+        since a driver whose goto never ended may flag a slew whatever it does."""
+        deadline = time.monotonic() + timeout_s
+        first: tuple[int, float, float] | None = None
+        while time.monotonic() < deadline:
+            rep = self._report
+            if rep is not None:
+                az, el = self._observed(rep.ra_rad, rep.dec_rad, rep.read_us)
+                period_us = int((self.stats.period_s() or 0.25) * 1e6)
+                if first is None:
+                    first = (rep.read_us, az, el)
+                else:
+                    t0, az0, el0 = first
+                    moved = math.hypot((az - az0) * math.cos(el), el - el0) * ARCSEC_PER_RAD
+                    if moved > REST_TOLERANCE_ARCSEC:
+                        first = (rep.read_us, az, el)
+                    elif rep.read_us - t0 >= period_us:
+                        return True
+            await asyncio.sleep(max(self.driver.poll_s, 0.02))
+        return False
 
 
 def sidereal_rate_rad_s() -> float:

@@ -1,0 +1,438 @@
+"""Bounded driver waits: the cause of the Alpaca sky scenario's hang, and the goto bound.
+
+The link (`RateMountLink`) runs for real over `SimGotoDriver`, a small goto mount written
+here (a slew moves RA and Dec linearly at its rate, as the Alpaca simulator's does) with
+the faults a real driver shows: a Slewing flag that never clears, a read that completes
+at the very moment the link is being stopped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import re
+import time
+
+import pytest
+
+from virtualstar.astro import EarthOrientation, Site
+from virtualstar.server.backends.driver_waits import (
+    GotoBudget,
+    SlewRateMeter,
+    axis_travel_deg,
+    within,
+)
+from virtualstar.server.backends.rate_mount import (
+    DriverInfo,
+    DriverReport,
+    RateLinkConfig,
+    RateMountLink,
+)
+from virtualstar.server.exceptions import MountFault
+
+HANG_GUARD_S = 60.0  # a hang guard, not a speed bound: the bounds under test are seconds
+
+
+class SimGotoDriver:
+    """A goto mount on the host clock: gotos move RA/Dec linearly at `rate_deg_s`."""
+
+    poll_s = 0.02
+
+    def __init__(self, *, rate_deg_s: float = 40.0, stuck: bool = False,
+                 stuck_after_abort: bool = False, geometry: str = "fork") -> None:
+        self.url = "sim://goto"
+        self.geometry = geometry
+        self.rate_deg_s = rate_deg_s
+        self.stuck = stuck  # a goto reaches its place but the driver never clears Slewing
+        self.stuck_after_abort = stuck_after_abort  # ... not even after an abort
+        self.drop_gotos = 0  # this many gotos are accepted and dropped (the mount stays)
+        self.early_idle_s = 0.0  # a goto is not flagged as a slew for its first seconds
+        self._goto_at = 0.0
+        self.ra_h, self.dec_deg = 6.0, 10.0
+        self.target: tuple[float, float] | None = None
+        self.slewing = False
+        self.tracking = False
+        self.rates = (0.0, 0.0)
+        self.calls: list[str] = []
+        self.gate: asyncio.Future | None = None  # a read waits on it when set
+        self._t = time.monotonic()
+
+    def _advance(self) -> None:
+        now = time.monotonic()
+        dt, self._t = now - self._t, now
+        if self.target is not None:
+            d_ra = ((self.target[0] - self.ra_h) * 15.0 + 180.0) % 360.0 - 180.0
+            d_dec = self.target[1] - self.dec_deg
+            dist = math.hypot(d_ra, d_dec)
+            step = self.rate_deg_s * dt
+            if dist <= step:
+                self.ra_h, self.dec_deg = self.target
+                self.target = None
+                self.slewing = self.stuck
+            else:
+                self.ra_h = (self.ra_h + step / dist * d_ra / 15.0) % 24.0
+                self.dec_deg += step / dist * d_dec
+            return
+        sidereal_h_s = 24.0 / 86164.0905
+        self.ra_h = (self.ra_h + dt * ((0.0 if self.tracking else sidereal_h_s)
+                                       + self.rates[0] / 15.0)) % 24.0
+        self.dec_deg += dt * self.rates[1]
+
+    async def open(self, site: Site) -> DriverInfo:
+        return DriverInfo(name="sim", geometry=self.geometry, max_rate_deg_s=5.0,
+                          rate_step_arcsec_s=None, can_park=False, can_pulse_guide=False,
+                          site=None, slew_rate_deg_s=self.rate_deg_s)
+
+    async def close(self) -> None:
+        pass
+
+    async def read(self) -> DriverReport:
+        if self.gate is not None:
+            await self.gate
+        await asyncio.sleep(0)
+        self._advance()
+        slewing = self.slewing and time.monotonic() - self._goto_at >= self.early_idle_s
+        return DriverReport(self.ra_h, self.dec_deg, slewing, self.tracking, False, 1)
+
+    async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
+        self._advance()
+        self.calls.append("goto")
+        if self.drop_gotos:
+            self.drop_gotos -= 1
+            return
+        self.target, self.slewing = (ra_h, dec_deg), True
+        self._goto_at = time.monotonic()
+
+    async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
+        self._advance()
+        self.calls.append(f"rates {ra_deg_s:g} {dec_deg_s:g}")
+        self.rates = (ra_deg_s, dec_deg_s)
+
+    async def set_tracking(self, on: bool) -> None:
+        self._advance()
+        self.calls.append(f"tracking {on}")
+        self.tracking = on
+
+    async def abort(self) -> None:
+        self._advance()
+        self.calls.append("abort")
+        self.target = None
+        self.slewing = self.stuck_after_abort
+
+    async def park(self) -> None:
+        pass
+
+    async def unpark(self) -> None:
+        pass
+
+
+SITE = Site(lat_deg=-30.0, lon_deg=70.0, height_m=1500.0)
+
+
+@pytest.fixture(scope="module")
+def eop() -> EarthOrientation:
+    return EarthOrientation.from_astropy_iers_data()
+
+
+def _link(driver, eop, **config) -> RateMountLink:
+    return RateMountLink(driver, RateLinkConfig(driver.url, SITE, eop, **config), backend="sim")
+
+
+# ---------------------------------------------------------------------- the cause of the hang
+async def _poll_with_wait_for(read, stop_reads: list) -> None:
+    """The poll loop as it was: each read through `asyncio.wait_for`."""
+    while True:
+        stop_reads.append(await asyncio.wait_for(read(), 2.0))
+        await asyncio.sleep(0.01)
+
+
+async def _cancel_as_read_lands(poll_factory) -> bool:
+    """Start a poll loop blocked in a read, let the read complete and cancel the loop in the
+    same loop iteration (what `RateMountLink.stop` does to its poller while a report comes
+    in); return whether the loop ended."""
+    gate = asyncio.get_running_loop().create_future()
+
+    async def read():
+        await gate
+        return 1
+
+    reads: list = []
+    poller = asyncio.ensure_future(poll_factory(read, reads))
+    for _ in range(5):
+        await asyncio.sleep(0)  # the poller is now waiting inside its read
+    gate.set_result(None)  # the driver's answer arrives ...
+    await asyncio.sleep(0)  # ... the read finishes, its waiter is not woken yet
+    poller.cancel()  # ... and the link is stopped in that iteration
+    done, _ = await asyncio.wait({poller}, timeout=1.0)
+    if not done:
+        poller.cancel()  # the second cancel lands in the sleep: clean up
+        await asyncio.wait({poller}, timeout=1.0)
+    return bool(done)
+
+
+async def _poll_with_within(read, stop_reads: list) -> None:
+    while True:
+        stop_reads.append(await within(read(), 2.0))
+        await asyncio.sleep(0.01)
+
+
+def test_python311_wait_for_drops_a_cancel_that_meets_a_finished_read():
+    """The hang's mechanism, reproduced deterministically: with `asyncio.wait_for` the
+    cancellation is swallowed and the poll loop runs on (the VSS polled the simulator for
+    12 minutes after the test closed it); with `driver_waits.within` it ends."""
+    import sys
+
+    async def main():
+        return await _cancel_as_read_lands(_poll_with_wait_for), \
+            await _cancel_as_read_lands(_poll_with_within)
+
+    ended_wait_for, ended_within = asyncio.run(main())
+    if sys.version_info < (3, 12):
+        assert not ended_wait_for  # the defect this module works round (CPython gh-86296)
+    assert ended_within
+
+
+def test_stopping_the_link_while_a_report_lands_ends_the_link(eop):
+    """`RateMountLink.stop` cancels its poller; done at the moment a driver read completes
+    it must still end (before the fix: awaited forever, the scenario's 720-s hang)."""
+    async def main():
+        driver = SimGotoDriver()
+        link = _link(driver, eop)
+        link.start()
+        await link.wait_connected(10)
+        ended = 0
+        for k in range(20):
+            driver.gate = asyncio.get_running_loop().create_future()
+            await asyncio.sleep(0.05)  # the poller now waits in a read
+            for _ in range(k % 4):
+                await asyncio.sleep(0)
+            driver.gate.set_result(None)
+            driver.gate = None
+            await asyncio.sleep(0)
+            stopping = asyncio.ensure_future(link.stop())
+            done, _ = await asyncio.wait({stopping}, timeout=HANG_GUARD_S / 10)
+            assert done, f"link.stop() did not end (round {k})"
+            ended += 1
+            link.start()
+            await link.wait_connected(10)
+        await link.stop()
+        return ended
+
+    assert asyncio.run(main()) == 20
+
+
+# ---------------------------------------------------------------------- the goto bound
+def test_a_goto_that_never_lands_is_aborted_retried_then_a_fault_with_the_mount_stopped(eop):
+    async def main():
+        driver = SimGotoDriver(stuck=True)
+        link = _link(driver, eop, goto_budget=GotoBudget(margin_s=0.5, report_periods=2),
+                     rest_wait_s=2.0)
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        driver.calls.clear()
+        t0 = time.monotonic()
+        with pytest.raises(MountFault) as err:
+            await asyncio.wait_for(link.call("goto_native", math.radians(7.0 * 15),
+                                             math.radians(20.0)), HANG_GUARD_S)
+        waited = time.monotonic() - t0
+        status = link.describe()
+        state = link.state_name()
+        read = await link.read(["mount_state", "az_fault_text"])
+        await link.stop()
+        return driver, err.value, waited, status, state, read
+
+    driver, err, waited, status, state, read = asyncio.run(main())
+    # the goto was sent, overdue, aborted, sent once more, overdue, then the mount stopped
+    gotos = [k for k, c in enumerate(driver.calls) if c == "goto"]
+    aborts = [k for k, c in enumerate(driver.calls) if c == "abort"]
+    assert len(gotos) == 2 and len(aborts) == 3
+    assert gotos[0] < aborts[0] < gotos[1] < aborts[1] < aborts[2]
+    after = driver.calls[aborts[2]:]
+    assert "rates 0 0" in after and "tracking False" in after
+    assert driver.rates == (0.0, 0.0) and not driver.tracking and driver.target is None
+    # each wait was its budget: 15° of RA (the larger axis turn of a fork) at the 40°/s
+    # the driver declares (none measured yet), doubled, plus the margin and two report
+    # periods; the second goto starts where the first left the mount (at the place)
+    travel, _ = axis_travel_deg(6.0, 10.0, 7.0, 20.0, "fork")
+    assert travel == pytest.approx(15.0, abs=0.01)
+    found = re.search(r"did not land within ([0-9.]+) s, then ([0-9.]+) s", str(err))
+    assert found, str(err)
+    first, second = float(found[1]), float(found[2])
+    assert 2 * travel / 40.0 + 0.5 <= first + 0.05 <= 2 * travel / 40.0 + 0.5 + 2 * 0.25 + 0.1
+    assert 0.5 <= second + 0.05 < first
+    assert waited >= 0.9 * (first + second)  # it did wait out both budgets
+    assert "it is at rest" in str(err)
+    assert state == "fault" and status["goto_fault"] == str(err) and status["fault"]
+    assert read["az_fault_text"] == str(err)
+
+
+def test_a_driver_that_flags_a_slew_even_after_the_abort_is_judged_at_rest_by_its_places(eop):
+    async def main():
+        driver = SimGotoDriver(stuck=True, stuck_after_abort=True)
+        link = _link(driver, eop, goto_budget=GotoBudget(margin_s=0.3, report_periods=1),
+                     rest_wait_s=2.0)
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        with pytest.raises(MountFault) as err:
+            await asyncio.wait_for(link.call("slew", 120.0, 40.0), HANG_GUARD_S)
+        after_reset_state = None
+        await link.call("reset_faults")
+        after_reset_state = link.state_name()
+        await link.stop()
+        return str(err.value), after_reset_state
+
+    text, after_reset = asyncio.run(main())
+    assert "still flags a slew" in text and "it is at rest" in text
+    assert after_reset != "fault"
+
+
+def test_a_goto_that_lands_is_not_cut_short_and_teaches_the_link_the_slew_rate(eop):
+    async def main():
+        driver = SimGotoDriver(rate_deg_s=40.0)
+        link = _link(driver, eop, goto_budget=GotoBudget(margin_s=5.0))
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        driver.calls.clear()  # the halt on connecting
+        await asyncio.wait_for(link.call("goto_native", math.radians(8.0 * 15),
+                                         math.radians(-20.0)), HANG_GUARD_S)
+        rate = link.slew_rate.rate_deg_s()
+        await link.stop()
+        return driver, rate, link
+
+    driver, rate, link = asyncio.run(main())
+    assert driver.calls.count("goto") == 1 and "abort" not in driver.calls
+    assert abs(driver.ra_h - 8.0) < 1e-9 and abs(driver.dec_deg + 20.0) < 1e-9
+    assert link.goto_fault == ""
+    # measured: a 30° Dec / 30° RA goto at 40°/s along the diagonal; the reports show its
+    # end a poll late, so the measure is a little under the true rate and never above it
+    assert rate is not None and 0.0 < rate <= 40.0 * 1.01
+
+
+def test_goto_budget_and_axis_travel():
+    b = GotoBudget(margin_s=10.0, slow_factor=2.0, report_periods=4)
+    # 90° at a measured 15°/s: 12 s, plus 10 s, plus 4 periods of 0.1 s
+    assert b.bound_s(90.0, measured_deg_s=15.0, declared_deg_s=3.0, period_s=0.1) == \
+        pytest.approx(22.4)
+    # nothing measured: the declared rate; nothing declared: the cautious default (1°/s)
+    assert b.bound_s(90.0, measured_deg_s=None, declared_deg_s=3.0, period_s=None) == \
+        pytest.approx(60 + 10 + 1.0)
+    assert b.bound_s(10.0, measured_deg_s=None, declared_deg_s=None, period_s=0.25) == \
+        pytest.approx(20 + 10 + 1.0)
+    # axis travel: the larger axis turn; RA the short way round; a German flip allowed for
+    assert axis_travel_deg(23.5, 0.0, 0.5, 10.0, "fork") == pytest.approx((15.0, 15.0))
+    assert axis_travel_deg(1.0, 10.0, 2.0, 40.0, "fork") == pytest.approx((30.0, 30.0))
+    # German: the direct way for the rate measure, a flip (165° of hour angle) for the budget
+    assert axis_travel_deg(1.0, 10.0, 2.0, 40.0, "german") == pytest.approx((30.0, 165.0))
+    meter = SlewRateMeter()
+    meter.landed(1.0, 0.01)  # too short to say anything
+    assert meter.rate_deg_s() is None
+    meter.landed(30.0, 2.0)
+    meter.landed(60.0, 4.0)
+    assert meter.rate_deg_s() == pytest.approx(15.0)
+
+
+# ---------------------------------------------------------------------- through the VSS
+def test_a_slew_on_a_goto_that_never_lands_ends_with_mount_fault_shown_and_logged(eop,
+                                                                                 monkeypatch):
+    """The VSS (`vs server --mount alpaca://…` with the driver swapped for `SimGotoDriver`):
+    the slew operation fails with `mount_fault`, `status` shows the fault and the stopped
+    mount, the event log has it, and the server closes (no hang)."""
+    from virtualstar.server import assembly, build_server
+
+    driver = SimGotoDriver(stuck=True)
+
+    def open_sim(url, site, eop_=None, **options):
+        return _link(driver, eop, goto_budget=GotoBudget(margin_s=0.5, report_periods=2),
+                     rest_wait_s=2.0)
+
+    monkeypatch.setattr(assembly, "open_rate_mount", open_sim)
+
+    async def main():
+        vss = build_server(mount_url="alpaca://127.0.0.1:9/0", site=SITE)
+        await vss.start("ws://127.0.0.1:0")
+        try:
+            t = vss.telescope
+            await t.link.wait_connected(10)
+            await asyncio.sleep(0.5)
+            op = await t.slew_altaz(200.0, 50.0)
+            await asyncio.wait_for(asyncio.shield(op.done), HANG_GUARD_S)
+            status = await t.status()
+            events = [(e.level, e.kind, e.message) for e in t.log.since(0)]
+            return op.as_dict(), op.done.exception() if op.done.done() else None, status, \
+                events
+        finally:
+            await asyncio.wait_for(vss.close(), HANG_GUARD_S)
+
+    op, exc, status, events = asyncio.run(main())
+    assert op["phase"] == "failed", op
+    assert getattr(exc, "code", None) == "mount_fault" or "mount_fault" in str(op), (op, exc)
+    assert status["backend"]["goto_fault"] and "did not land" in status["backend"]["goto_fault"]
+    assert driver.rates == (0.0, 0.0) and not driver.tracking and driver.target is None
+    assert any(level == "error" and kind == "fault" and "did not land" in message
+               for level, kind, message in events), events
+
+
+@pytest.mark.parametrize("dropped", [1, 2])
+def test_a_waypoint_goto_the_driver_drops_is_sent_again_then_a_fault(eop, dropped):
+    """A driver that accepts a goto and stays where it is, not slewing (the Alpaca simulator
+    can lose a goto sent as its previous slew completes): not taken as landed (the detour's
+    next leg would start from the wrong place); overdue, it is sent again, then a fault."""
+    async def main():
+        driver = SimGotoDriver()
+        link = _link(driver, eop, goto_budget=GotoBudget(margin_s=0.5, report_periods=2),
+                     rest_wait_s=2.0)
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        here = link._report
+        az, el = link._observed(here.ra_rad, here.dec_rad, here.read_us)
+        az_deg, el_deg = math.degrees(az) + 10.0, math.degrees(el) + 5.0
+        driver.calls.clear()
+        driver.drop_gotos = dropped
+        try:
+            await asyncio.wait_for(link.call("goto_place", az_deg, el_deg), HANG_GUARD_S)
+            outcome = None
+        except MountFault as exc:
+            outcome = str(exc)
+        rep = link._report
+        a, e = link._observed(rep.ra_rad, rep.dec_rad, rep.read_us)
+        off = math.degrees(math.hypot((a - math.radians(az_deg)) * math.cos(e),
+                                      e - math.radians(el_deg)))
+        state = link.state_name()
+        await link.stop()
+        return driver, outcome, off, state
+
+    driver, outcome, off, state = asyncio.run(main())
+    assert driver.calls.count("goto") == 2
+    if dropped == 1:
+        assert outcome is None and off < 0.1 and state != "fault"
+    else:
+        assert outcome and "did not land within" in outcome and state == "fault"
+        assert driver.rates == (0.0, 0.0) and not driver.tracking
+
+
+def test_a_goto_flagged_late_is_waited_for_until_the_mount_reports_its_place(eop):
+    """A driver that does not flag its goto as a slew for its first 1.5 s (the INDI
+    simulator's star goto was once taken as landed 4.6° short): the link waits until the
+    reports show the place, not for the first report without the flag."""
+    async def main():
+        driver = SimGotoDriver(rate_deg_s=10.0)
+        driver.early_idle_s = 1.5
+        link = _link(driver, eop)
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        driver.calls.clear()
+        await asyncio.wait_for(link.call("goto_native", math.radians(7.0 * 15),
+                                         math.radians(20.0)), HANG_GUARD_S)
+        rep = link._report
+        await link.stop()
+        return driver, rep
+
+    driver, rep = asyncio.run(main())
+    assert driver.calls.count("goto") == 1 and "abort" not in driver.calls
+    assert abs(math.degrees(rep.ra_rad) / 15.0 - 7.0) < 1e-6
+    assert abs(math.degrees(rep.dec_rad) - 20.0) < 1e-6
