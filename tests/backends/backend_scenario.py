@@ -65,6 +65,17 @@ def now_us() -> int:
     return time.time_ns() // 1000
 
 
+def stop_process(proc: subprocess.Popen, wait_s: float = 10.0) -> None:
+    """Terminate a helper process, and kill it if it does not end within `wait_s`."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(wait_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 def free_port() -> int:
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
@@ -181,13 +192,7 @@ class Observer:
         return None
 
     def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc)
 
 
 def observe(kind: str, port: int, path: Path) -> None:

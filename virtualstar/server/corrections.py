@@ -16,6 +16,10 @@ pulse, the closed loop's estimate) is planned from `from_us` and sent:
 * **append-only** (no `traj_replace` role): the change starts after the last point
   already pushed, `feed_lead_s` later (5 s in real time) — the old behaviour,
   which `status` reports as `corrections.mode = "append-only"`.
+* **rate_loop** (a rate-driven mount, Alpaca/INDI: no buffer at all): the change
+  starts now; the rate loop samples the path at every driver report, so it is in
+  force from the loop's next command (one report period, plus the driver's measured
+  application lag).
 
 Before the track has joined its path (preparing, slewing, the run-up), a change
 starts at the join (`hold_until`), so the run-up aims at the offset place.
@@ -50,8 +54,14 @@ class CorrectionMode:
     can_replace: bool
     min_lead_us: int  # the controller's documented minimum lead
     margin_us: int  # what the VSS adds for a request's travel (0 in lockstep)
+    rate_loop: bool = False  # a rate-driven mount: the VSS's rate loop samples the path
 
     def as_dict(self) -> dict[str, Any]:
+        if self.rate_loop:
+            return {"mode": "rate_loop", "min_lead_ms": 0.0, "margin_ms": 0.0,
+                    "note": ("a rate-driven mount: offsets and guide pulses start when accepted "
+                             "and are in force from the rate loop's next command (the next "
+                             "report of the driver, plus its measured application lag)")}
         doc = {"mode": "replace_from" if self.can_replace else "append-only",
                "min_lead_ms": self.min_lead_us / 1000, "margin_ms": self.margin_us / 1000}
         if not self.can_replace:
@@ -70,7 +80,7 @@ class Replanned:
 
     accepted_us: int  # the mount time read when it was planned
     from_us: int  # where the changed path begins
-    sent: str  # "replace_from", "planned" (the next batch has it) or "appended"
+    sent: str  # "replace_from", "planned" (the next batch has it), "appended" or "rate_loop"
     value: Any  # what the change returned
 
     @property
@@ -82,6 +92,8 @@ def start_of_change(mode: CorrectionMode, feeder: Feeder | None, now_us: int, ma
                     not_before_us: int | None = None) -> tuple[int, str]:
     """Where a change may start, and how it reaches the mount."""
     floor = not_before_us if not_before_us is not None else now_us
+    if mode.rate_loop:
+        return max(now_us, floor), "rate_loop"  # the loop's next command samples it
     if feeder is None or not feeder.stats.pushed:
         return max(now_us, floor), "planned"  # nothing buffered yet: the next batch has it
     if mode.can_replace:

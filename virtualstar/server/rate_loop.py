@@ -17,11 +17,14 @@ Alpaca ``MoveAxis``, INDI ``TELESCOPE_TRACK_RATE``), the VSS closes the loop its
    differ): measured, not assumed.
 3. **Loop** (`RateFollower.run`): at every new report of the driver (its period is
    measured by the backend), the place the mount will have when the next command takes
-   effect is predicted from the report and the rates in force; the command for the next
-   report period is the feed-forward (the path's mean rate over that period) plus a
-   fraction `gain` of the predicted error per period, within the driver's rate limit.
-   Rates too close to the last to matter are not sent, so a sidereal target on an
-   equatorial mount is left to the mount's own tracking.
+   effect is predicted from the report and the commands in force; when a command takes
+   effect is *learned* from the reports (`rate_predictor.ApplicationLag`: both simulators
+   apply a rate retroactively from their last update, a real mount may take it later).
+   The command for the next report period is the feed-forward (the path's chord from the
+   time it takes effect to the next command's) plus a fraction `gain` of the predicted
+   error then, within the driver's rate limit (`rate_predictor.plan_rate`). Rates too
+   close to the last to matter are not sent, so a sidereal target on an equatorial mount
+   is left to the mount's own tracking.
 
 Every report is compared with the path *at that report's own mount time* (the middle
 of the interval in which it appeared): that error goes to the tracking-error history,
@@ -62,13 +65,20 @@ from .exceptions import (
     TargetUnreachable,
 )
 from .link_interface import MountCapabilities
+from .rate_predictor import RatePredictor
 from .trajectories import Path, Points
 
-__all__ = ["FollowStats", "NativeFrame", "RateFollower", "RateJoin", "run_up_s", "run_up_start"]
+__all__ = ["FollowStats", "NativeFrame", "RateFollower", "RateJoin", "gain_per_period", "run_up_s",
+           "run_up_start"]
 
 log = logging.getLogger("virtualstar.server")
 
-GAIN = 0.6  # fraction of the predicted error removed per report period
+GAIN = 0.6  # fraction of the predicted error removed per GAIN_PERIOD_S (1: deadbeat; less
+GAIN_PERIOD_S = 0.25  # feeds back less of the report time's noise: a 1-ms stamp error is
+# 3.6″ at 1°/s). A driver that reports more often gets the same rate of removal in time,
+# so a smaller fraction per report (`gain_per_period`): 0.18 at Alpaca's ~55 ms, whose
+# reports' time noise is then averaged over ~5 reports instead of fed back at 0.6 each
+INITIAL_LAG_PERIODS = 0.25  # when a command takes effect, until the reports have told
 RATE_STEP_H_S = 0.2  # mount seconds between the two samples that give the path's rate
 STALE_REPORTS = 12  # reports missed (or STALE_MIN_S, the larger) before the driver counts as lost
 STALE_MIN_S = 5.0  # a loaded host (load average 20+ on 2 cores) was seen to leave 3 s without a push
@@ -81,6 +91,12 @@ RUN_UP_PERIODS = 8  # ... and this many report periods (the loop removes 60 % pe
 SETTLE_PERIODS = 8  # report periods from the join to the landing check
 LANDING_REPORTS = 4  # the landing check takes the median of this many last reports
 LANDING_GRACE_PERIODS = 12  # ... and may wait this many more periods for them to come within
+
+
+def gain_per_period(period_s: float) -> float:
+    """The fraction of the predicted error removed per report period of `period_s`: GAIN
+    per GAIN_PERIOD_S, the same removal in time whatever the report rate (at most GAIN)."""
+    return 1.0 - (1.0 - GAIN) ** min(1.0, max(period_s, 1e-3) / GAIN_PERIOD_S)
 
 
 def run_up_s(period_s: float | None) -> float:
@@ -129,10 +145,22 @@ class NativeFrame:
         return observed_to_apparent_radec(p.az_rad, p.el_rad, p.t_us, self.site, self.eop)
 
     def sample(self, path: Path, t_us: np.ndarray) -> Points:
-        """Native places at `t_us` and their rates (central differences of ±RATE_STEP_H_S/2)."""
+        """Native places at `t_us` and their rates (differences over RATE_STEP_H_S).
+
+        The difference is central, but kept inside the path: a finite path (a pass, or
+        the stretch of it on one side of the meridian) stands still outside its ends, and
+        a central difference at its start would see half the motion (the run-up, whose
+        rate is the path's at the join, ran at half of it on main: a step of ~900″/s at
+        the join of an ISS pass that the loop removed only after it)."""
         t = np.asarray(t_us, np.int64)
         h = int(RATE_STEP_H_S * 1e6)
-        a1, a2 = self.place(path, np.concatenate([t, t - h // 2, t + h // 2]))
+        lo, hi = t - h // 2, t + h // 2
+        start = getattr(path, "start_us", None)
+        end = getattr(path, "end_us", None)
+        if start is not None and end is not None and end - start >= h:
+            shift = np.clip(start - lo, 0, None) - np.clip(hi - end, 0, None)
+            lo, hi = lo + shift, hi + shift
+        a1, a2 = self.place(path, np.concatenate([t, lo, hi]))
         n = len(t)
         d1 = _wrap(a1[2 * n:] - a1[n:2 * n])
         d2 = a2[2 * n:] - a2[n:2 * n]
@@ -173,6 +201,8 @@ class FollowStats:
     max_report_age_s: float = 0.0
     signs: tuple[float, float] = (1.0, 1.0)
     ended: str = ""
+    application_lag_s: float | None = None  # learned: a rate is in force this long after
+    # the report it answers
     last_error_arcsec: float | None = None
     last_error_uncertainty_arcsec: float = 0.0
     recent_errors: list[tuple[float, float]] = field(default_factory=list)  # (error, its
@@ -181,7 +211,8 @@ class FollowStats:
     def as_dict(self) -> dict:
         return {"reports": self.reports, "commands": self.commands, "skipped": self.skipped,
                 "clipped": self.clipped, "max_report_age_s": self.max_report_age_s,
-                "axis_signs": list(self.signs), "ended": self.ended}
+                "axis_signs": list(self.signs), "ended": self.ended,
+                "application_lag_s": self.application_lag_s}
 
 
 @dataclass(frozen=True)
@@ -204,18 +235,19 @@ class RateFollower:
     """Hold a rate-driven mount on a path from `join_us` (see the module doc)."""
 
     def __init__(self, link, frame: NativeFrame, path: Path, join_us: int, *, errors,
-                 gain: float = GAIN, note_rates=None, run_up_us: int = 0) -> None:
+                 gain: float | None = None, note_rates=None, run_up_us: int = 0) -> None:
         self.link = link
         self.frame = frame
         self.path = path
         self.join_us = int(join_us)
         self.run_up_us = int(run_up_us)
         self.errors = errors
-        self.gain = gain
+        self.gain = gain  # None: `gain_per_period` of the measured report period
         self.note_rates = note_rates
         self.stats = FollowStats(first_point_us=self.join_us)
         self.done = False
         self._rates = (0.0, 0.0)
+        self._predictor: RatePredictor | None = None  # created at the first report (its period)
         self._side: float | None = None  # the sign of the hour angle at the join (German)
         caps = link.capabilities
         self.max_rate = math.radians(caps.max_rate_deg_s or 1.0)
@@ -267,11 +299,21 @@ class RateFollower:
                 continue
             last_t = t_rep
             self._check_state(int(v["mount_state"]))
+            if self._predictor is None:
+                self._predictor = RatePredictor(period, self._gain(period),
+                                                INITIAL_LAG_PERIODS * period,
+                                                self._rates, _wrap)
+            self._predictor.reported(t_rep, (float(v["axis1_position"]),
+                                             float(v["axis2_position"])))
+            self.stats.application_lag_s = self._predictor.lag.lag_s
             started = time.monotonic()
             await self._cycle(float(v["axis1_position"]), float(v["axis2_position"]), t_rep, now,
                               period)
             # at most one command per driver period (a still place is reported at every poll)
             await self._sleep(max(0.0, 0.8 * period - (time.monotonic() - started)))
+
+    def _gain(self, period_s: float) -> float:
+        return self.gain if self.gain is not None else gain_per_period(period_s)
 
     def _period_s(self) -> float:
         stats = getattr(self.link, "stats", None)
@@ -286,37 +328,38 @@ class RateFollower:
             raise OperationAborted("the mount was parked outside the VSS while following")
 
     async def _cycle(self, a1: float, a2: float, t_rep: int, now: int, period_s: float) -> None:
-        period_us = int(period_s * 1e6)
+        self._predictor.period_us = int(period_s * 1e6)  # as measured now
+        self._predictor.gain = self._gain(period_s)
         end = self.path.end_us
         if t_rep >= self.join_us:
             self._record(a1, a2, t_rep)
-        # the place the mount will have when this command takes effect, and the path then
-        t_a = now + period_us // 4
+        # when this command will be in force (learned), and the next one
+        pred = self._predictor
+        t_a = pred.effect_us(now)
         if end is not None and t_a >= end:
             await self._set((0.0, 0.0))
             self.done, self.stats.ended = True, "path ended"
             return
-        t_b = t_a + period_us
-        # before the run-up the demand is its start (the mount's own tracking holds it),
-        # then the run-up line, then the path
-        native = _run_up_points(self.frame, self.path, self.join_us, self.run_up_us,
-                                np.array([t_a, t_b], np.int64))
+        t_b = t_a + pred.period_us
         self._guard_meridian(t_b)
-        p1 = a1 + self._rates[0] * (t_a - t_rep) / 1e6
-        p2 = a2 + self._rates[1] * (t_a - t_rep) / 1e6
-        e1 = float(_wrap(native.az_rad[0] - p1))
-        e2 = float(native.el_rad[0] - p2)
-        # feed-forward: the path's mean rate over the next period (its chord)
-        f1 = float(_wrap(native.az_rad[1] - native.az_rad[0])) / period_s
-        f2 = float(native.el_rad[1] - native.el_rad[0]) / period_s
-        r = (f1 + self.gain * e1 / period_s, f2 + self.gain * e2 / period_s)
+
+        def path_at(t_us: int) -> np.ndarray:
+            # before the run-up the demand is its start (the mount's own tracking holds
+            # it), then the run-up line, then the path
+            p = _run_up_points(self.frame, self.path, self.join_us, self.run_up_us,
+                               np.array([t_us], np.int64))
+            return np.array([float(p.az_rad[0]), float(p.el_rad[0])])
+
+        rate, ff, err, _ = pred.command(now, path_at)
         if self.note_rates is not None:
-            self.note_rates(native)
+            self.note_rates(_run_up_points(self.frame, self.path, self.join_us, self.run_up_us,
+                                           np.array([t_a, t_b], np.int64)))
         self.stats.last_point_us = t_b
-        log.debug("rate loop: report %d now %d e=(%.2f, %.2f)″ ff=(%.2f, %.2f)″/s cmd=(%.2f, %.2f)″/s",
-                  t_rep, now, e1 * ARCSEC_PER_RAD, e2 * ARCSEC_PER_RAD, f1 * ARCSEC_PER_RAD,
-                  f2 * ARCSEC_PER_RAD, r[0] * ARCSEC_PER_RAD, r[1] * ARCSEC_PER_RAD)
-        await self._set(r)
+        log.debug("rate loop: report %d now %d lag %.1f ms e=(%.2f, %.2f)″ ff=(%.2f, %.2f)″/s "
+                  "cmd=(%.2f, %.2f)″/s", t_rep, now, (t_a - t_rep) / 1e3, err[0] * ARCSEC_PER_RAD,
+                  err[1] * ARCSEC_PER_RAD, ff[0] * ARCSEC_PER_RAD, ff[1] * ARCSEC_PER_RAD,
+                  rate[0] * ARCSEC_PER_RAD, rate[1] * ARCSEC_PER_RAD)
+        await self._set((float(rate[0]), float(rate[1])))
 
     def _record(self, a1: float, a2: float, t_rep: int) -> None:
         d = self.frame.sample(self.path, np.array([t_rep], np.int64))
@@ -380,6 +423,8 @@ class RateFollower:
                 await self._stop(str(again))
         self._rates = r
         self.stats.commands += 1
+        if self._predictor is not None:
+            self._predictor.sent(r, time.time_ns() // 1000)
 
     async def _stop(self, why: str) -> None:
         """Tell the mount to stop (it may not listen) and end with a fault."""

@@ -55,8 +55,9 @@ class Steering:
     def mode(self) -> CorrectionMode:
         link, clock = self.t.link, self.t.clock
         margin = 0 if clock.lockstep else int(MARGIN_PER_SPEED_US * max(1.0, clock.speed))
+        caps = link.capabilities
         return CorrectionMode(link.mapping.has_function("traj_replace"), self.min_lead_us,
-                              margin)
+                              margin, rate_loop=caps.rate_axes and not caps.trajectory_buffer)
 
     def corrections(self, op: Operation) -> Corrections:
         """The offsets of a track (kept through its re-acquisitions, new for a new operation)."""

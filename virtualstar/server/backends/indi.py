@@ -14,6 +14,10 @@ properties used (libindi's `INDI::Telescope`):
   limit ±16 384″/s): the rate actuator. The RA member is the *axis* rate, sidereal
   included (15.04″/s holds a place of date); a commanded coordinate rate is taken
   off it. A finer actuator than the four steps of ``TELESCOPE_MOTION_NS/WE``.
+* A driver pushes a place only when it changed: after `FRESH_READ_S` of silence the
+  place is asked for again (``getProperties`` of the vector; the answer is a Define).
+  An answer is a report of now; a driver that has answered nothing for `FRESH_FAIL_S`
+  fails its reads (frozen), a shorter silence is a busy host.
 * ``TELESCOPE_PARK``, ``TELESCOPE_PIER_SIDE`` (its presence: a German mount),
   ``GEOGRAPHIC_COORD`` (the VSS's site is sent when the driver's differs).
 """
@@ -22,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import time
 from urllib.parse import unquote, urlsplit
 
@@ -37,6 +42,13 @@ __all__ = ["IndiDriver", "parse_indi_url"]
 
 CONNECT_TIMEOUT_S = 10.0
 PUSH_WAIT_S = 0.3  # a read waits this long for a new push; silence means "unchanged"
+FRESH_READ_S = 1.0  # after this long without a push, the place is asked for again: a
+# driver that answers is alive (a host that stalled is not a dead driver); one that does
+# not answer grows old and ends the rate loop (a frozen driver)
+FRESH_WAIT_S = 2.0  # how long a fresh read waits for the answer (a loaded host: seconds)
+FRESH_FAIL_S = 10.0  # a driver that has answered nothing (push or fresh read) for this long
+# fails its reads: a frozen driver. Shorter silences are a busy host (indiserver was seen
+# to stall 3–5 s at load 15–25): the place counts as unchanged, as before
 
 
 def parse_indi_url(url: str) -> tuple[str, int, str]:
@@ -79,6 +91,10 @@ class IndiDriver:
         self._pushed = asyncio.Event()
         self._place: tuple[float, float, int] | None = None  # ra_h, dec_deg, arrival µs
         self._read_place: tuple[float, float, int] | None = None
+        self._written = (SIDEREAL_RATE_ARCSEC_S, 0.0)  # the TELESCOPE_TRACK_RATE last written
+        self._answer = False  # the newest place answered a fresh read (not a tick's push)
+        self.fresh_reads = 0  # fresh reads asked, and answered
+        self.fresh_answers = 0
 
     # ------------------------------------------------------------------ connection
     async def open(self, site: Site) -> DriverInfo:
@@ -92,7 +108,8 @@ class IndiDriver:
                     return
                 if getattr(event, "vectorname", None) == "EQUATORIAL_EOD_COORD" and \
                         getattr(event, "eventtype", "") in ("Set", "Define"):
-                    driver._take_place(_now_us())
+                    # a Define answers a fresh read (getProperties), a Set is a tick's push
+                    driver._take_place(_now_us(), answer=event.eventtype == "Define")
 
         self._client = Client(indihost=self.host, indiport=self.port)
         self._client.debug_verbosity(0)
@@ -106,8 +123,9 @@ class IndiDriver:
                          "its coordinates and track rate")
         if self._place is None:
             self._take_place(_now_us())
-        await self._set_site(site)
         rate = self._vector("TELESCOPE_TRACK_RATE")
+        self._written = (rate.getfloatvalue("TRACK_RATE_RA"), rate.getfloatvalue("TRACK_RATE_DE"))
+        await self._set_site(site)
         member = rate.member("TRACK_RATE_RA")
         max_rate = float(getattr(member, "max", 0.0) or 16384.0)
         step = float(getattr(member, "step", 0.0) or 0.0) or None
@@ -120,9 +138,10 @@ class IndiDriver:
                           can_pulse_guide=self._vector("TELESCOPE_TIMED_GUIDE_NS") is not None,
                           site=self._site(), slew_rate_deg_s=None)
 
-    def _take_place(self, arrived_us: int) -> None:
+    def _take_place(self, arrived_us: int, answer: bool = False) -> None:
         vector = self._vector("EQUATORIAL_EOD_COORD")
         self._place = (vector.getfloatvalue("RA"), vector.getfloatvalue("DEC"), arrived_us)
+        self._answer = answer
         self._pushed.set()
 
     async def close(self) -> None:
@@ -187,6 +206,9 @@ class IndiDriver:
         self._alive()
         with contextlib.suppress(TimeoutError):
             await within(self._pushed.wait(), PUSH_WAIT_S)  # never drops a cancel
+        if not self._pushed.is_set() and self._place is not None \
+                and _now_us() - self._place[2] > FRESH_READ_S * 1e6:
+            await self._fresh_read()
         self._pushed.clear()
         self._alive()
         place = self._place
@@ -209,7 +231,26 @@ class IndiDriver:
                             at_park=park is not None and park["PARK"] == "On",
                             side_of_pier=side,
                             # a push describes the moment it arrived; silence: unchanged now
-                            received_us=place[2] if fresh else None)
+                            received_us=place[2] if fresh else None,
+                            answered=fresh and self._answer)
+
+    async def _fresh_read(self) -> None:
+        """Ask the driver for its place again (it pushes only a place that changed); an
+        answer (a Define of the vector) is a report of now. No answer: the place ages."""
+        self._pushed.clear()
+        await self._client.send_getProperties(self.device, "EQUATORIAL_EOD_COORD")
+        self.fresh_reads += 1
+        with contextlib.suppress(TimeoutError):
+            await within(self._pushed.wait(), FRESH_WAIT_S)
+        if not self._pushed.is_set():
+            silent_s = (_now_us() - self._place[2]) / 1e6 if self._place else math.inf
+            if silent_s > FRESH_FAIL_S:
+                # a failed read: the link calls the driver lost after a few over `stale_s`
+                raise OSError(f"INDI {self.device}: no answer to a fresh read of "
+                              f"EQUATORIAL_EOD_COORD, nothing from the driver for "
+                              f"{silent_s:.0f} s")
+            return
+        self.fresh_answers += 1
 
     # ------------------------------------------------------------------ commands
     async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
@@ -235,13 +276,24 @@ class IndiDriver:
                     m: ("On" if m == "TRACK_SIDEREAL" else "Off") for m in mode.members()})
             return
         # the axis turns at sidereal minus the place's own rate (arcsec/s)
-        await self._send("TELESCOPE_TRACK_RATE",
-                         {"TRACK_RATE_RA": SIDEREAL_RATE_ARCSEC_S - ra_deg_s * 3600.0,
-                          "TRACK_RATE_DE": dec_deg_s * 3600.0})
+        want = (SIDEREAL_RATE_ARCSEC_S - ra_deg_s * 3600.0, dec_deg_s * 3600.0)
+        if mode["TRACK_CUSTOM"] == "On" and (want[0] * self._written[0] < 0
+                                             or want[1] * self._written[1] < 0):
+            # libindi refuses, while tracking at custom rates, a rate whose sign differs from
+            # the one last *written* (refused ones included: it stores them first) and says
+            # so only in a message: an axis that must turn the other way goes through zero
+            await self._write_rates(tuple(w if w * o >= 0 else 0.0
+                                          for w, o in zip(want, self._written, strict=True)))
+        await self._write_rates(want)
         if mode["TRACK_CUSTOM"] != "On":
             # the driver's own mode, not a remembered one (a goto or abort may reset it)
             await self._send("TELESCOPE_TRACK_MODE",
                              {m: ("On" if m == "TRACK_CUSTOM" else "Off") for m in mode.members()})
+
+    async def _write_rates(self, rates: tuple[float, ...]) -> None:
+        await self._send("TELESCOPE_TRACK_RATE", {"TRACK_RATE_RA": rates[0],
+                                                  "TRACK_RATE_DE": rates[1]})
+        self._written = (float(rates[0]), float(rates[1]))
 
     async def set_tracking(self, on: bool) -> None:
         await self._send("TELESCOPE_TRACK_STATE", {"TRACK_ON": "On" if on else "Off",

@@ -53,6 +53,7 @@ from ..link_interface import ConnectionWaits, MountCapabilities
 from ..mapping import STATE_NAMES, RoleMapping
 from ..operations import current_operation
 from .driver_waits import GotoBudget, SlewRateMeter, axis_travel_deg, within
+from .tick_grid import TickGrid
 
 __all__ = ["Driver", "DriverInfo", "DriverReport", "RateLinkConfig", "RateMountLink"]
 
@@ -90,6 +91,7 @@ class DriverReport:
     at_park: bool
     side_of_pier: int = -1  # ASCOM's numbers: 0 east, 1 west, -1 unknown
     received_us: int | None = None  # a pushed report: when it arrived (polled: None)
+    answered: bool = False  # pushed in answer to a fresh read (off the driver's tick grid)
 
 
 @dataclass(frozen=True)
@@ -222,6 +224,7 @@ class RateMountLink(ConnectionWaits):
         self.goto_fault = ""  # a goto that never landed: latched until `reset_faults`
         self.slew_rate = SlewRateMeter()
         self.stats = ReportStats()
+        self._ticks = TickGrid()  # a pushing driver's ticks
         self._lock = asyncio.Lock()
         self._connected = asyncio.Event()
         self._changed = asyncio.Condition()
@@ -390,8 +393,12 @@ class RateMountLink(ConnectionWaits):
         before = _now_us()
         rep = await within(self.driver.read(), self.config.timeout_s)
         after = _now_us()
-        if rep.received_us is not None:  # pushed: it describes the moment it arrived
-            before = after = rep.received_us
+        if rep.received_us is not None:
+            # pushed: it describes its driver's tick, which it follows by the handling
+            # delay (the INDI simulator ticks every 250.5 ± 0.2 ms; its property timestamps
+            # have whole seconds only): the tick grid fitted to the arrivals
+            before = after = (rep.received_us if rep.answered
+                              else self._ticks.add(rep.received_us))
         self.stats.reads += 1
         self.stats.latency_s.append((after - before) / 1e6)
         return rep, before, after
