@@ -15,12 +15,11 @@ import math
 
 import numpy as np
 import pytest
+from synthetic_store import settled_track_scores, write_store
 
 from virtualstar.anomalies import detect_anomalies
 from virtualstar.anomalies.current_model import fit_current_model
 from virtualstar.anomalies.detectors import DetectorConfig
-from virtualstar.recorder.parquet_store import ParquetStoreReader, ParquetStoreWriter
-from virtualstar.recorder.samples import SampleBlock, SignalInfo
 
 J_KG_M2, VISCOUS_NM_S, COULOMB_NM, SMOOTH_RAD_S, KT_NM_A = 36.0, 4.0, 2.0, 1e-4, 12.0
 GRAVITY_NM, COGGING_NM, COGGING_N = 6.0, 0.4, 96
@@ -145,23 +144,14 @@ def _el_night(path, *, winding_loss: float = 0.0):
     kt = np.where(ts >= FAULT_S, KT_NM_A * (1.0 - winding_loss), KT_NM_A)
     current = _current_a(p, v, a, 0.0) * KT_NM_A / kt + \
         np.random.default_rng(6).normal(0.0, 2e-4, len(ts))
-    t_us = T0_US + np.round(ts * 1e6).astype(np.int64)
-    names = ("axis.el.position", "axis.el.current")
-    with ParquetStoreWriter(path) as w:
-        w.begin([SignalInfo(n, "") for n in names], rate_hz=RATE_HZ)
-        w.write(SampleBlock(t_us, {"axis.el.position": p, "axis.el.current": current}))
-    reader = ParquetStoreReader(path)
+    reader = write_store(path, T0_US, ts, {"axis.el.position": p, "axis.el.current": current},
+                         RATE_HZ)
     first, last = reader.time_range()
     return detect_anomalies(reader, first, last + 1)
 
 
 def _later_track_scores(report, from_s: float) -> np.ndarray:
-    trace = next(t for t in report.traces if t.name == "el current")
-    ts = (trace.t_us - T0_US) * 1e-6
-    rows = (ts >= max(from_s, 900.0)) & (np.mod(ts, CYCLE_S) > SLEW_S + 20.0) & \
-        (np.mod(ts, CYCLE_S) < CYCLE_S - 10.0)
-    assert rows.sum() > 20
-    return trace.score[rows]
+    return settled_track_scores(report, "el current", T0_US, from_s, CYCLE_S, SLEW_S)
 
 
 @pytest.fixture(scope="module")

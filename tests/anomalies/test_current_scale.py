@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from synthetic_store import settled_track_scores, write_store
 
 from virtualstar.anomalies import detect_anomalies
-from virtualstar.recorder.parquet_store import ParquetStoreReader, ParquetStoreWriter
-from virtualstar.recorder.samples import SampleBlock, SignalInfo
 
 T0_US = 1_772_395_200_000_000
 RATE_HZ = 1000.0
@@ -57,12 +56,8 @@ def _night(path, *, winding_loss: float = 0.0, friction_growth_nm_h: float = 0.0
     torque = INERTIA_KG_M2 * a + VISCOUS_NM_S * v + coulomb * np.clip(v / SMOOTH_RAD_S, -1, 1)
     kt = np.where(ts >= FAULT_S, KT_NM_A * (1.0 - winding_loss), KT_NM_A)
     current = torque / kt + np.random.default_rng(5).normal(0.0, 2e-4, len(ts))
-    t_us = T0_US + np.round(ts * 1e6).astype(np.int64)
-    names = ("axis.az.position", "axis.az.current")
-    with ParquetStoreWriter(path) as w:
-        w.begin([SignalInfo(n, "") for n in names], rate_hz=RATE_HZ)
-        w.write(SampleBlock(t_us, {"axis.az.position": p, "axis.az.current": current}))
-    reader = ParquetStoreReader(path)
+    reader = write_store(path, T0_US, ts, {"axis.az.position": p, "axis.az.current": current},
+                         RATE_HZ)
     first, last = reader.time_range()
     return detect_anomalies(reader, first, last + 1) if detect else reader
 
@@ -75,12 +70,7 @@ def _later_track_scores(report, from_s: float) -> np.ndarray:
     """The current detector's scores of the windows wholly inside the tracks at the speed
     the reference never held, from `from_s` on (20 s after each slew: settled): windows
     the mean residual cannot score, so a score there is the scale statistics'."""
-    trace = next(t for t in report.traces if t.name == "az current")
-    ts = (trace.t_us - T0_US) * 1e-6
-    rows = (ts >= max(from_s, 900.0)) & (np.mod(ts, CYCLE_S) > SLEW_S + 20.0) & \
-        (np.mod(ts, CYCLE_S) < CYCLE_S - 10.0)
-    assert rows.sum() > 20
-    return trace.score[rows]
+    return settled_track_scores(report, "az current", T0_US, from_s, CYCLE_S, SLEW_S)
 
 
 @pytest.fixture(scope="module")

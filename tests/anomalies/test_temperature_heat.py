@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from synthetic_store import write_store
 
 from virtualstar.anomalies import detect_anomalies
-from virtualstar.recorder.parquet_store import ParquetStoreReader, ParquetStoreWriter
-from virtualstar.recorder.samples import SampleBlock, SignalInfo
 
 T0_US = 1_772_395_200_000_000
 RATE_HZ = 1000.0
@@ -44,13 +43,9 @@ def _night(path, *, heat_growth_w_h: float = 0.0):
     temp = temp + rng.normal(0.0, 0.002, len(ts))
     current = current + rng.normal(0.0, 2e-4, len(ts))
     position = 0.7 + 5e-5 * ts  # a sidereal track throughout
-    t_us = T0_US + np.round(ts * 1e6).astype(np.int64)
     sig = {"axis.el.position": position, "axis.el.current": current,
            "axis.el.temperature": temp}
-    with ParquetStoreWriter(path) as w:
-        w.begin([SignalInfo(n, "") for n in sig], rate_hz=RATE_HZ)
-        w.write(SampleBlock(t_us, sig))
-    reader = ParquetStoreReader(path)
+    reader = write_store(path, T0_US, ts, sig, RATE_HZ)
     first, last = reader.time_range()
     return detect_anomalies(reader, first, last + 1)
 
