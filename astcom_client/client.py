@@ -501,6 +501,9 @@ class Client:
         for future in self._pending.values():
             if not future.done():
                 future.set_exception(error)
+                # its waiter raises it; a request whose own send failed (`_flush` raises
+                # the error itself) never awaits its future: no "never retrieved" at exit
+                future.exception()
         for stream in self._streams.values():
             stream._end()
 

@@ -211,3 +211,26 @@ def test_a_refusal_that_arrives_before_the_hello_is_sent_is_reported_as_the_refu
         finally:
             server.close()
     run(main())
+
+
+def test_a_request_whose_send_fails_raises_once_and_leaves_no_unretrieved_error() -> None:
+    """The request raises ConnectionClosed itself; its own pending future, failed with the
+    same error, must not be logged as "Future exception was never retrieved" when it is
+    collected (a suite printed that traceback at exit)."""
+    import gc
+
+    from astcom_client import ConnectionClosed
+
+    unhandled: list[dict] = []
+
+    async def main() -> None:
+        asyncio.get_running_loop().set_exception_handler(lambda _, ctx: unhandled.append(ctx))
+        async with memory_session() as (_, _, client):
+            client._transport.closed = True  # the link drops between two requests
+            with pytest.raises(ConnectionClosed):
+                await client.read(["counter"])
+            gc.collect()
+            await settle()
+    run(main())
+    gc.collect()
+    assert not [c for c in unhandled if "never retrieved" in str(c.get("message", ""))], unhandled
