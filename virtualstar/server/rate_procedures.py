@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+import erfa
 import numpy as np
 
 from .exceptions import TargetUnreachable, Unsupported
@@ -66,9 +67,7 @@ def route_estimate_s(t: Station, here, legs: list[tuple[float, float]]) -> float
     rate = t.link.capabilities.max_rate_deg_s or 1.0
     total, az0, el0 = 0.0, here.az_rad, here.el_rad
     for az1, el1 in legs:
-        total += math.degrees(math.acos(max(-1.0, min(1.0, math.sin(el0) * math.sin(el1)
-                                                      + math.cos(el0) * math.cos(el1)
-                                                      * math.cos(az1 - az0)))))
+        total += math.degrees(erfa.seps(az0, el0, az1, el1))
         az0, el0 = az1, el1
     return 1.5 * total / rate + GOTO_SETTLE_S * len(legs)
 

@@ -42,6 +42,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+import erfa
 import numpy as np
 
 from virtualstar.astro import EarthOrientation, Site
@@ -190,13 +191,6 @@ class ReportStats:
             return 0.0
         mid = statistics.median(last)
         return statistics.median(abs(x - mid) for x in last)
-
-
-def _sep_deg(ra1: float, dec1: float, ra2: float, dec2: float) -> float:
-    """Angle between two places (rad in), degrees."""
-    c = (math.sin(dec1) * math.sin(dec2)
-         + math.cos(dec1) * math.cos(dec2) * math.cos(ra1 - ra2))
-    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
 def _now_us() -> int:
@@ -719,8 +713,7 @@ class RateMountLink(ConnectionWaits):
         for _attempt in range(attempts):
             rep = self._require()
             here_az, here_el = self._observed(rep.ra_rad, rep.dec_rad, _now_us())
-            dist = math.acos(max(-1.0, min(1.0, math.sin(el) * math.sin(here_el) + math.cos(el)
-                                           * math.cos(here_el) * math.cos(az - here_az))))
+            dist = float(erfa.seps(az, el, here_az, here_el))
             if dist * ARCSEC_PER_RAD <= PLACE_TOLERANCE_ARCSEC or dist >= 0.7 * last:
                 break
             last = dist
@@ -780,7 +773,8 @@ class RateMountLink(ConnectionWaits):
             # INDI simulator's star goto was taken as landed 4.6° short, and the rate loop
             # then measured its axis signs on a moving mount)
             if (not rep.flags.slewing and rep.read_us > sent
-                    and _sep_deg(rep.ra_rad, rep.dec_rad, ra_rad, dec_rad) <= GOTO_LANDED_DEG):
+                    and math.degrees(erfa.seps(rep.ra_rad, rep.dec_rad, ra_rad, dec_rad))
+                    <= GOTO_LANDED_DEG):
                 self.slew_rate.landed(direct, (rep.read_us - sent) / 1e6)
                 return None
             if time.monotonic() > deadline:
