@@ -303,8 +303,10 @@ class RateFollower:
                 self._predictor = RatePredictor(period, self._gain(period),
                                                 INITIAL_LAG_PERIODS * period,
                                                 self._rates, _wrap)
+            # the report's time uncertainty, read before any await (the same report)
+            spread = int(getattr(self.link, "report_spread_us", lambda: 0)())
             self._predictor.reported(t_rep, (float(v["axis1_position"]),
-                                             float(v["axis2_position"])))
+                                             float(v["axis2_position"])), spread)
             self.stats.application_lag_s = self._predictor.lag.lag_s
             started = time.monotonic()
             await self._cycle(float(v["axis1_position"]), float(v["axis2_position"]), t_rep, now,
@@ -355,8 +357,9 @@ class RateFollower:
             self.note_rates(_run_up_points(self.frame, self.path, self.join_us, self.run_up_us,
                                            np.array([t_a, t_b], np.int64)))
         self.stats.last_point_us = t_b
-        log.debug("rate loop: report %d now %d lag %.1f ms e=(%.2f, %.2f)″ ff=(%.2f, %.2f)″/s "
-                  "cmd=(%.2f, %.2f)″/s", t_rep, now, (t_a - t_rep) / 1e3, err[0] * ARCSEC_PER_RAD,
+        log.debug("rate loop: report %d ±%.1f ms (weight %.2f) now %d lag %.1f ms e=(%.2f, %.2f)″ "
+                  "ff=(%.2f, %.2f)″/s cmd=(%.2f, %.2f)″/s", t_rep, pred.spread_us / 1e3,
+                  pred.weight(), now, (t_a - t_rep) / 1e3, err[0] * ARCSEC_PER_RAD,
                   err[1] * ARCSEC_PER_RAD, ff[0] * ARCSEC_PER_RAD, ff[1] * ARCSEC_PER_RAD,
                   rate[0] * ARCSEC_PER_RAD, rate[1] * ARCSEC_PER_RAD)
         await self._set((float(rate[0]), float(rate[1])))

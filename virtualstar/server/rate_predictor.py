@@ -43,6 +43,8 @@ MIN_EVIDENCE = 3  # report intervals with a rate change before the learned lag i
 OUTLIER_WINDOW = 16  # reports whose predicted errors set what counts as an outlier
 OUTLIER_FACTOR = 4.0  # an error this many times their median is taken at that size
 OUTLIER_FLOOR_RAD = 1.0 / 206264.806  # ... but errors up to 1″ always count in full
+SPREAD_WINDOW = 32  # reports whose time uncertainties set what a usual one is
+SPREAD_FLOOR_US = 500  # a report known to within this counts as well known as any
 
 
 @dataclass(frozen=True)
@@ -178,10 +180,31 @@ class RatePredictor:
         self._t_rep = 0
         self._recent: deque[float] = deque(maxlen=OUTLIER_WINDOW)  # |predicted error|, rad
         self._large = False  # the last report's error was beyond the outlier limit
+        self._spread_us = 0
+        self._spreads: deque[int] = deque(maxlen=SPREAD_WINDOW)
 
-    def reported(self, t_us: int, place: tuple[float, float]) -> None:
+    def reported(self, t_us: int, place: tuple[float, float], spread_us: int = 0) -> None:
+        """A new report: the place at `t_us`, known to ±`spread_us` in time (a polled
+        driver: half the read's own length; see `weight`)."""
         self._t_rep = int(t_us)
+        self._spread_us = max(int(spread_us), 0)
+        self._spreads.append(self._spread_us)
         self.lag.reported(t_us, place, self.wrap)
+
+    @property
+    def spread_us(self) -> int:
+        """The newest report's time uncertainty (µs), as given to `reported`."""
+        return self._spread_us
+
+    def weight(self) -> float:
+        """How much of the gain the newest report earns: 1 for a report whose time is known
+        as well as usual (the median of the recent ones) or better, (usual / its own)² for
+        a worse one. A polled report's time is only known to its read's length, which a
+        busy host stretches now and then (20 ms is 70″ at 1°/s); the error it shows is then
+        mostly that, so it is fed back in proportion to its inverse variance instead of in
+        full (a least-squares filter's weighting, relative to the usual report)."""
+        usual = max(float(np.median(self._spreads)) if self._spreads else 0.0, SPREAD_FLOOR_US)
+        return min(1.0, (usual / max(self._spread_us, 1)) ** 2)
 
     def effect_us(self, now_us: int) -> int:
         """When a command sent now is in force: the last report + the learned lag, or now
@@ -194,7 +217,8 @@ class RatePredictor:
         """(rate, feed-forward, predicted error, in force from) for a command sent now."""
         t_a = self.effect_us(now_us)
         place = self.lag.place_at(t_a)
-        rate, ff, err = plan_rate(place, path_at, t_a, self.period_us, self.gain, self.wrap)
+        gain = self.gain * self.weight()
+        rate, ff, err = plan_rate(place, path_at, t_a, self.period_us, gain, self.wrap)
         size = float(np.hypot(*err))
         large = False
         if len(self._recent) >= OUTLIER_WINDOW // 2:
@@ -207,7 +231,7 @@ class RatePredictor:
             large = size > limit
             if large and not self._large:
                 err = err * (limit / size)
-                rate = ff + self.gain * err / (self.period_us / 1e6)
+                rate = ff + gain * err / (self.period_us / 1e6)
         self._large = large
         self._recent.append(size)
         return rate, ff, err, t_a
