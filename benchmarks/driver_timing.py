@@ -33,6 +33,7 @@ import time
 import urllib.parse
 
 SIDEREAL = 15.041067  # arcsec/s, the INDI simulator's own figure
+_last_request = [(0.0, 0.0)]  # (start, end) of the last Alpaca request (s)
 
 
 def wait_port(port: int) -> None:
@@ -64,7 +65,9 @@ def alpaca() -> None:
                 conn.request("PUT", base + member, q,
                              {"Content-Type": "application/x-www-form-urlencoded"})
             doc = json.loads(conn.getresponse().read())
-            return (time.time() + t0) / 2, doc.get("Value")
+            t1 = time.time()
+            _last_request[0] = (t0, t1)
+            return (t1 + t0) / 2, doc.get("Value")
 
         call("PUT", "connected", Connected="true")
         call("PUT", "unpark")
@@ -91,6 +94,7 @@ def alpaca() -> None:
               f"share moved at the new rate {statistics.median(s for s, _ in shares):.3f} "
               f"(median; at once would be {statistics.median(i for _, i in shares):.2f}): "
               "in force from the previous read (the driver's last update) on")
+        devicestate_instants(call)
         rate = 0.123456789
         call("PUT", "moveaxis", Axis=0, Rate=repr(rate))
         t0, ra0 = call("GET", "rightascension")
@@ -104,6 +108,39 @@ def alpaca() -> None:
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def devicestate_instants(call) -> None:
+    """DeviceState's place and the instant it describes (what bench_backends judges): the
+    instant recovered from its Altitude/Azimuth must fall inside the RightAscension read
+    that set the place just before (that read advances the place to its own moment)."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from datetime import datetime
+
+    from bench_backends import simulator_instant
+
+    lat, lon = float(call("GET", "sitelatitude")[1]), float(call("GET", "sitelongitude")[1])
+    inside, where, after_mid, ddec = 0, [], [], []
+    n = 20
+    for _ in range(n):
+        t_mid, _ra = call("GET", "rightascension")
+        t0, t1 = _last_request[0]
+        _, values = call("GET", "devicestate")
+        v = {d["Name"]: d["Value"] for d in values}
+        stamp = datetime.fromisoformat(v["TimeStamp"]).timestamp()
+        t, dec = simulator_instant(v["RightAscension"], v["Altitude"], v["Azimuth"], lat, lon,
+                                   stamp)
+        t = float(t)
+        inside += t0 <= t <= t1
+        where.append((t - t0) / (t1 - t0))
+        after_mid.append((t_mid - t) * 1e3)
+        ddec.append(abs(float(dec) - v["Declination"]) * 3600)
+        time.sleep(random.uniform(0.01, 0.05))
+    print(f"[alpaca] DeviceState's place at the instant its Altitude/Azimuth give back: inside "
+          f"the RightAscension read that set it {inside}/{n} times, at {statistics.median(where):.2f}"
+          f" of the read (median; the read's middle is {statistics.median(after_mid):+.2f} ms "
+          f"from it), its declination given back to {max(ddec):.0e}″: DeviceState places carry "
+          "their own time (bench_backends judges them there)")
 
 
 # ---------------------------------------------------------------------- INDI
