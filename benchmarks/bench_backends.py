@@ -17,9 +17,15 @@ processes, mostly waiting), so the whole takes about `--sidereal-s` plus two min
    when the goto ends (the last goto's duration ahead), again and again, as niche
    tools do.
 
-Every place the simulator reports is read by an independent client (alpyca, indipyclient)
-with the time it was read, and compared with skyfield's topocentric apparent place of
-date at that time (astropy's for the star). Printed beside the figures: the bound the
+Every place the simulator reports is read by an independent client (its own process;
+plain HTTP, indipyclient) with the time it was read, and compared with skyfield's
+topocentric apparent place of date at that time (astropy's for the star). On Alpaca the
+pass is judged at the simulator's own update instants (`AxisObserver`: DeviceState's
+place, its instant from its own Altitude/Azimuth), so neither the observer's scheduling
+nor a request's length enters the figure; the request-stamped figure is printed beside it.
+The pass parts run at `--nice` (-10: the host's other work, and the benchmark's own
+sidereal tracks, wait for them); the loop and goto-chasing share those processes, one
+after the other. Printed beside the figures: the bound the
 update period and the rate resolution allow (a rate changed once per report period can
 only follow the chord of the path between reports; a rate quantised to q leaves q·T/√12),
 and the time uncertainty of the reports (their time × the satellite's rate), which the
@@ -553,10 +559,11 @@ def main() -> None:
     ap.add_argument("--observe-alpaca", nargs=2, help=argparse.SUPPRESS)
     ap.add_argument("--part", help=argparse.SUPPRESS)
     ap.add_argument("--out", default=None, help="keep the raw samples here (JSON per simulator)")
-    ap.add_argument("--nice", type=int, default=-10, help="the niceness of every process of "
-                    "the run (simulators, VSS, goto-chaser, observers; default -10, root only: "
-                    "the benchmark measures the mount, not the host's other work; 0 = as "
-                    "started). Both sides of each comparison run in the same processes")
+    ap.add_argument("--nice", type=int, default=-10, help="the niceness of the pass parts' "
+                    "processes (simulator, VSS, goto-chaser, observer; default -10, root only: "
+                    "the benchmark measures the mount, not the host's other work or its own "
+                    "sidereal tracks, which run as started). The loop and goto-chasing run in "
+                    "the same processes, one after the other")
     ap.add_argument("--report", metavar="DIR", help="print the figures of a run kept with --out "
                     "again (its KIND-PART.json files), without running anything")
     args = ap.parse_args()
@@ -580,13 +587,13 @@ def main() -> None:
         if (Path(args.report) / "host.json").exists():
             host = json.loads((Path(args.report) / "host.json").read_text())
             print(f"host: load (1-min average) {host['load_start']:.1f} at the start, "
-                  f"{host['load_end']:.1f} at the end; every process of the run at nice "
+                  f"{host['load_end']:.1f} at the end; the passes' processes at nice "
                   f"{host['nice']:+d}")
         print_figures(kinds, docs, args.window_s)
         return
     out = Path(args.out or f"/tmp/bench-backends-{os.getpid()}")
     out.mkdir(parents=True, exist_ok=True)
-    nice = raise_priority(args.nice)
+    nice = pass_niceness(args.nice)
     load0 = os.getloadavg()[0]
     procs = {}
     for kind in kinds:  # side by side: each waits in real time
@@ -596,7 +603,8 @@ def main() -> None:
                  'ip link set lo up && exec "$0" "$@"', sys.executable, __file__, "--inner",
                  kind, "--part", part, "--sidereal-s", str(args.sidereal_s), "--window-s",
                  str(args.window_s)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                text=True, env={**os.environ, "BENCH_OUT": str(out)})
+                text=True, env={**os.environ, "BENCH_OUT": str(out)},
+                preexec_fn=(lambda: os.nice(nice - os.nice(0))) if part == "pass" else None)
     docs = {}
     for (kind, part), proc in procs.items():
         stdout, stderr = proc.communicate()
@@ -606,22 +614,21 @@ def main() -> None:
         docs[kind, part] = json.loads(stdout.strip().splitlines()[-1])
         (out / f"{kind}-{part}.json").write_text(json.dumps(docs[kind, part]))
     print(f"host: load (1-min average) {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the "
-          f"end; every process of the run at nice {nice:+d} (the host's other work at its own)")
+          f"end; the passes' processes (simulator, VSS, goto-chaser, observer) at nice {nice:+d}, "
+          f"the sidereal tracks' at {os.nice(0):+d} (the host's other work at its own)")
     (out / "host.json").write_text(json.dumps({"load_start": load0, "nice": nice,
                                                "load_end": os.getloadavg()[0]}))
     print_figures(kinds, docs, args.window_s)
     print(f"raw samples: {out} (python benchmarks/bench_backends.py --report {out})")
 
 
-def raise_priority(nice: int) -> int:
-    """Run this process (and so every child) at `nice`; the niceness in force is returned
-    (raising priority needs root: without it the run goes on as started, and says so)."""
-    if nice:
-        try:
-            os.nice(nice - os.nice(0))
-        except PermissionError:
-            print(f"cannot set nice {nice:+d} (not root): the run goes on at {os.nice(0):+d}")
-    return os.nice(0)
+def pass_niceness(nice: int) -> int:
+    """The niceness the pass parts run at (every process of a part inherits it): `nice`,
+    or as started when raising priority is not allowed (not root), said so."""
+    if nice < os.nice(0) and os.geteuid() != 0:
+        print(f"cannot run the passes at nice {nice:+d} (not root): they run at {os.nice(0):+d}")
+        return os.nice(0)
+    return nice
 
 
 def print_figures(kinds: list[str], docs: dict, window_s: float) -> None:

@@ -34,6 +34,7 @@ from virtualstar.astro import Site
 
 from ..exceptions import BadRequest, MountRejected
 from .rate_mount import DriverInfo, DriverReport
+from .rate_mount import _now_us as now_us  # the link's one wall clock for reports
 
 __all__ = ["AlpacaDriver", "parse_alpaca_url"]
 
@@ -68,6 +69,23 @@ def geometry_override(url: str) -> str | None:
     return values[-1]
 
 
+def _mark(k: int):
+    """An aiohttp trace hook writing the time (µs) into slot `k` of the request's window."""
+    async def hook(session, ctx, params) -> None:
+        window = ctx.trace_request_ctx
+        if isinstance(window, list):
+            window[k] = now_us()
+
+    return hook
+
+
+def _span(*windows: list) -> tuple[int, int] | None:
+    """The window holding both reads of a place (RA and Dec), or None if one was not seen."""
+    if any(None in w for w in windows):
+        return None
+    return min(w[0] for w in windows), max(w[1] for w in windows)
+
+
 class AlpacaDriver:
     """One ASCOM Alpaca telescope, polled over HTTP."""
 
@@ -84,16 +102,25 @@ class AlpacaDriver:
         self._tx = itertools.count(1)
         self._device_state = True
 
-    async def _request(self, method: str, member: str, **params):
+    async def _request(self, method: str, member: str, window: list | None = None, **params):
+        """One request; `window`, if given, gets [sent_us, answered_us]: when the request
+        left (its headers written to the socket) and when the answer's headers came
+        (aiohttp's request tracing). The driver computed its answer inside that window,
+        which is shorter than the span around the whole call (connection pool, the event
+        loop's turns before sending, the body's parsing)."""
         import aiohttp
 
         if self._session is None:
+            trace = aiohttp.TraceConfig()
+            trace.on_request_headers_sent.append(_mark(0))
+            trace.on_request_end.append(_mark(1))
             self._session = aiohttp.ClientSession(
-                timeout=aiohttp.ClientTimeout(total=self.timeout_s))
+                timeout=aiohttp.ClientTimeout(total=self.timeout_s), trace_configs=[trace])
         ids = {"ClientID": CLIENT_ID, "ClientTransactionID": next(self._tx)}
         try:
             if method == "GET":
-                resp = await self._session.get(self.base + member, params={**ids, **params})
+                resp = await self._session.get(self.base + member, params={**ids, **params},
+                                               trace_request_ctx=window)
             else:
                 resp = await self._session.put(self.base + member, data={**ids, **params})
             async with resp:
@@ -113,6 +140,11 @@ class AlpacaDriver:
 
     async def get(self, member: str, **params):
         return await self._request("GET", member, **params)
+
+    async def _timed_get(self, member: str) -> tuple[object, list]:
+        window = [None, None]
+        value = await self._request("GET", member, window)
+        return value, window
 
     async def put(self, member: str, **params):
         return await self._request("PUT", member, **params)
@@ -160,20 +192,23 @@ class AlpacaDriver:
     async def read(self) -> DriverReport:
         if self._device_state:
             try:
-                state, ra, dec = await asyncio.gather(
-                    self.get("devicestate"), self.get("rightascension"), self.get("declination"))
+                state, (ra, w_ra), (dec, w_dec) = await asyncio.gather(
+                    self.get("devicestate"), self._timed_get("rightascension"),
+                    self._timed_get("declination"))
                 values = {d["Name"]: d["Value"] for d in state}
                 return DriverReport(ra_h=float(ra), dec_deg=float(dec),
                                     slewing=bool(values["Slewing"]),
                                     tracking=bool(values["Tracking"]),
                                     at_park=bool(values["AtPark"]),
-                                    side_of_pier=int(values.get("SideOfPier", -1)))
+                                    side_of_pier=int(values.get("SideOfPier", -1)),
+                                    window_us=_span(w_ra, w_dec))
             except (MountRejected, KeyError, TypeError):
                 self._device_state = False  # an ITelescopeV3 driver: member by member
-        ra, dec, slewing, tracking, park = await asyncio.gather(
-            self.get("rightascension"), self.get("declination"), self.get("slewing"),
-            self.get("tracking"), self.get("atpark"))
-        return DriverReport(float(ra), float(dec), bool(slewing), bool(tracking), bool(park))
+        (ra, w_ra), (dec, w_dec), slewing, tracking, park = await asyncio.gather(
+            self._timed_get("rightascension"), self._timed_get("declination"),
+            self.get("slewing"), self.get("tracking"), self.get("atpark"))
+        return DriverReport(float(ra), float(dec), bool(slewing), bool(tracking), bool(park),
+                            window_us=_span(w_ra, w_dec))
 
     async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
         await self.put("slewtocoordinatesasync", RightAscension=f"{ra_h % 24.0:.9f}",

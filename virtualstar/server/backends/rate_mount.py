@@ -93,6 +93,9 @@ class DriverReport:
     side_of_pier: int = -1  # ASCOM's numbers: 0 east, 1 west, -1 unknown
     received_us: int | None = None  # a pushed report: when it arrived (polled: None)
     answered: bool = False  # pushed in answer to a fresh read (off the driver's tick grid)
+    # polled: when the reads of the place left and were answered (µs), if the driver knows;
+    # the place was computed inside it (else: the span around the whole read)
+    window_us: tuple[int, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -387,6 +390,8 @@ class RateMountLink(ConnectionWaits):
         before = _now_us()
         rep = await within(self.driver.read(), self.config.timeout_s)
         after = _now_us()
+        if rep.window_us is not None and before <= rep.window_us[0] <= rep.window_us[1] <= after:
+            before, after = rep.window_us
         if rep.received_us is not None:
             # pushed: it describes its driver's tick, which it follows by the handling
             # delay (the INDI simulator ticks every 250.5 ± 0.2 ms; its property timestamps
