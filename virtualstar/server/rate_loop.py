@@ -304,7 +304,7 @@ class RateFollower:
                                                 INITIAL_LAG_PERIODS * period,
                                                 self._rates, _wrap)
             # the report's time uncertainty, read before any await (the same report)
-            spread = int(getattr(self.link, "report_spread_us", lambda: 0)())
+            spread = int(getattr(self.link, "read_spread_us", lambda: 0)())
             self._predictor.reported(t_rep, (float(v["axis1_position"]),
                                              float(v["axis2_position"])), spread)
             self.stats.application_lag_s = self._predictor.lag.lag_s

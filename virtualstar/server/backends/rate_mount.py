@@ -614,6 +614,15 @@ class RateMountLink(ConnectionWaits):
             finally:
                 waiter.cancel()
 
+    def read_spread_us(self) -> int:
+        """How well a *polled* report's time is known: half the read it came in (0 for a
+        push, whose time is its driver's tick, `TickGrid`). The rate loop weighs each
+        report's correction by it (`RatePredictor.weight`)."""
+        rep = self._report
+        if rep is None or rep.flags.received_us is not None:
+            return 0
+        return rep.spread_us
+
     def report_spread_us(self) -> int:
         """The uncertainty of the newest report's time: half the interval it appeared in
         (polled), or for a push the jitter of the pushes' arrival (its handling delay)."""
