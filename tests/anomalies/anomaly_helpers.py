@@ -16,9 +16,11 @@ from virtualstar.recorder.experiment import Injection, SineExperiment, run_sine_
 
 MINUTES = 30.0
 AT_S = 960.0  # injections 16 minutes in: after the 15-minute reference stretch
-# A recording takes ~8 s of CPU alone and a VSS night ~15 s; several minutes on a loaded
-# host. A waiting worker builds its own copy after this long rather than wait on.
-MADE_ONCE_WAIT_S = 240.0
+# A recording takes ~8 s of CPU alone and a VSS night ~15 s: a few minutes on a loaded host.
+# A waiting worker builds its own copy after this long rather than wait on (the modules
+# that wait allow 1800 s: a wait, then a build of their own, fit in it).
+MADE_ONCE_WAIT_S = 600.0
+MADE_ONCE_TIMEOUT_S = 1800  # pytest-timeout of a module whose fixture may wait and build
 
 
 def made_once(tmp_path_factory, name: str, build: Callable[[Path], object], *,

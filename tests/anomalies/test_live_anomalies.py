@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
-from anomaly_helpers import CASES, LIVE_CASE
+import pytest
+from anomaly_helpers import CASES, LIVE_CASE, MADE_ONCE_TIMEOUT_S
 
 from virtualstar.anomalies.live import LiveAnomalies
 from virtualstar.recorder.parquet_store import ParquetStoreReader
+
+# a fixture's setup (a recording, or the wait for another worker's) counts toward the
+# first test's timeout
+pytestmark = pytest.mark.timeout(MADE_ONCE_TIMEOUT_S)
 
 
 def test_a_live_recording_logs_each_anomaly_once_after_the_injection(live_recording):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from anomaly_helpers import made_once
+from anomaly_helpers import MADE_ONCE_TIMEOUT_S, made_once
 from typer.testing import CliRunner
 from vss_nights import DEGRADATIONS, Moments, injections, make_plan, moments, record_night
 
@@ -31,7 +31,7 @@ from virtualstar.recorder.parquet_store import ParquetStoreReader
 WINDOW_US = 30_000_000  # a flag may begin up to one detector window before the injection
 # The module's three nights take ~45 s of CPU; on a loaded machine several minutes, and a
 # module fixture's setup counts toward its first test's timeout (300 s by default).
-pytestmark = pytest.mark.timeout(1800)
+pytestmark = pytest.mark.timeout(MADE_ONCE_TIMEOUT_S)
 
 
 @pytest.fixture(scope="module")
