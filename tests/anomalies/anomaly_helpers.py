@@ -14,8 +14,11 @@ from pathlib import Path
 from virtualstar.anomalies.scoring import InjectedFault
 from virtualstar.recorder.experiment import Injection, SineExperiment, run_sine_experiment
 
-MINUTES = 30.0
+MINUTES = 30.0  # the clean recording: a 15-minute reference, then 15 minutes scored
 AT_S = 960.0  # injections 16 minutes in: after the 15-minute reference stretch
+# The faults' recordings end 10 minutes after the injections: the slowest to be found, the
+# rattling part's growing vibration, is flagged 6 minutes after its injection.
+FAULT_MINUTES = 26.0
 # A recording takes ~8 s of CPU alone and a VSS night ~15 s: a few minutes on a loaded host.
 # A waiting worker builds its own copy after this long rather than wait on (the modules
 # that wait allow 1800 s: a wait, then a build of their own, fit in it).

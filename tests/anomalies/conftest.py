@@ -6,13 +6,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from anomaly_helpers import CASES, LIVE_CASE, made_once, record
+from anomaly_helpers import CASES, FAULT_MINUTES, LIVE_CASE, MINUTES, made_once, record
 
 
-def _recorded(tmp_path_factory, name: str, injections, *, detect: bool = False
-              ) -> tuple[Path, int]:
+def _recorded(tmp_path_factory, name: str, injections, *, minutes: float = MINUTES,
+              detect: bool = False) -> tuple[Path, int]:
     def build(directory: Path):
-        store, t0 = record(directory, injections, detect=detect)
+        store, t0 = record(directory, injections, minutes=minutes, detect=detect)
         return str(store), t0
 
     store, t0 = made_once(tmp_path_factory, name, build)
@@ -21,7 +21,7 @@ def _recorded(tmp_path_factory, name: str, injections, *, detect: bool = False
 
 def _case(tmp_path_factory, name: str) -> tuple[Path, int]:
     return _recorded(tmp_path_factory, "sine-" + name.replace(" ", "-").replace(",", ""),
-                     CASES[name][0], detect=name == LIVE_CASE)
+                     CASES[name][0], minutes=FAULT_MINUTES, detect=name == LIVE_CASE)
 
 
 @pytest.fixture(scope="session")
@@ -32,7 +32,7 @@ def clean_recording(tmp_path_factory):
 
 @pytest.fixture(scope="session", params=sorted(CASES))
 def faulty_recording(request, tmp_path_factory):
-    """(case name, store, trajectory start µs) of each fault case."""
+    """(case name, store, trajectory start µs) of each fault case (FAULT_MINUTES long)."""
     return (request.param, *_case(tmp_path_factory, request.param))
 
 
