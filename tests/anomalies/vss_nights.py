@@ -137,10 +137,13 @@ def _intervals(events, source: str, kind: str, field: str, value: str):
     return out
 
 
-def moments(clean_store: Path, config: DetectorConfig | None = None) -> Moments:
+def moments(clean_store: Path, config: DetectorConfig | None = None, *,
+            report=None) -> Moments:
+    """`report`: the clean store's offline report, if the caller has it already."""
     reader = ParquetStoreReader(clean_store)
-    a, b = reader.time_range()
-    report = detect_anomalies(reader, a, b + 1, config=config)
+    if report is None:
+        a, b = reader.time_range()
+        report = detect_anomalies(reader, a, b + 1, config=config)
     ref_end = report.reference.stretches[-1][1]
     events = reader.events()
     slews = [(s, e) for s, e in _intervals(events, "emulator", "state", "new", "SLEWING")
