@@ -21,8 +21,8 @@ def _kind(argv: list[str]) -> str:
 
     if "-c" in sys.orig_argv:
         code = sys.orig_argv[sys.orig_argv.index("-c") + 1]
-        if "virtualstar.cli.main" in code:
-            return "vs " + " ".join(a for a in argv[1:2])
+        if code.lstrip().startswith("from virtualstar.cli.main import"):  # the tests' `vs`
+            return " ".join(["vs", *argv[1:2]])
         return "python -c " + " ".join(code.split())[:60]
     if "-m" in sys.orig_argv:
         module = sys.orig_argv[sys.orig_argv.index("-m") + 1]
@@ -31,7 +31,7 @@ def _kind(argv: list[str]) -> str:
         return f"python -m {module} " + " ".join(argv[1:2])
     script = os.path.basename(argv[0]) if argv else "?"
     if script == "vs":
-        return "vs " + " ".join(argv[1:2])
+        return " ".join(["vs", *argv[1:2]])
     return f"{script} " + " ".join(a for a in argv[1:2] if not a.startswith("-"))
 
 
