@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from .earth_orientation import EarthOrientation
 from .site import Site
@@ -113,8 +114,6 @@ def _root(f: Callable[[float], float], a: float, b: float) -> float:
         return a
     if fb == 0.0 or np.sign(fa) == np.sign(fb):
         return b
-    from scipy.optimize import brentq  # lazily: 0.45 s of CPU to import
-
     return float(brentq(f, a, b, xtol=TIME_TOLERANCE_S))
 
 

@@ -16,15 +16,12 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import erfa
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 from .site import Site
-
-if TYPE_CHECKING:  # scipy.interpolate costs 0.45 s of CPU to import: only when tabulating
-    from scipy.interpolate import CubicSpline
 
 # ERFA's refraction model freezes sin(el) at 0.05 below this elevation (atioq's
 # SELMIN), which puts a kink in the refraction curve: the table is split there.
@@ -127,8 +124,6 @@ def refraction_table(pressure_hpa: float, temperature_c: float, humidity: float,
     def spline(lo: float, hi: float) -> CubicSpline:
         n = max(8, int(math.ceil((hi - lo) / _TABLE_STEP_RAD)) + 1)
         el = np.linspace(lo, hi, n)
-        from scipy.interpolate import CubicSpline
-
         return CubicSpline(el, erfa_refracted_elevation(el, refa, refb) - el)
 
     return RefractionTable(low=spline(_EL_TABLE_MIN_RAD, _EL_KINK_RAD),
