@@ -137,12 +137,22 @@ class CurrentDetector(Detector):
             uncertainty += cogging
         return {"resid": resid, "allowance": allowance, "covered": covered,
                 "model": i - resid, "friction": self.model.friction_a(v),
-                "uncertainty": uncertainty}
+                "uncertainty": uncertainty, "design": self.model.design(p, v, a)}
 
     def stats(self, arrays, starts):
+        assert self.model is not None, "fit before scoring"
+        design = arrays["design"]
         out = {"mean": window_mean(arrays["resid"], starts, arrays["use"], need=self.need),
                "allowance": window_mean(arrays["allowance"], starts, arrays["use"],
                                         need=self.need)}
+        # Each statistic is linear in the residual, so an error δβ of the model's
+        # coefficients moves it by a linear form u·δβ: the window mean of the design rows
+        # for the mean residual, Σ x·m / Σ m² for a scale regressed on m. Its standard
+        # deviation, from the coefficients' covariance on the reference, is how far the
+        # statistic may be off at this motion because the reference left the model open
+        # there (a slew ten times faster than any the reference held, say).
+        out["mean_sd_a"] = self.model.form_sd(window_mean(design, starts, arrays["use"],
+                                                          need=self.need))
         use, r = arrays["use_any"], arrays["resid"]
         unc = window_mean(arrays["uncertainty"], starts, use, need=self.need)
         for name, x in (("gain", arrays["model"]), ("friction", arrays["friction"])):
@@ -150,17 +160,23 @@ class CurrentDetector(Detector):
             with np.errstate(invalid="ignore", divide="ignore"):
                 out[name] = window_mean(r * x, starts, use, need=self.need) / power
                 out[f"{name}_rms_a"] = np.sqrt(power)
+                out[f"{name}_sd"] = self.model.form_sd(window_mean(
+                    design * x[:, None], starts, use, need=self.need) / power[:, None])
         out["uncertainty"] = unc
         return out
 
     def fit(self, chunk: Chunk, ref: np.ndarray) -> Check:
         p, v, a, i = self._motion(chunk)
         rows = self.use(chunk) & ref
+        # the residuals of neighbouring segments err together: the coefficients'
+        # covariance is clustered by the detector's windows (10 s of mount time)
+        t = chunk.seg.t_first_us
+        clusters = (t - (t[0] if len(t) else 0)) // round(self._window_s() * 1e6)
         try:
             self.model = fit_current_model(p, v, a, i, rows, gravity=self.axis == "el",
                                            cogging_periods=self.cfg.cogging_periods,
                                            segment_s=self.seg_s * (SEGMENT_SAMPLES - 1)
-                                           / SEGMENT_SAMPLES)
+                                           / SEGMENT_SAMPLES, clusters=clusters)
         except ValueError as exc:
             self.plan = {}
             return Check(self.kind, self.axis, self.signals, False, str(exc))
@@ -254,13 +270,15 @@ class CurrentDetector(Detector):
             # at this motion — over the same current
             noise = self.cfg.threshold * self.window_sigma_a / rms
             limit = np.maximum(base, noise) + self.cfg.scale_uncertainty_factor * (
-                self.model.reference_rms_a + stats["uncertainty"]) / rms
+                self.model.reference_rms_a + stats["uncertainty"]) / rms \
+                + self.cfg.model_sd_factor * stats[f"{name}_sd"]
         ok = (rms >= least) & (cls != REST) & (cls >= 0)
         return np.where(ok, stats[name] - center, np.nan), np.where(ok, limit, np.nan)
 
     def window_scores(self, stats, cls):
         center = self._lookup(self.center, cls)
-        limit = self._lookup(self.limit, cls) + self.cfg.coverage_factor * stats["allowance"]
+        limit = self._lookup(self.limit, cls) + self.cfg.coverage_factor * stats["allowance"] \
+            + self.cfg.model_sd_factor * stats["mean_sd_a"]
         dev = stats["mean"] - center
         with np.errstate(invalid="ignore"):
             score = np.abs(dev) / limit
