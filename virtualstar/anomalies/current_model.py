@@ -218,11 +218,15 @@ def _lstsq(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.solve(gram, xs.T @ y), scales
 
 
-def coefficient_covariance(xs: np.ndarray, residual: np.ndarray, clusters: np.ndarray
-                           ) -> np.ndarray:
+def coefficient_covariance(xs: np.ndarray, residual: np.ndarray, clusters: np.ndarray, *,
+                           lags: int = 0) -> np.ndarray:
     """The covariance of least-squares coefficients on the scaled columns `xs`, robust to
-    residuals correlated within a cluster (the sandwich G⁻¹ (Σ_c g_c g_cᵀ) G⁻¹ with
-    g_c = Σ_{rows of c} x·r, and the small-sample factor C/(C − 1)).
+    residuals correlated within a cluster and between clusters up to `lags` apart (labels
+    are integers in time order: clusters l apart in label are l apart in time).
+
+    The sandwich G⁻¹ M G⁻¹ with g_c = Σ_{rows of c} x·r and M = Σ_c g_c g_cᵀ + Σ_{l ≤ lags}
+    (1 − l/(lags + 1)) Σ_c (g_c g_{c+l}ᵀ + g_{c+l} g_cᵀ) (Newey–West's Bartlett weights
+    over the clusters), times C/(C − 1).
 
     Clustered because the residual of a motion model is no white noise: it wanders slowly
     (a friction that warms, a cogging phase slightly off), so rows next to each other err
@@ -238,7 +242,14 @@ def coefficient_covariance(xs: np.ndarray, residual: np.ndarray, clusters: np.nd
         return np.zeros((k, k))
     scores = np.zeros((len(labels), k))
     np.add.at(scores, index, xs * residual[:, None])
-    meat = scores.T @ scores * (len(labels) / (len(labels) - 1))
+    meat = scores.T @ scores
+    for lag in range(1, lags + 1):
+        j = np.searchsorted(labels, labels + lag)
+        pair = j < len(labels)
+        pair[pair] = labels[j[pair]] == labels[pair] + lag
+        cross = scores[pair].T @ scores[j[pair]]
+        meat += (1.0 - lag / (lags + 1.0)) * (cross + cross.T)
+    meat *= len(labels) / (len(labels) - 1)
     return inv @ meat @ inv
 
 
@@ -372,8 +383,8 @@ def estimate_cogging_periods(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.
 
 def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray,
                       rows: np.ndarray, *, gravity: bool, cogging_periods: int | None = None,
-                      segment_s: float = 0.0, clusters: np.ndarray | None = None
-                      ) -> CurrentModel:
+                      segment_s: float = 0.0, clusters: np.ndarray | None = None,
+                      cluster_lags: int = 0) -> CurrentModel:
     """Fit the current model on `rows`; `cogging_periods` None estimates N from them.
     `segment_s`: the span of a segment (s), over which the cogging averages. `clusters`:
     a label per row (the same length as `p`) of the stretches whose residuals may err
@@ -418,7 +429,7 @@ def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray
         _rms(_regressors(p, v, a, gravity, m, friction, segment_s), i)
         > ALTERNATIVE_RMS_RATIO * rms for m in (n - 1, n + 1) if m > 0)
     held = _held_angles(p, v, n, segment_s)
-    covariance = coefficient_covariance(x / scales, res, labels)
+    covariance = coefficient_covariance(x / scales, res, labels, lags=cluster_lags)
     return CurrentModel(coef, scales, gravity, n, rms, friction, segment_s,
                         tuple(alternatives), certain, tuple(cogging_alternatives), held,
                         covariance)
