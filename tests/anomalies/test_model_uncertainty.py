@@ -95,8 +95,9 @@ def _segments(seed: int):
 
 
 def _fit(ts, p, v, a, i, clustered: bool):
-    """The model as the detector fits it (10-s windows, COVARIANCE_LAGS), or with the
-    textbook covariance (`clustered` False: every segment its own cluster)."""
+    """The model as the detector fits it (10-s windows, COVARIANCE_LAGS), or unclustered
+    (`clustered` False: every segment its own cluster — White's covariance, which on this
+    evenly noised axis is the textbook σ²(XᵀX)⁻¹)."""
     ref = ts < REFERENCE_S
     clusters = (ts // 10.0).astype(int) if clustered else None
     return fit_current_model(p, v, a, i, ref, gravity=True, cogging_periods=0,
@@ -119,22 +120,22 @@ def test_the_clustered_uncertainty_covers_the_models_error_at_an_unheld_speed():
     # Known answer: the truth's current. Over twenty nights (wander and noise drawn
     # anew), the model's error in the 0.1-rad/s slews, in its own standard deviations,
     # is distributed as an error should be (median near a normal's 0.67) and stays
-    # within 3 of them on at least 18 — while the textbook σ²(XᵀX)⁻¹, which counts each
-    # segment of a wandering residual as news, claims a fraction of the error
-    ratios, textbook = [], []
+    # within 3 of them on at least 18 — while the unclustered covariance, which counts
+    # each segment of a wandering residual as news, claims a fraction of the error
+    ratios, unclustered = [], []
     for seed in range(20):
         ts, p, v, a, i = _segments(seed)
         fast = np.flatnonzero((np.abs(v) >= 0.099) & (ts > REFERENCE_S))
         truth = true_current_a(p[fast], v[fast], a[fast])
-        for clustered, out in ((True, ratios), (False, textbook)):
+        for clustered, out in ((True, ratios), (False, unclustered)):
             model = _fit(ts, p, v, a, i, clustered)
             err = np.abs(model.predict(p[fast], v[fast], a[fast]) - truth)
             out.append(np.median(err) / np.median(model.prediction_sd_a(p[fast], v[fast],
                                                                           a[fast])))
-    ratios, textbook = np.array(ratios), np.array(textbook)
+    ratios, unclustered = np.array(ratios), np.array(unclustered)
     assert np.sum(ratios <= 3.0) >= 18, np.round(np.sort(ratios), 2)
     assert 0.4 <= np.median(ratios) <= 1.2
-    assert np.sum(textbook <= 3.0) <= 12, np.round(np.sort(textbook), 2)
+    assert np.sum(unclustered <= 3.0) <= 12, np.round(np.sort(unclustered), 2)
 
 
 def test_a_linear_form_of_the_coefficients_has_the_variance_the_covariance_gives():

@@ -42,8 +42,8 @@ EDGE_ACCEL_RAD_S2 = 1e-5
 # The reference residual's slow wander outlasts a 10-s window: the coefficients' covariance
 # also counts the correlation of windows up to this many apart (Newey–West weights). On a
 # synthetic axis with a 30-s wander the model's error at 50× the reference's speeds then
-# lies within 3 standard deviations on 19 nights of 20, within 3 of the clustered-only
-# estimate's on 17 (tests/anomalies/test_model_uncertainty.py)
+# lies within 3 standard deviations on 19 nights of 20, within 3 of the estimate without
+# the lags on 17 (tests/anomalies/test_model_uncertainty.py)
 COVARIANCE_LAGS = 3
 
 class CurrentDetector(Detector):

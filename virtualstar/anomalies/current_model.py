@@ -232,7 +232,7 @@ def coefficient_covariance(xs: np.ndarray, residual: np.ndarray, clusters: np.nd
     (a friction that warms, a cogging phase slightly off), so rows next to each other err
     together. The textbook σ²(XᵀX)⁻¹ counts each 0.256-s segment as news and, on a fresh
     night's elevation whose reference held no fast slew, put the current of a 0.1-rad/s
-    slew within 0.0009 A — it was 0.019 A off; clustered by 10-s windows, 0.009 A."""
+    slew within 0.0009 A — it was 0.019 A off; clustered by 10-s windows, 0.010 A."""
     k = xs.shape[1]
     gram = xs.T @ xs
     gram += RIDGE * max(np.trace(gram), 1e-30) / k * np.eye(k)
