@@ -11,9 +11,12 @@ The difference is what waiting (real-time tests, a worker's last long module) co
 
 With `--modules N` it also prints the N modules that used the most CPU (own + the children
 they waited for; benchmarks/suite_cpu_plugin.py), with their wall time: where to cut.
+With `--processes` it also counts every Python process the suite started, by kind (pytest
+workers, `vs server`, other `vs` commands, devices, helpers), with the CPU each kind used
+(benchmarks/process_census/sitecustomize.py): what a process's start-up costs the suite.
 
     python benchmarks/bench_suite.py [--workers 4] [--burners 0|2] [--modules 30]
-                                     [-- extra pytest args, e.g. --durations=40]
+                                     [--processes] [-- extra pytest args, e.g. --durations=40]
 """
 
 from __future__ import annotations
@@ -47,6 +50,8 @@ def main() -> int:
                     help="processes burning a core each beside the suite (test-under-load: 2)")
     ap.add_argument("--modules", type=int, default=0, metavar="N",
                     help="print the N modules that used the most CPU")
+    ap.add_argument("--processes", action="store_true",
+                    help="count the Python processes the suite started, and their CPU, by kind")
     ap.add_argument("pytest_args", nargs="*", help="more pytest arguments (after --)")
     args = ap.parse_args()
     env = _suite_env()
@@ -57,6 +62,11 @@ def main() -> int:
         env["PYTHONPATH"] = os.pathsep.join(
             [str(ROOT / "benchmarks"), *filter(None, [env.get("PYTHONPATH")])])
         plugin = ["-p", "suite_cpu_plugin"]
+    census = tempfile.TemporaryDirectory(prefix="suite-processes-") if args.processes else None
+    if census is not None:
+        env["SUITE_PROCESS_LOG"] = str(Path(census.name) / "processes.jsonl")
+        env["PYTHONPATH"] = os.pathsep.join(
+            [str(ROOT / "benchmarks" / "process_census"), *filter(None, [env.get("PYTHONPATH")])])
     cores = os.cpu_count() or 1
     load_before = os.getloadavg()[0]
     burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
@@ -94,6 +104,9 @@ def main() -> int:
     if per_module is not None:
         with per_module:
             _print_modules(Path(per_module.name), args.modules)
+    if census is not None:
+        with census:
+            _print_processes(Path(census.name) / "processes.jsonl", cpu_s)
     for line in proc.stdout.splitlines():  # --durations, if asked for
         if re.match(r"\d+\.\d+s (setup|call|teardown) ", line):
             print(f"  {line}")
@@ -121,6 +134,23 @@ def _print_modules(directory: Path, n: int) -> None:
     for name, (o, c, wall, count) in sorted(modules.items(),
                                             key=lambda kv: -(kv[1][0] + kv[1][1]))[:n]:
         print(f"  {o + c:6.1f} {o:5.1f} {c:9.1f} {wall:8.1f} {count:6d}  {name}")
+
+
+def _print_processes(log: Path, cpu_s: float) -> None:
+    kinds: dict[str, list[float]] = {}  # kind: [count, CPU s, lifetime s]
+    lines = log.read_text().splitlines() if log.exists() else []
+    for line in lines:
+        row = json.loads(line)
+        total = kinds.setdefault(row["kind"], [0, 0.0, 0.0])
+        total[0] += 1
+        total[1] += row["cpu_s"]
+        total[2] += row["life_s"]
+    counted = sum(k[1] for k in kinds.values())
+    print(f"processes: {len(lines)} Python processes reported {counted:.0f} s of the {cpu_s:.0f} s "
+          f"of CPU (the rest: browsers, simulators, compilers, killed processes)")
+    print("  count   CPU s  CPU s each  life s  kind")
+    for kind, (n, c, life) in sorted(kinds.items(), key=lambda kv: -kv[1][1])[:40]:
+        print(f"  {n:5d} {c:7.1f} {c / n:11.2f} {life:7.0f}  {kind}")
 
 
 if __name__ == "__main__":

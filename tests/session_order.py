@@ -8,9 +8,11 @@ from pathlib import Path
 TESTS = Path(__file__).parent
 
 # The modules that take longest, longest first (wall time, mostly spent waiting on real or
-# paced time, servers and browsers; measured per module with 4 workers): with `--dist
-# loadscope` xdist hands modules out in collection order, so these start at once instead of
-# one of them starting last and the others waiting for it at the end.
+# paced time, servers and browsers; measured per module with 4 workers by
+# `bench_suite.py --modules`, last on 2026-11-27, which added the 55-80 s modules that had
+# grown unlisted and so started in collection order, vss/ last): with `--dist loadscope`
+# xdist hands modules out in collection order, so these start at once instead of one of
+# them starting last and the others waiting for it at the end.
 LONGEST_FIRST = (
     "hostile/test_hostile_vss.py",
     "anomalies/test_anomalies_on_recordings.py",
@@ -24,11 +26,19 @@ LONGEST_FIRST = (
     "backends/test_indi_pass.py",
     "hostile/test_hostile_api.py",
     "vss/test_vss_safety.py",
+    "vss/test_vss_ownership_stateful.py",
     "vss/test_vss_on_target.py",
     "backends/test_alpaca_pass.py",
+    "astcom/test_astcom_auth_throttle.py",
+    "alpaca/test_alpaca_telescope.py",
+    "astcom/test_astcom_hostile_input.py",
+    "panel/test_panel_log_e2e.py",
+    "panel/test_panel_js_client.py",
+    "panel/test_panel_e2e.py",
+    "planning/test_plan_night.py",
+    "indi/test_indi_closed_loop.py",
     "anomalies/test_live_anomalies.py",
     "vss/test_vss_satellite.py",
-    "astcom/test_astcom_auth_throttle.py",
     "device_c/test_device_qemu.py",
     "panel/test_panel_trust_e2e.py",
     "planning/test_run_night.py",

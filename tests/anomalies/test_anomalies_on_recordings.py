@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import json
 
-from anomaly_helpers import CASES, faults
+import pytest
+from anomaly_helpers import CASES, MADE_ONCE_TIMEOUT_S, faults
 from typer.testing import CliRunner
 
 from virtualstar.anomalies import detect_anomalies
@@ -14,6 +15,9 @@ from virtualstar.anomalies.scoring import score_detections
 from virtualstar.cli.main import app
 from virtualstar.recorder.parquet_store import ParquetStoreReader
 
+# a fixture's setup (a recording, or the wait for another worker's) counts toward the
+# first test's timeout
+pytestmark = pytest.mark.timeout(MADE_ONCE_TIMEOUT_S)
 CONTRACT = {"start_utc", "end_utc", "signals", "kind", "score"}
 WINDOW_US = 60_000_000  # a flag may start up to one detector window before the injection
 

@@ -2,22 +2,25 @@
 
 from __future__ import annotations
 
-import asyncio
-
-from anomaly_helpers import AT_S
+import pytest
+from anomaly_helpers import CASES, LIVE_CASE, MADE_ONCE_TIMEOUT_S
 
 from virtualstar.anomalies.live import LiveAnomalies
-from virtualstar.recorder.experiment import Injection, SineExperiment, run_sine_experiment
 from virtualstar.recorder.parquet_store import ParquetStoreReader
 
+# a fixture's setup (a recording, or the wait for another worker's) counts toward the
+# first test's timeout
+pytestmark = pytest.mark.timeout(MADE_ONCE_TIMEOUT_S)
 
-def test_a_live_recording_logs_each_anomaly_once_after_the_injection(tmp_path):
-    # 20 minutes: the winding fault is flagged within a window of its injection at 16 min
-    exp = SineExperiment(hours=20 / 60, injections=(
-        Injection(AT_S, "axis.az.inject_winding_fault", 0.25),))
-    result = asyncio.run(run_sine_experiment(exp, tmp_path, plots=False, detect=True))
-    events = [e for e in ParquetStoreReader(result.store).events() if e.kind == "anomaly"]
-    injected_us = result.trajectory_t0_us + round(AT_S * 1e6)
+
+def test_a_live_recording_logs_each_anomaly_once_after_the_injection(live_recording):
+    # the friction case (conftest.py): recorded with the detectors running live, and its
+    # fault flagged within a window of its injection at 16 min
+    store, t0_us = live_recording
+    injections, expected = CASES[LIVE_CASE]
+    assert [(kind, axis) for kind, axis, *_ in expected] == [("current", "az")]
+    events = [e for e in ParquetStoreReader(store).events() if e.kind == "anomaly"]
+    injected_us = injections[0].at_us(t0_us)
     assert [e.fields["anomaly_kind"] for e in events] == ["current"]
     assert events[0].source == "recorder" and events[0].level == "warning"
     assert events[0].t_us >= injected_us  # raised while recording, after the fault

@@ -6,7 +6,8 @@ kind and axis, when injected in the middle of a slew and during a satellite pass
 moments are read from the emulator's own state events, not from our phases); a
 reference holding the powered-off mount is refused; live detection fed the same store
 block by block raises the same anomalies as the offline run. The three nights are
-recorded once for this module (~15 s of CPU each)."""
+recorded once for this module (~13 s of CPU each; the faulty ones stop FOUND_WITHIN_S
+after their fault, and move exactly as the clean one until it)."""
 
 from __future__ import annotations
 
@@ -16,9 +17,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from anomaly_helpers import made_once
+from anomaly_helpers import MADE_ONCE_TIMEOUT_S, made_once
 from typer.testing import CliRunner
-from vss_nights import DEGRADATIONS, Moments, injections, make_plan, moments, record_night
+from vss_nights import (
+    DEGRADATIONS,
+    FOUND_WITHIN_S,
+    SIGNALS,
+    Moments,
+    injections,
+    make_plan,
+    moments,
+    record_night,
+)
 
 from virtualstar.anomalies import detect_anomalies
 from virtualstar.anomalies.live import LiveAnomalies
@@ -29,9 +39,10 @@ from virtualstar.cli.main import app
 from virtualstar.recorder.parquet_store import ParquetStoreReader
 
 WINDOW_US = 30_000_000  # a flag may begin up to one detector window before the injection
-# The module's three nights take ~45 s of CPU; on a loaded machine several minutes, and a
-# module fixture's setup counts toward its first test's timeout (300 s by default).
-pytestmark = pytest.mark.timeout(1800)
+# The module's three nights take ~35 s of CPU; on a loaded machine several minutes, and a
+# module fixture's setup (or the wait for another worker's) counts toward its first test's
+# timeout (300 s by default).
+pytestmark = pytest.mark.timeout(MADE_ONCE_TIMEOUT_S)
 
 
 @pytest.fixture(scope="module")
@@ -42,9 +53,11 @@ def nights(tmp_path_factory):
     def build(work):
         plan = make_plan(work / "plan")
         record_night(plan, work / "clean")
-        when = moments(work / "clean")
+        # the clean night's report, kept for the tests if they run in this process
+        when = moments(work / "clean", report=_detect(work / "clean")[0])
         for name, at_us in (("slew", when.slew_us), ("pass", when.pass_us)):
-            record_night(plan, work / name, injections(at_us))
+            record_night(plan, work / name, injections(at_us),
+                         until_us=at_us + round(FOUND_WITHIN_S * 1e6))
         return {"work": str(work), "moments": list(astuple(when))}
 
     made = made_once(tmp_path_factory, "vss-nights", build)
@@ -107,6 +120,26 @@ def test_each_degradation_is_found_when_injected_during_a_slew_and_a_pass(nights
     # nothing of that kind on that axis before the fault began
     assert not [a for a in report.anomalies if a.kind == kind and a.axis == axis
                 and a.start_us < at_us - WINDOW_US]
+
+
+@pytest.mark.parametrize("where", ["slew", "pass"])
+def test_a_faulty_night_moves_exactly_as_the_clean_one_until_its_fault_and_stops_after(
+        nights, where):
+    at_us = nights["moments"].slew_us if where == "slew" else nights["moments"].pass_us
+    clean, faulty = ParquetStoreReader(nights["clean"]), ParquetStoreReader(nights[where])
+    assert faulty.time_range()[0] == clean.time_range()[0]
+    # bit for bit in the two minutes before the fault (the emulator is deterministic: equal
+    # positions, currents, errors and temperatures there mean the same night until then;
+    # the whole stretch would cost seconds of reading)
+    before = [r.window(at_us - 120_000_000, at_us) for r in (clean, faulty)]
+    assert np.array_equal(before[0].t_us, before[1].t_us) and len(before[0].t_us) > 110_000
+    for name in SIGNALS:
+        assert np.array_equal(before[0].columns[name], before[1].columns[name]), name
+    # stopped where it was told to (its last samples within a stream packet, 0.2 s, of the
+    # stop), while the clean night ran on for minutes more
+    stop_us = at_us + round(FOUND_WITHIN_S * 1e6)
+    assert stop_us - 1_000_000 <= faulty.time_range()[1] < stop_us + 10_000_000
+    assert clean.time_range()[1] > stop_us + 120_000_000
 
 
 def test_phases_from_the_events_agree_with_the_phases_from_the_signals(nights):

@@ -11,7 +11,9 @@ program's blocks would go on the same (a later end only adds blocks after it), a
 fault of the tests is flagged within two minutes of its injection. Fault injections are
 timed from the clean run: in the middle of the first slew after the reference, and three
 minutes into the satellite pass after it (the runs are deterministic, so the faulty night
-moves exactly as the clean one until the fault begins).
+moves exactly as the clean one until the fault begins). A faulty night is stopped
+FOUND_WITHIN_S after its fault (twice the two minutes its faults need): the rest of the
+night would only cost CPU (a night is ~13 s of it).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from virtualstar.recorder.parquet_store import ParquetStoreReader
 SIGNALS = tuple(f"axis.{ax}.{s}" for ax in ("az", "el")
                 for s in ("position", "current", "error_arcsec", "temperature"))
 RATE_HZ = 1000.0
+FOUND_WITHIN_S = 240.0  # a faulty night runs on this long after its fault, then stops
 WINDOW = ("2021-07-21T01:20:00Z", "2021-07-21T01:48:00Z")
 PROGRAM = """
 [program]
@@ -102,10 +105,13 @@ def make_plan(workdir: Path) -> dict:
     return doc
 
 
-def record_night(plan: dict, store: Path, writes: list[TimedWrite] = ()) -> dict:
-    """Run the plan on the embedded emulator, recording SIGNALS at 1 kHz into `store`."""
+def record_night(plan: dict, store: Path, writes: list[TimedWrite] = (),
+                 until_us: int | None = None) -> dict:
+    """Run the plan on the embedded emulator, recording SIGNALS at 1 kHz into `store`
+    (stopped at mount time `until_us`, if given)."""
     recording = RunRecording(SIGNALS, RATE_HZ, (f"parquet:{store}",))
-    return run_plan_on_emulator(plan, record=recording, writes=list(writes))
+    return run_plan_on_emulator(plan, record=recording, writes=list(writes),
+                                until_us=until_us)
 
 
 @dataclass(frozen=True)
@@ -131,10 +137,13 @@ def _intervals(events, source: str, kind: str, field: str, value: str):
     return out
 
 
-def moments(clean_store: Path, config: DetectorConfig | None = None) -> Moments:
+def moments(clean_store: Path, config: DetectorConfig | None = None, *,
+            report=None) -> Moments:
+    """`report`: the clean store's offline report, if the caller has it already."""
     reader = ParquetStoreReader(clean_store)
-    a, b = reader.time_range()
-    report = detect_anomalies(reader, a, b + 1, config=config)
+    if report is None:
+        a, b = reader.time_range()
+        report = detect_anomalies(reader, a, b + 1, config=config)
     ref_end = report.reference.stretches[-1][1]
     events = reader.events()
     slews = [(s, e) for s, e in _intervals(events, "emulator", "state", "new", "SLEWING")

@@ -79,8 +79,11 @@ class RawPeer:
     async def send_raw(self, data: bytes) -> None:
         await self.transport.send(data)
 
-    async def recv(self, timeout_s: float = 2.0) -> Any:
-        """Return the next decoded frame, or None when the endpoint closed."""
+    async def recv(self, timeout_s: float = 30.0) -> Any:
+        """Return the next decoded frame, or None when the endpoint closed.
+
+        `timeout_s` only bounds a failure (every caller expects a frame or the close): at 2 s
+        a starved host timed out a refusal the device had sent."""
         data = await asyncio.wait_for(self.transport.recv(), timeout_s)
         return None if data is None else self.codec.decode(data)
 

@@ -39,6 +39,12 @@ __all__ = ["CurrentDetector"]
 # below this an axis's speed changes too slowly to cross the knee within a segment (the
 # sidereal rates change by ~1e-8 rad/s²); it keeps noise at rest from counting as a start
 EDGE_ACCEL_RAD_S2 = 1e-5
+# The reference residual's slow wander outlasts a 10-s window: the coefficients' covariance
+# also counts the correlation of windows up to this many apart (Newey–West weights). On a
+# synthetic axis with a 30-s wander the model's error at 50× the reference's speeds then
+# lies within 3 standard deviations on 19 nights of 20, within 3 of the estimate without
+# the lags on 17 (tests/anomalies/test_model_uncertainty.py)
+COVARIANCE_LAGS = 3
 
 class CurrentDetector(Detector):
     """Flag windows whose current departs from the motion model (friction, winding)."""
@@ -137,12 +143,28 @@ class CurrentDetector(Detector):
             uncertainty += cogging
         return {"resid": resid, "allowance": allowance, "covered": covered,
                 "model": i - resid, "friction": self.model.friction_a(v),
-                "uncertainty": uncertainty}
+                "uncertainty": uncertainty, "design": self.model.design(p, v, a)}
+
+    def _form_sd(self, forms: np.ndarray) -> np.ndarray:
+        """The model error's standard deviation of each window's linear form (0 before a
+        model is fitted)."""
+        return np.zeros(len(forms)) if self.model is None else self.model.form_sd(forms)
 
     def stats(self, arrays, starts):
+        design = arrays.get("design")
+        if design is None:  # statistics of given arrays, no model: no model error
+            design = np.zeros((len(arrays["resid"]), 0))
         out = {"mean": window_mean(arrays["resid"], starts, arrays["use"], need=self.need),
                "allowance": window_mean(arrays["allowance"], starts, arrays["use"],
                                         need=self.need)}
+        # Each statistic is linear in the residual, so an error δβ of the model's
+        # coefficients moves it by a linear form u·δβ: the window mean of the design rows
+        # for the mean residual, Σ x·m / Σ m² for a scale regressed on m. Its standard
+        # deviation, from the coefficients' covariance on the reference, is how far the
+        # statistic may be off at this motion because the reference left the model open
+        # there (a slew ten times faster than any the reference held, say).
+        out["mean_sd_a"] = self._form_sd(window_mean(design, starts, arrays["use"],
+                                                     need=self.need))
         use, r = arrays["use_any"], arrays["resid"]
         unc = window_mean(arrays["uncertainty"], starts, use, need=self.need)
         for name, x in (("gain", arrays["model"]), ("friction", arrays["friction"])):
@@ -150,17 +172,25 @@ class CurrentDetector(Detector):
             with np.errstate(invalid="ignore", divide="ignore"):
                 out[name] = window_mean(r * x, starts, use, need=self.need) / power
                 out[f"{name}_rms_a"] = np.sqrt(power)
+                out[f"{name}_sd"] = self._form_sd(window_mean(
+                    design * x[:, None], starts, use, need=self.need) / power[:, None])
         out["uncertainty"] = unc
         return out
 
     def fit(self, chunk: Chunk, ref: np.ndarray) -> Check:
         p, v, a, i = self._motion(chunk)
         rows = self.use(chunk) & ref
+        # the residuals of neighbouring segments err together: the coefficients'
+        # covariance is clustered by the detector's windows (10 s of mount time), with
+        # the neighbouring windows' correlation up to COVARIANCE_LAGS windows apart
+        t = chunk.seg.t_first_us
+        clusters = (t - (t[0] if len(t) else 0)) // round(self._window_s() * 1e6)
         try:
             self.model = fit_current_model(p, v, a, i, rows, gravity=self.axis == "el",
                                            cogging_periods=self.cfg.cogging_periods,
                                            segment_s=self.seg_s * (SEGMENT_SAMPLES - 1)
-                                           / SEGMENT_SAMPLES)
+                                           / SEGMENT_SAMPLES, clusters=clusters,
+                                           cluster_lags=COVARIANCE_LAGS)
         except ValueError as exc:
             self.plan = {}
             return Check(self.kind, self.axis, self.signals, False, str(exc))
@@ -254,13 +284,15 @@ class CurrentDetector(Detector):
             # at this motion — over the same current
             noise = self.cfg.threshold * self.window_sigma_a / rms
             limit = np.maximum(base, noise) + self.cfg.scale_uncertainty_factor * (
-                self.model.reference_rms_a + stats["uncertainty"]) / rms
+                self.model.reference_rms_a + stats["uncertainty"]) / rms \
+                + self.cfg.model_sd_factor * stats[f"{name}_sd"]
         ok = (rms >= least) & (cls != REST) & (cls >= 0)
         return np.where(ok, stats[name] - center, np.nan), np.where(ok, limit, np.nan)
 
     def window_scores(self, stats, cls):
         center = self._lookup(self.center, cls)
-        limit = self._lookup(self.limit, cls) + self.cfg.coverage_factor * stats["allowance"]
+        limit = self._lookup(self.limit, cls) + self.cfg.coverage_factor * stats["allowance"] \
+            + self.cfg.model_sd_factor * stats["mean_sd_a"]
         dev = stats["mean"] - center
         with np.errstate(invalid="ignore"):
             score = np.abs(dev) / limit

@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["CurrentModel", "Friction", "estimate_cogging_periods", "fit_current_model",
-           "fit_friction"]
+__all__ = ["CurrentModel", "Friction", "coefficient_covariance", "estimate_cogging_periods",
+           "fit_current_model", "fit_friction"]
 
 FRICTION_SHAPES = ("clip", "tanh", "exp")
 FRICTION_KNEES_RAD_S = tuple(float(x) for x in np.logspace(-6, -2, 41))
@@ -93,6 +93,32 @@ class CurrentModel:
     # the reference's angles (rad, sorted) where the cogging shows (slow enough that a
     # segment does not average it out): where the fitted phase was seen
     held_angles_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # the coefficients' covariance (on the scaled columns), clustered by the reference's
+    # windows (see `coefficient_covariance`): how far the reference pins each down
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def design(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """The model's columns at each motion, scaled as fitted (rows × coefficients):
+        `design @ coefficients` is `predict`, and a window's statistic that is linear in
+        the residual is a linear form in them (its uncertainty: `form_sd`)."""
+        x = _regressors(p, v, a, self.gravity, self.cogging_periods, self.friction,
+                        self.segment_s)
+        return x / self.scales
+
+    def form_sd(self, forms: np.ndarray) -> np.ndarray:
+        """The standard deviation of each row of `forms` (rows × coefficients) applied to
+        the fitted coefficients: u·β has variance u Σ uᵀ (0 without a covariance)."""
+        if self.covariance.size == 0 or len(forms) == 0:
+            return np.zeros(len(forms))
+        with np.errstate(invalid="ignore"):
+            var = np.einsum("wk,kl,wl->w", forms, self.covariance, forms)
+        return np.sqrt(np.maximum(var, 0.0))
+
+    def prediction_sd_a(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """How far off the model's current may be at each motion from what the reference
+        left open in its coefficients (A, one standard deviation): small where the
+        reference held such motions, large where the model extrapolates."""
+        return self.form_sd(self.design(p, v, a))
 
     def cogging_uncertainty_a(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """How far off the cogging term may be at each motion (A) when the reference did
@@ -190,6 +216,41 @@ def _lstsq(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     gram = xs.T @ xs
     gram += RIDGE * max(np.trace(gram), 1e-30) / len(gram) * np.eye(len(gram))
     return np.linalg.solve(gram, xs.T @ y), scales
+
+
+def coefficient_covariance(xs: np.ndarray, residual: np.ndarray, clusters: np.ndarray, *,
+                           lags: int = 0) -> np.ndarray:
+    """The covariance of least-squares coefficients on the scaled columns `xs`, robust to
+    residuals correlated within a cluster and between clusters up to `lags` apart (labels
+    are integers in time order: clusters l apart in label are l apart in time).
+
+    The sandwich G⁻¹ M G⁻¹ with g_c = Σ_{rows of c} x·r and M = Σ_c g_c g_cᵀ + Σ_{l ≤ lags}
+    (1 − l/(lags + 1)) Σ_c (g_c g_{c+l}ᵀ + g_{c+l} g_cᵀ) (Newey–West's Bartlett weights
+    over the clusters), times C/(C − 1).
+
+    Clustered because the residual of a motion model is no white noise: it wanders slowly
+    (a friction that warms, a cogging phase slightly off), so rows next to each other err
+    together. The textbook σ²(XᵀX)⁻¹ counts each 0.256-s segment as news and, on a fresh
+    night's elevation whose reference held no fast slew, put the current of a 0.1-rad/s
+    slew within 0.0009 A — it was 0.019 A off; clustered by 10-s windows, 0.010 A."""
+    k = xs.shape[1]
+    gram = xs.T @ xs
+    gram += RIDGE * max(np.trace(gram), 1e-30) / k * np.eye(k)
+    inv = np.linalg.pinv(gram)
+    labels, index = np.unique(clusters, return_inverse=True)
+    if len(labels) < 2:
+        return np.zeros((k, k))
+    scores = np.zeros((len(labels), k))
+    np.add.at(scores, index, xs * residual[:, None])
+    meat = scores.T @ scores
+    for lag in range(1, lags + 1):
+        j = np.searchsorted(labels, labels + lag)
+        pair = j < len(labels)
+        pair[pair] = labels[j[pair]] == labels[pair] + lag
+        cross = scores[pair].T @ scores[j[pair]]
+        meat += (1.0 - lag / (lags + 1.0)) * (cross + cross.T)
+    meat *= len(labels) / (len(labels) - 1)
+    return inv @ meat @ inv
 
 
 def _rms(x: np.ndarray, y: np.ndarray) -> float:
@@ -322,9 +383,14 @@ def estimate_cogging_periods(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.
 
 def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray,
                       rows: np.ndarray, *, gravity: bool, cogging_periods: int | None = None,
-                      segment_s: float = 0.0) -> CurrentModel:
+                      segment_s: float = 0.0, clusters: np.ndarray | None = None,
+                      cluster_lags: int = 0) -> CurrentModel:
     """Fit the current model on `rows`; `cogging_periods` None estimates N from them.
-    `segment_s`: the span of a segment (s), over which the cogging averages."""
+    `segment_s`: the span of a segment (s), over which the cogging averages. `clusters`:
+    a label per row (the same length as `p`) of the stretches whose residuals may err
+    together (the detector's windows), for the coefficients' covariance; None: every row
+    its own."""
+    labels = (np.arange(len(p)) if clusters is None else np.asarray(clusters))[rows]
     p, v, a, i = p[rows], v[rows], a[rows], i[rows]
     if len(p) < 10:
         raise ValueError(f"the current model needs rows to learn from; got {len(p)}")
@@ -363,5 +429,7 @@ def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray
         _rms(_regressors(p, v, a, gravity, m, friction, segment_s), i)
         > ALTERNATIVE_RMS_RATIO * rms for m in (n - 1, n + 1) if m > 0)
     held = _held_angles(p, v, n, segment_s)
+    covariance = coefficient_covariance(x / scales, res, labels, lags=cluster_lags)
     return CurrentModel(coef, scales, gravity, n, rms, friction, segment_s,
-                        tuple(alternatives), certain, tuple(cogging_alternatives), held)
+                        tuple(alternatives), certain, tuple(cogging_alternatives), held,
+                        covariance)

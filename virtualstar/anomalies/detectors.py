@@ -72,6 +72,10 @@ class DetectorConfig:
     friction_scale_floor: float = 0.08
     friction_min_a: float = 0.03
     scale_uncertainty_factor: float = 3.0
+    # Every current statistic's limit also widens by this many standard deviations of
+    # the statistic's model error: the coefficients' covariance on the reference
+    # (clustered by window) propagated to the window scored (CurrentDetector.stats)
+    model_sd_factor: float = 3.0
     vibration_window_s: float = 30.0
     vibration_floor_ratio: float = 16.0  # power × this at least (amplitude × 4)
     spike_factor: float = 5.0  # × the largest spike of the class on the reference

@@ -54,7 +54,8 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
                          done: list[dict[str, Any]] | None = None,
                          on_event: Callable[[str, dict[str, Any]], None] = lambda k, d: None,
                          record: RunRecording | None = None,
-                         writes: Sequence[TimedWrite] = ()) -> dict[str, Any]:
+                         writes: Sequence[TimedWrite] = (),
+                         until_us: int | None = None) -> dict[str, Any]:
     """Run the plan on a fresh emulator + VSS; return the run (as the `program` command).
 
     speed: None runs as fast as the CPU allows, else at most ×speed real time;
@@ -64,7 +65,9 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     event logs beside them (the VSS's phases tell `vs data anomalies` what the mount did);
     writes: emulator parameters written at their mount times (fault injections), by an
     operator client of their own; an unknown parameter raises PlanningError before the
-    run. The result gains `wall_s`.
+    run; until_us: stop the run at this mount time, as an operator's `stop` does (a
+    rehearsal whose faults are in and found need not run the night out: until then it
+    runs exactly as the whole night). The result gains `wall_s`.
     """
     from virtualstar.launcher import embedded_vss
     from virtualstar.lockstep import LockstepClock, run_lockstep
@@ -77,11 +80,17 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     async def main() -> dict[str, Any]:
         async with embedded_vss(clock=clock, site=site or _plan_site(plan)) as vss:
             writer = await _start_writes(vss, clock, writes) if writes else None
+            stopper = (asyncio.ensure_future(_stop_at(vss, clock, until_us))
+                       if until_us is not None else None)
             try:
                 if record is None:
                     return await follow(vss)
                 return await recorded(vss)
             finally:
+                if stopper is not None:
+                    stopper.cancel()
+                    with contextlib.suppress(asyncio.CancelledError):
+                        await stopper  # a stop the server refused raises here
                 if writer is not None:
                     if not writer.done():
                         writer.cancel()
@@ -146,6 +155,12 @@ async def _start_writes(vss, clock, writes: Sequence[TimedWrite]) -> asyncio.Tas
             await client.close()
 
     return asyncio.ensure_future(write_in_time())
+
+
+async def _stop_at(vss, clock, t_us: int) -> None:
+    """Stop the running program at mount time `t_us` (the VSS's own `stop` command)."""
+    await clock.sleep_until_us(t_us)
+    await vss.server.call("stop", {})
 
 
 def _plan_site(plan: Plan) -> Site:
