@@ -88,11 +88,24 @@ def _durable_last_t_us(store: Path) -> int | None:
     return last
 
 
-def _wait_until(condition, what: str) -> None:
+def _wait_until(condition, what: str, details=lambda: "") -> None:
     deadline = time.monotonic() + PATIENCE_S
     while not condition():
-        assert time.monotonic() < deadline, f"gave up waiting for {what}"
+        assert time.monotonic() < deadline, f"gave up waiting for {what} {details()}"
         time.sleep(0.05)
+
+
+def _why_not(proc: subprocess.Popen, device: ThreadedDevice, store: Path, last_t_us: int) -> str:
+    """What a failed wait saw (it once failed beside a loaded suite, with nothing to go on)."""
+    stats = device._call(_endpoint_stats(device.endpoint))
+    state = "running" if proc.poll() is None else f"exited {proc.returncode}: {proc.stderr.read()[-2000:]}"
+    return (f"(durable last {_durable_last_t_us(store)}, wanted {last_t_us}; recorder {state}; "
+            f"endpoint dropped {stats['dropped_samples']} samples, queues {stats['queue_depths']}; "
+            f"store files {sorted(p.name for p in (store / 'samples').glob('*'))})")
+
+
+async def _endpoint_stats(endpoint: Endpoint) -> dict:
+    return endpoint.service.stats()
 
 
 def _start_recorder(url: str, store: Path, rate_hz: float) -> subprocess.Popen:
@@ -117,7 +130,8 @@ def test_a_killed_recorder_loses_nothing_it_held_longer_than_a_flush(tmp_path, r
         _wait_until(device.streaming, "the recorder's stream")
         last_t_us = device.advance_s(seconds)
         _wait_until(lambda: (_durable_last_t_us(store) or 0) >= last_t_us - 1e6 / rate_hz,
-                    "the journal to hold the last tick")
+                    "the journal to hold the last tick",
+                    lambda: _why_not(proc, device, store, last_t_us))
         crossed = last_t_us // HOUR_US != start_us // HOUR_US
         if crossed:  # the hour closed on its clock, before any crash or recovery
             finished = sorted(p.name for p in (store / "samples").glob("*.parquet"))
