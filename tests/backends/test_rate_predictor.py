@@ -103,6 +103,13 @@ class CausalDriver:
             yield t, self.place.copy()
 
 
+def answer(pred, driver, path_at, now_us: int) -> None:
+    """The loop's answer to the report just given to `pred`: its command, sent at `now_us`."""
+    rate, *_ = pred.command(now_us, path_at)
+    driver.send(now_us, rate)
+    pred.sent(tuple(rate), now_us)
+
+
 def run_loop(driver, path_at, *, period_s: float, answer_us: int, seconds: float,
              gain: float = 0.5, learn: bool = True, initial_lag_s: float | None = None):
     """The loop on a driver: at each report, a command sent `answer_us` later. Returns the
@@ -114,9 +121,7 @@ def run_loop(driver, path_at, *, period_s: float, answer_us: int, seconds: float
         errors.append(np.hypot(*(path_at(t) - place)))
         pred.reported(t, tuple(place))
         now = t + answer_us
-        rate, _ff, _err, _t_a = pred.command(now, path_at)
-        driver.send(now, rate)
-        pred.sent(tuple(rate), now)
+        answer(pred, driver, path_at, now)
     return np.asarray(errors), pred
 
 
@@ -228,9 +233,7 @@ def test_a_report_stamped_late_now_and_then_does_not_throw_the_loop_off():
         stamp = t + (25_000 if rng.random() < 0.05 else 0)
         pred.reported(stamp, tuple(place))
         now = stamp + 3_000
-        rate, *_ = pred.command(now, path_at)
-        driver.send(now, rate)
-        pred.sent(tuple(rate), now)
+        answer(pred, driver, path_at, now)
     err = np.asarray(errors[40:]) / ARCSEC
     late_error = 1.0 * DEG * 0.025 / ARCSEC  # what one late stamp looks like, at most
     # each late stamp moves the mount by at most the clipped correction (a few tenths of it)
@@ -257,9 +260,7 @@ def test_a_real_step_of_the_path_is_followed_at_once_not_taken_for_an_outlier():
         errors.append(np.hypot(*(path_at(t) - place)) / ARCSEC)
         pred.reported(t, tuple(place))
         clock[0] = now = t + 8_000
-        rate, *_ = pred.command(now, path_at)
-        driver.send(now, rate)
-        pred.sent(tuple(rate), now)
+        answer(pred, driver, path_at, now)
     after = np.asarray(errors[accepted_us // 250_000:])
     # the first tick after acceptance still at the old place, then 60 % of the error
     # removed per tick (one tick lost to the outlier check at most): 12 ticks on, < 0.1″
@@ -306,9 +307,7 @@ def _slipping_pass(slip_ms: int, stamp) -> tuple[np.ndarray, dict[int, int]]:
         arrival = t + 500 + int(rng.exponential(1_000))  # the host's handling delay
         pred.reported(stamp(arrival), tuple(place))
         now = arrival + 3_000
-        rate, *_ = pred.command(now, path_at)
-        driver.send(now, rate)
-        pred.sent(tuple(rate), now)
+        answer(pred, driver, path_at, now)
     return np.asarray(errors), slip_at
 
 
@@ -352,9 +351,7 @@ def test_a_large_error_that_persists_is_removed_at_the_loops_full_speed():
         errors.append(np.hypot(*(path_at(t) - place)) / ARCSEC)
         pred.reported(t, tuple(place))
         now = t + 8_000
-        rate, *_ = pred.command(now, path_at)
-        driver.send(now, rate)
-        pred.sent(tuple(rate), now)
+        answer(pred, driver, path_at, now)
     after = np.asarray(errors[kicked_at:])
     assert after[0] > 199.0
     # one tick clipped at most, then × 0.4 per tick: 200 × 0.4⁶ = 0.8″ seven ticks on
@@ -400,9 +397,7 @@ def test_a_faster_reporting_driver_gets_the_same_gain_in_time_and_averages_its_s
             errors.append(np.hypot(*(path_at(t) - place)) / ARCSEC)
             pred.reported(t + int(rng.normal(0, 3_000)), tuple(place))  # stamp: ± 3 ms
             now = t + 5_000 + int(rng.exponential(3_000))
-            rate, *_ = pred.command(now, path_at)
-            driver.send(now, rate)
-            pred.sent(tuple(rate), now)
+            answer(pred, driver, path_at, now)
         e = np.asarray(errors[200:])
         return float(np.sqrt(np.mean(e**2)))
 
@@ -430,9 +425,7 @@ def test_a_report_whose_read_took_long_is_weighed_by_how_well_its_time_is_known(
             stamp, spread = start + length // 2, length // 2
             pred.reported(stamp, tuple(place), spread if tell_spread else 0)
             now = start + length + 2_000
-            rate, *_ = pred.command(now, path_at)
-            driver.send(now, rate)
-            pred.sent(tuple(rate), now)
+            answer(pred, driver, path_at, now)
         e = np.asarray(errors[200:])
         return float(np.sqrt(np.mean(e**2)))
 
