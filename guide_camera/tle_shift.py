@@ -172,7 +172,10 @@ def measure_offsets(nominal, truth, t_us: np.ndarray,
     Each is (line1, line2), an sgp4 `Satrec` or a `SatelliteTruth`. From skyfield's
     apparent places: the along offset τ solves truth(t) ≈ nominal(t + τ) along the track
     (Newton steps), the across offset is what is left, positive to the left of the
-    direction of travel (x = az·cos E right, y = el up).
+    direction of travel (x = az·cos E right, y = el up). The truth's places are computed
+    at `t_us` exactly (a new truth each round of `shifted_elements`: a whole grid chunk
+    for one instant would cost ~100 times more); the nominal's, which the Newton steps
+    ask for again and again near `t_us`, from its grid.
     """
     from .truth import SatelliteTruth
 
@@ -180,7 +183,7 @@ def measure_offsets(nominal, truth, t_us: np.ndarray,
     nom, tru = (x if isinstance(x, SatelliteTruth) else SatelliteTruth.of(x, where)
                 for x in (nominal, truth))
     t = np.asarray(t_us, np.int64)
-    t_az, t_el = tru.place(t)
+    t_az, t_el = tru.exact(t)
     tau = np.zeros(len(t))
     for _ in range(4):
         x, y, ux, uy, rate = _relative(nom, t, tau, t_az, t_el)

@@ -125,6 +125,13 @@ class _GriddedTruth:
             el[sel] = s_el(x)
         return az, el
 
+    def exact(self, t_us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Observed (refracted) azimuth and elevation, radians, computed at exactly these
+        true UTC µs (no grid): for a few instants, where a whole chunk would be wasted."""
+        t = np.atleast_1d(np.asarray(t_us, np.int64))
+        az, el = self._observed(t)
+        return np.mod(az, 2 * math.pi), el
+
     def _chunk(self, key: int):
         if key not in self._chunks:
             if len(self._chunks) > 64:
