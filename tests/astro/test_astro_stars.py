@@ -7,7 +7,7 @@ import dataclasses
 import erfa
 import numpy as np
 import pytest
-from astro_testkit import ONE_MAS_RAD, sep_rad
+from astro_testkit import ONE_MAS_RAD, atco13_azel, sep_rad
 
 from virtualstar.astro.stars import IcrsStar
 from virtualstar.astro.timescales import UtcTimes
@@ -25,22 +25,6 @@ def _night(n: int, hours: float = 10.0, start_h: float = 0.0) -> UtcTimes:
                             NIGHT_START_JD[1] + np.linspace(start_h, start_h + hours, n) / 24)
 
 
-def _atco13(star: IcrsStar, times: UtcTimes, site, eop, pressure: float):
-    """Exact per-point ERFA: space motion to each date with pmsafe (as astropy does), atco13."""
-    ra, dec = np.radians(star.ra_deg), np.radians(star.dec_deg)
-    pmr = np.radians(star.pm_ra_cosdec_mas_yr / 3.6e6) / np.cos(dec)
-    pmd = np.radians(star.pm_dec_mas_yr / 3.6e6)
-    ep1 = erfa.epj2jd(star.epoch_jyear)
-    tt1, tt2 = times.tt()
-    ra0, dec0, _, _, px0, _ = erfa.pmsafe(ra, dec, pmr, pmd, star.parallax_mas / 1e3,
-                                          star.rv_km_s, ep1[0], ep1[1], tt1, tt2)
-    dut1, xp, yp = eop.interpolate(times.jd1, times.jd2)
-    aob, zob, *_ = erfa.atco13(ra0, dec0, 0.0, 0.0, px0, 0.0, times.jd1, times.jd2, dut1,
-                               site.lon_rad, site.lat_rad, site.height_m, xp, yp, pressure,
-                               site.temperature_c, site.humidity, site.wavelength_um)
-    return aob, np.pi / 2 - zob
-
-
 @pytest.mark.parametrize("refraction", [False, True])
 def test_interpolated_star_trajectory_matches_per_point_atco13_within_0_01_mas(site, eop,
                                                                               refraction):
@@ -49,7 +33,7 @@ def test_interpolated_star_trajectory_matches_per_point_atco13_within_0_01_mas(s
     pick = np.arange(0, len(times), 97)
     for star in STARS:
         obs = star.observe(times, use_site, eop)
-        az, el = _atco13(star, times[pick], site, eop, use_site.pressure_hpa)
+        az, el = atco13_azel(star, times[pick], site, eop, use_site.pressure_hpa)
         up = el > np.radians(3.0)  # ERFA's refraction model is frozen below ~2.9°
         err = sep_rad(az[up], el[up], obs.az_rad[pick][up], obs.el_rad[pick][up])
         assert err.max() < 0.01 * ONE_MAS_RAD, (star.name, err.max() / ONE_MAS_RAD)
@@ -70,7 +54,7 @@ def test_star_rates_are_the_derivative_of_position(site, eop):
 def test_sparse_times_are_computed_exactly(site, eop):
     times = UtcTimes.from_iso(["2024-03-15T21:00:00", "2024-06-01T01:00:00"])
     obs = ARCTURUS.observe(times, site.without_refraction(), eop)
-    az, el = _atco13(ARCTURUS, times, site, eop, 0.0)
+    az, el = atco13_azel(ARCTURUS, times, site, eop, 0.0)
     assert sep_rad(az, el, obs.az_rad, obs.el_rad).max() < 0.01 * ONE_MAS_RAD
 
 
@@ -181,7 +165,7 @@ def test_many_stars_at_once_match_per_point_atco13_within_5_mas(site, eop):
     az, el = observe_stars(STARS, times, site, eop)
     assert az.shape == el.shape == (len(STARS), len(times))
     for k, star in enumerate(STARS):
-        taz, tel = _atco13(star, times, site, eop, site.pressure_hpa)
+        taz, tel = atco13_azel(star, times, site, eop, site.pressure_hpa)
         up = tel > np.radians(3.0)
         assert up.sum() > 50
         err = sep_rad(taz[up], tel[up], az[k][up], el[k][up])

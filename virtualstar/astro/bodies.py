@@ -20,9 +20,10 @@ import numpy as np
 
 from .earth_orientation import EarthOrientation
 from .exceptions import UnknownTarget
+from .node_grid import spline_or_exact
 from .observed import Observation, observe_enu
 from .site import Site
-from .stars import DEFAULT_GRID_STEP_S, spline_or_exact
+from .stars import DEFAULT_GRID_STEP_S
 from .timescales import UtcTimes
 
 #: Names accepted for solar-system bodies → DE421 segment names.
@@ -99,7 +100,8 @@ class SolarSystemBody:
                         ) -> tuple[np.ndarray, np.ndarray]:
         """Return unrefracted (N,3) north/east/up unit vectors and their rates (1/s)."""
         eop = eop or EarthOrientation.from_astropy_iers_data()
-        return spline_or_exact(lambda t: self.exact_enu(t, site, eop), times, grid_step_s)
+        return spline_or_exact(lambda t: self.exact_enu(t, site, eop), times, grid_step_s,
+                               key=("body", self, site.lat_deg, site.lon_deg, site.height_m, eop))
 
     def observe(self, times: UtcTimes, site: Site, eop: EarthOrientation | None = None,
                 *, grid_step_s: float = DEFAULT_GRID_STEP_S) -> Observation:

@@ -7,7 +7,8 @@ and velocity, Earth rotation, polar motion) runs on a coarse time grid; there
 direction. A cubic spline of the north/east/up unit vector on that grid then
 serves every requested time with its analytic derivative; the spline error is
 measured in the tests against per-point `erfa.atco13` (≤ 0.01 mas on a 60 s
-grid). Refraction is applied afterwards per point (see observed.py), because
+grid). The grid is absolute and its nodes are cached (node_grid.py): a track
+sampled chunk by chunk computes each node once. Refraction is applied afterwards per point (see observed.py), because
 interpolating the refracted direction would be far less accurate near the
 horizon, where refraction curves strongly.
 """
@@ -26,14 +27,13 @@ from scipy.interpolate import CubicSpline
 
 from .constants import HIPPARCOS_EPOCH_JYEAR, J2000_JD, MAS_PER_RAD
 from .earth_orientation import EarthOrientation
+from .node_grid import spline_or_exact
 from .observed import Observation, observe_enu
 from .site import Site
 from .timescales import UtcTimes
 
 #: Spacing of the exact-astrometry grid, seconds (60 s keeps the spline error < 1 µas).
 DEFAULT_GRID_STEP_S = 60.0
-#: Time step of the central difference giving rates when times are sparse, seconds.
-_SPARSE_RATE_STEP_S = 0.5
 _DAYS_PER_JULIAN_YEAR = 365.25
 
 
@@ -89,28 +89,8 @@ class IcrsStar:
                         ) -> tuple[np.ndarray, np.ndarray]:
         """Return unrefracted (N,3) north/east/up unit vectors and their rates (1/s)."""
         eop = eop or EarthOrientation.from_astropy_iers_data()
-        return spline_or_exact(lambda t: exact_enu(self, t, site, eop), times, grid_step_s)
-
-
-def spline_or_exact(exact, times: UtcTimes, grid_step_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Evaluate `exact(UtcTimes) -> (N,3)` on a grid and spline it, or per point if sparse.
-
-    Returns (vectors, rates per second). Sparse times (fewer than a third of
-    the grid nodes their span needs) are computed exactly, rates by a central
-    difference.
-    """
-    # the spline runs in elapsed SI seconds: a leap second is a second of the sky too
-    s = times.si_seconds_since(float(times.jd1[0]), float(times.jd2[0]))
-    k0 = math.floor(float(s.min()) / grid_step_s) - 2
-    k1 = math.ceil(float(s.max()) / grid_step_s) + 2
-    if (k1 - k0 + 1) > 3 * len(times):
-        half = _SPARSE_RATE_STEP_S
-        v = exact(times)
-        rate = (exact(times.si_shifted(half)) - exact(times.si_shifted(-half))) / (2 * half)
-        return v, rate
-    s_grid = np.arange(k0, k1 + 1) * grid_step_s
-    spline = CubicSpline(s_grid, exact(times[0].si_shifted(s_grid)), axis=0)
-    return spline(s), spline(s, 1)
+        return spline_or_exact(lambda t: exact_enu(self, t, site, eop), times, grid_step_s,
+                               key=("star", self, site.lat_deg, site.lon_deg, site.height_m, eop))
 
 
 def exact_enu(star: IcrsStar, times: UtcTimes, site: Site, eop: EarthOrientation) -> np.ndarray:
