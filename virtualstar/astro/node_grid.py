@@ -48,10 +48,13 @@ class NodeCache:
     keys dropped beyond `max_keys`, oldest nodes of a key beyond `max_nodes` (a night at 60 s
     is 720 nodes). Safe to share between threads (the server plans beside its tracks)."""
 
-    def __init__(self, *, max_keys: int = 64, max_nodes: int = 4096) -> None:
+    def __init__(self, *, max_keys: int = 64, max_nodes: int = 4096,
+                 max_splines: int = 256) -> None:
         self.max_keys = max_keys
         self.max_nodes = max_nodes
+        self.max_splines = max_splines
         self._nodes: OrderedDict[Hashable, dict[int, np.ndarray]] = OrderedDict()
+        self._splines: OrderedDict[tuple, CubicSpline] = OrderedDict()
         self._lock = threading.Lock()
         self.computed = 0  # nodes computed (misses), for the tests and the benchmark
         self.reused = 0  # nodes served from the cache
@@ -85,9 +88,35 @@ class NodeCache:
             self.reused += len(ks) - len(missing)
         return np.array(rows)
 
+    def spline(self, key: Hashable | None, k0: int, k1: int, grid_step_s: float,
+               compute: Callable[[np.ndarray], np.ndarray]) -> CubicSpline:
+        """Return the cubic spline through nodes k0..k1 (its x: SI seconds from node k0).
+
+        Built once per span and key: a track's consecutive chunks, and the single instants
+        between them, mostly fall within the same span of nodes (building a spline costs
+        more than evaluating it). The same nodes give the same spline, cached or not.
+        """
+        ks = np.arange(k0, k1 + 1, dtype=np.int64)
+        if key is None:
+            return CubicSpline((ks - k0) * float(grid_step_s), compute(ks), axis=0)
+        span = (key, k0, k1)
+        with self._lock:
+            hit = self._splines.get(span)
+            if hit is not None:
+                self._splines.move_to_end(span)
+                return hit
+        spline = CubicSpline((ks - k0) * float(grid_step_s), self.values(key, ks, compute),
+                             axis=0)
+        with self._lock:
+            self._splines[span] = spline
+            while len(self._splines) > self.max_splines:
+                self._splines.popitem(last=False)
+        return spline
+
     def clear(self) -> None:
         with self._lock:
             self._nodes.clear()
+            self._splines.clear()
 
 
 #: The one cache of the process (targets and sites are values, Earth orientation tables
@@ -119,14 +148,11 @@ def spline_or_exact(exact: Callable[[UtcTimes], np.ndarray], times: UtcTimes,
         v = exact(times)
         rate = (exact(times.si_shifted(half)) - exact(times.si_shifted(-half))) / (2 * half)
         return v, rate
-    ks = np.arange(k0, k1 + 1, dtype=np.int64)
     n1, n2 = _node_tai(np.array([k0]), grid_step_s)
     # elapsed SI seconds from the first node, from two-part dates: exact to picoseconds
     s = ((tai1 - n1[0]) + (tai2 - n2[0])) * DAY_S
-    values = NODE_CACHE.values(
-        None if key is None else (key, float(grid_step_s)), ks,
-        lambda k: exact(_node_times(k, grid_step_s)))
-    spline = CubicSpline((ks - k0) * float(grid_step_s), values, axis=0)
+    spline = NODE_CACHE.spline(None if key is None else (key, float(grid_step_s)), k0, k1,
+                               grid_step_s, lambda k: exact(_node_times(k, grid_step_s)))
     return spline(s), spline(s, 1)
 
 
