@@ -39,6 +39,11 @@ EDGE_NODES = 2
 #: The rule depends on the times alone, never on what the cache holds: a result is the same
 #: whatever ran before it.
 SPLINE_ALWAYS_NODES = 16
+#: Nodes are computed in whole aligned blocks of this many (k // NODE_BLOCK): a node's value is
+#: then always computed in the same batch at the same place, whatever the cache held before
+#: (vectorised ufuncs may round the last bit by an element's place in the batch), so a
+#: lockstep run is the same to the bit whatever the process computed before it.
+NODE_BLOCK = 8
 #: The grid's origin, TAI two-part Julian date: J2000.0 read as TAI.
 _ORIGIN_TAI_JD = J2000_JD
 
@@ -63,7 +68,7 @@ class NodeCache:
                compute: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
         """Return the (len(ks), 3) values of nodes `ks`, computing the missing ones at once."""
         if key is None:
-            return compute(ks)
+            return _in_blocks(ks, compute)
         with self._lock:
             known = self._nodes.get(key)
             if known is None:
@@ -75,15 +80,16 @@ class NodeCache:
             rows = [known.get(int(k)) for k in ks]
         missing = [i for i, row in enumerate(rows) if row is None]
         if missing:
-            fresh = compute(ks[missing])
-            for i, row in zip(missing, fresh, strict=True):
-                rows[i] = row
+            blocks = np.unique(ks[missing] // NODE_BLOCK)
+            fresh_ks = (blocks[:, None] * NODE_BLOCK + np.arange(NODE_BLOCK)).ravel()
+            fresh = dict(zip(fresh_ks.tolist(), compute(fresh_ks), strict=True))
+            for i in missing:
+                rows[i] = fresh[int(ks[i])]
             with self._lock:
-                for i in missing:
-                    known[int(ks[i])] = rows[i]
+                known.update(fresh)
                 while len(known) > self.max_nodes:
                     known.pop(next(iter(known)))
-                self.computed += len(missing)
+                self.computed += len(fresh_ks)
         with self._lock:
             self.reused += len(ks) - len(missing)
         return np.array(rows)
@@ -98,7 +104,7 @@ class NodeCache:
         """
         ks = np.arange(k0, k1 + 1, dtype=np.int64)
         if key is None:
-            return CubicSpline((ks - k0) * float(grid_step_s), compute(ks), axis=0)
+            return CubicSpline((ks - k0) * float(grid_step_s), _in_blocks(ks, compute), axis=0)
         span = (key, k0, k1)
         with self._lock:
             hit = self._splines.get(span)
@@ -117,6 +123,14 @@ class NodeCache:
         with self._lock:
             self._nodes.clear()
             self._splines.clear()
+
+
+def _in_blocks(ks: np.ndarray, compute: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """Compute nodes `ks` as the cache does: in whole aligned blocks of NODE_BLOCK."""
+    blocks = np.unique(ks // NODE_BLOCK)
+    fresh_ks = (blocks[:, None] * NODE_BLOCK + np.arange(NODE_BLOCK)).ravel()
+    values = compute(fresh_ks)
+    return values[np.searchsorted(fresh_ks, ks)]
 
 
 #: The one cache of the process (targets and sites are values, Earth orientation tables
