@@ -3,13 +3,22 @@
 The emulator, the VSS and the program run share one `LockstepClock`: the night takes as
 long as the CPU needs, the same on every host, and the mount is never late. The run
 goes through the VSS API (`run_plan`), exactly as against a real server.
+
+Variants of a run (`Branches`: the same night with a fault injected here or there) are
+forked off it at a mount time instead of being simulated again from the start: until
+then they would move exactly as the run (planning/forking.py).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
+import os
+import signal
+import tempfile
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -18,12 +27,13 @@ from astcom_client import AstcomError
 from virtualstar.astro import Site, load_site
 
 from .exceptions import PlanningError
+from .forking import HeldRecording, own_loop_after_fork, read_all, write_all
 from .scheduler import Plan
 
 if TYPE_CHECKING:
     from .recording import RunRecording  # the recorder (pyarrow) loads only to record
 
-__all__ = ["EMULATOR_LEAD_S", "TimedWrite", "run_plan_on_emulator"]
+__all__ = ["EMULATOR_LEAD_S", "Branch", "Branches", "TimedWrite", "run_plan_on_emulator"]
 
 EMULATOR_LEAD_S = 120.0  # the emulator starts this long before the plan: time to unpark
 
@@ -36,6 +46,151 @@ class TimedWrite:
     t_us: int
     name: str
     value: float
+
+
+@dataclass(frozen=True)
+class Branch:
+    """What a variant forked off a run (`Branches`) does from its fork on: the run, plus
+    its own `writes` (each at or after the fork), stopped at `until_us` if given (instead
+    of the run's `until_us`), and its
+    recording (the run's until the fork) written to `record_to` (store specs; required
+    when the run records)."""
+
+    writes: Sequence[TimedWrite] = ()
+    until_us: int | None = None
+    record_to: tuple[str, ...] = ()
+
+    def as_json(self) -> bytes:
+        return json.dumps({"writes": [[w.t_us, w.name, w.value] for w in self.writes],
+                           "until_us": self.until_us,
+                           "record_to": list(self.record_to)}).encode()
+
+    @classmethod
+    def from_json(cls, doc: bytes) -> Branch:
+        d = json.loads(doc)
+        return cls(tuple(TimedWrite(int(t), str(n), float(v)) for t, n, v in d["writes"]),
+                   d["until_us"], tuple(d["record_to"]))
+
+
+@dataclass(frozen=True)
+class Branches:
+    """`count` variants of the run, forked off it (os.fork) at mount time `at_us`.
+
+    Each waits there, costing no CPU, until the run has ended; `orders(result)` (called
+    with the run's result, the run's recording written) then says what each does
+    (`count` Branch), and they run on in parallel. The run's result gains `branches`:
+    theirs, in order. A variant moves exactly as the run until its first own write (the
+    run is deterministic; tests/anomalies/test_forked_runs.py compares one with a variant
+    simulated whole). Linux only; a recording is held in memory until its end."""
+
+    at_us: int
+    count: int
+    orders: Callable[[dict[str, Any]], Sequence[Branch]]
+
+
+class _Forks:
+    """The children forked at a branch point (in the parent), or which one this is."""
+
+    def __init__(self, branches: Branches | None, recorded: bool) -> None:
+        self.branches = branches
+        self.recorded = recorded
+        self.children: list[tuple[int, int, str]] = []  # (pid, order pipe, result file)
+        self.result_path: str | None = None  # set in a child
+
+    def fork(self, loop: asyncio.AbstractEventLoop) -> Branch | None:
+        """Fork one child; return None in the parent, the child's Branch in the child
+        (once the parent sends it; a child told nothing leaves at once)."""
+        fd, path = tempfile.mkstemp(prefix="vs-branch-", suffix=".json")
+        os.close(fd)
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid:
+            os.close(r)
+            self.children.append((pid, w, path))
+            return None
+        try:  # the child: nothing here may return into the caller's code on failure
+            self.result_path = path
+            os.close(w)
+            for _, order_fd, _ in self.children:
+                os.close(order_fd)  # an earlier sibling's orders are not ours
+            self.children = []
+            own_loop_after_fork(loop)
+            doc = read_all(r)
+            os.close(r)
+        except BaseException:
+            self.end_child(error=traceback.format_exc())
+        if not doc:
+            os._exit(0)  # the run failed in the parent: no variant to run
+        return Branch.from_json(doc)
+
+    def end_child(self, *, result: dict[str, Any] | None = None, error: str = "") -> None:
+        """In a child: leave its result (or error) for the parent and exit, never
+        returning into the code that called the run (a test runner, a CLI)."""
+        code = 1
+        try:
+            doc = {"error": error} if error else {"result": result}
+            with open(self.result_path, "w") as f:  # type: ignore[arg-type]
+                json.dump(doc, f, default=str)
+            code = 1 if error else 0
+        finally:
+            os._exit(code)
+
+    def finish(self, result: dict[str, Any]) -> list[dict[str, Any]]:
+        """In the parent, after the run: send each child its orders, wait for them all,
+        return their results. Raises PlanningError for bad orders or a failed variant."""
+        assert self.branches is not None
+        if len(self.children) != self.branches.count:
+            raise PlanningError(f"the run ended before its branch point (mount time "
+                                f"{self.branches.at_us}): no variant was forked")
+        orders = list(self.branches.orders(result))
+        if len(orders) != self.branches.count:
+            raise PlanningError(f"{len(orders)} branch orders for {self.branches.count} "
+                                "forked variants")
+        for b in orders:
+            early = [w for w in b.writes if w.t_us < self.branches.at_us]
+            if early or (b.until_us is not None and b.until_us < self.branches.at_us):
+                raise PlanningError(f"a branch forked at mount time {self.branches.at_us} "
+                                    "cannot write or stop before it")
+            if self.recorded and not b.record_to:
+                raise PlanningError("a branch of a recorded run needs stores of its own "
+                                    "(record_to)")
+        for (_, order_fd, _), b in zip(self.children, orders, strict=True):
+            write_all(order_fd, b.as_json())
+            os.close(order_fd)
+        self.children = [(pid, -1, path) for pid, _, path in self.children]
+        out, errors = [], []
+        while self.children:
+            pid, _, path = self.children[0]
+            os.waitpid(pid, 0)
+            self.children.pop(0)
+            try:
+                with open(path) as f:
+                    doc = json.load(f)
+            except (OSError, ValueError):
+                doc = {"error": f"variant process {pid} died without a result"}
+            finally:
+                with contextlib.suppress(OSError):
+                    os.unlink(path)
+            out.append(doc.get("result"))
+            if doc.get("error"):
+                errors.append(doc["error"])
+        if errors:
+            raise PlanningError(f"{len(errors)} branch(es) failed; the first: {errors[0]}")
+        return out
+
+    def abandon(self) -> None:
+        """In the parent, when the run failed: end and reap every child."""
+        for pid, order_fd, path in self.children:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+            with contextlib.suppress(OSError):
+                if order_fd >= 0:
+                    os.close(order_fd)
+            with contextlib.suppress(OSError):
+                os.waitpid(pid, 0)
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+        self.children = []
 
 
 class _ServerLog:
@@ -55,7 +210,8 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
                          on_event: Callable[[str, dict[str, Any]], None] = lambda k, d: None,
                          record: RunRecording | None = None,
                          writes: Sequence[TimedWrite] = (),
-                         until_us: int | None = None) -> dict[str, Any]:
+                         until_us: int | None = None,
+                         branches: Branches | None = None) -> dict[str, Any]:
     """Run the plan on a fresh emulator + VSS; return the run (as the `program` command).
 
     speed: None runs as fast as the CPU allows, else at most ×speed real time;
@@ -67,7 +223,8 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     operator client of their own; an unknown parameter raises PlanningError before the
     run; until_us: stop the run at this mount time, as an operator's `stop` does (a
     rehearsal whose faults are in and found need not run the night out: until then it
-    runs exactly as the whole night). The result gains `wall_s`.
+    runs exactly as the whole night); branches: variants forked off the run (Branches;
+    the result gains `branches`). The result gains `wall_s`.
     """
     from virtualstar.launcher import embedded_vss
     from virtualstar.lockstep import LockstepClock, run_lockstep
@@ -77,25 +234,47 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     clock = LockstepClock(start_us if start_us is not None
                           else plan.start_us - int(EMULATOR_LEAD_S * 1e6), pace=speed)
 
+    recording = HeldRecording(record) if branches and record is not None else record
+    forks = _Forks(branches, record is not None)
+
     async def main() -> dict[str, Any]:
         async with embedded_vss(clock=clock, site=site or _plan_site(plan)) as vss:
-            writer = await _start_writes(vss, clock, writes) if writes else None
-            stopper = (asyncio.ensure_future(_stop_at(vss, clock, until_us))
-                       if until_us is not None else None)
+            # writes, stops, the branch point: cancelled at the end, their errors raised
+            helpers = await _helpers(vss, writes, until_us)
+            if branches is not None:
+                helpers.append(asyncio.ensure_future(fork_at(vss, branches.at_us, helpers)))
             try:
-                if record is None:
+                if recording is None:
                     return await follow(vss)
                 return await recorded(vss)
             finally:
-                if stopper is not None:
-                    stopper.cancel()
+                for task in helpers:
+                    task.cancel()
                     with contextlib.suppress(asyncio.CancelledError):
-                        await stopper  # a stop the server refused raises here
-                if writer is not None:
-                    if not writer.done():
-                        writer.cancel()
-                    with contextlib.suppress(asyncio.CancelledError):
-                        await writer  # a write the emulator refused raises here
+                        await task  # a stop or a write refused raises here
+
+    stoppers: list[asyncio.Future] = []
+
+    async def _helpers(vss, writes, until_us) -> list[asyncio.Future]:
+        tasks = [await _start_writes(vss, clock, writes)] if writes else []
+        if until_us is not None:
+            for old in stoppers:
+                old.cancel()  # a branch's stop replaces the run's
+            stoppers.append(asyncio.ensure_future(_stop_at(vss, clock, until_us)))
+            tasks.append(stoppers[-1])
+        return tasks
+
+    async def fork_at(vss, at_us: int, helpers: list[asyncio.Future]) -> None:
+        assert branches is not None
+        await clock.sleep_until_us(at_us)
+        await clock.settled()  # a quiet moment: nothing half done is copied
+        for _ in range(branches.count):
+            order = forks.fork(asyncio.get_running_loop())
+            if order is not None:  # this process is the variant from here on
+                if isinstance(recording, HeldRecording):
+                    recording.stores = order.record_to
+                helpers += await _helpers(vss, order.writes, order.until_us)
+                return
 
     async def recorded(vss) -> dict[str, Any]:
         from virtualstar.eventlog import VssEventSource
@@ -105,9 +284,9 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
         async def connect():
             return await vss.emulator.connect_in_memory(name="vs-run-recorder")
 
-        assert record is not None
+        assert recording is not None
         result, summary = await record_beside(
-            record, connect, "embedded emulator", follow(vss),
+            recording, connect, "embedded emulator", follow(vss),
             event_sources=[VssEventSource(_ServerLog(vss.server))])
         result["recording"] = summary
         return result
@@ -128,8 +307,21 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
         vss.server.unsubscribe(events)
         return task.result()
 
-    result = run_lockstep(main(), clock)
+    try:
+        result = run_lockstep(main(), clock)
+    except BaseException:
+        if forks.result_path is not None:
+            forks.end_child(error=traceback.format_exc())
+        forks.abandon()
+        raise
     result["wall_s"] = time.perf_counter() - t0
+    if forks.result_path is not None:
+        forks.end_child(result=result)
+    if branches is not None:
+        try:
+            result["branches"] = forks.finish(result)
+        finally:
+            forks.abandon()
     return result
 
 
