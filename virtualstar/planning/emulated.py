@@ -13,10 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
-import os
-import signal
-import tempfile
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -25,12 +21,14 @@ from typing import TYPE_CHECKING, Any
 
 from astcom_client import AstcomError
 from virtualstar.astro import Site, load_site
+from virtualstar.forking import ForkError, Forks, HeldWriter
 
 from .exceptions import PlanningError
-from .forking import HeldRecording, own_loop_after_fork, read_all, write_all
 from .scheduler import Plan
 
 if TYPE_CHECKING:
+    from virtualstar.recorder.subscriber import Connector, Recorder
+
     from .recording import RunRecording  # the recorder (pyarrow) loads only to record
 
 __all__ = ["EMULATOR_LEAD_S", "Branch", "Branches", "TimedWrite", "run_plan_on_emulator"]
@@ -60,14 +58,12 @@ class Branch:
     until_us: int | None = None
     record_to: tuple[str, ...] = ()
 
-    def as_json(self) -> bytes:
-        return json.dumps({"writes": [[w.t_us, w.name, w.value] for w in self.writes],
-                           "until_us": self.until_us,
-                           "record_to": list(self.record_to)}).encode()
+    def as_doc(self) -> dict[str, Any]:
+        return {"writes": [[w.t_us, w.name, w.value] for w in self.writes],
+                "until_us": self.until_us, "record_to": list(self.record_to)}
 
     @classmethod
-    def from_json(cls, doc: bytes) -> Branch:
-        d = json.loads(doc)
+    def from_doc(cls, d: dict[str, Any]) -> Branch:
         return cls(tuple(TimedWrite(int(t), str(n), float(v)) for t, n, v in d["writes"]),
                    d["until_us"], tuple(d["record_to"]))
 
@@ -88,109 +84,28 @@ class Branches:
     orders: Callable[[dict[str, Any]], Sequence[Branch]]
 
 
-class _Forks:
-    """The children forked at a branch point (in the parent), or which one this is."""
+class _HeldRecording:
+    """A RunRecording whose recorder writes through a HeldWriter (`held`, once made):
+    the process may fork while it records. `stores` may be changed before the end."""
 
-    def __init__(self, branches: Branches | None, recorded: bool) -> None:
-        self.branches = branches
-        self.recorded = recorded
-        self.children: list[tuple[int, int, str]] = []  # (pid, order pipe, result file)
-        self.result_path: str | None = None  # set in a child
+    def __init__(self, recording: RunRecording) -> None:
+        self.recording = recording
+        self.stores = recording.stores
+        self.held: HeldWriter | None = None  # made with the recorder
 
-    def fork(self, loop: asyncio.AbstractEventLoop) -> Branch | None:
-        """Fork one child; return None in the parent, the child's Branch in the child
-        (once the parent sends it; a child told nothing leaves at once)."""
-        fd, path = tempfile.mkstemp(prefix="vs-branch-", suffix=".json")
-        os.close(fd)
-        r, w = os.pipe()
-        pid = os.fork()
-        if pid:
-            os.close(r)
-            self.children.append((pid, w, path))
-            return None
-        try:  # the child: nothing here may return into the caller's code on failure
-            self.result_path = path
-            os.close(w)
-            for _, order_fd, _ in self.children:
-                os.close(order_fd)  # an earlier sibling's orders are not ours
-            self.children = []
-            own_loop_after_fork(loop)
-            doc = read_all(r)
-            os.close(r)
-        except BaseException:
-            self.end_child(error=traceback.format_exc())
-        if not doc:
-            os._exit(0)  # the run failed in the parent: no variant to run
-        return Branch.from_json(doc)
+    def recorder(self, connect: Connector, source: str, *,
+                 event_sources: list | None = None) -> Recorder:
+        from virtualstar.recorder.subscriber import Recorder
 
-    def end_child(self, *, result: dict[str, Any] | None = None, error: str = "") -> None:
-        """In a child: leave its result (or error) for the parent and exit, never
-        returning into the code that called the run (a test runner, a CLI)."""
-        code = 1
-        try:
-            doc = {"error": error} if error else {"result": result}
-            with open(self.result_path, "w") as f:  # type: ignore[arg-type]
-                json.dump(doc, f, default=str)
-            code = 1 if error else 0
-        finally:
-            os._exit(code)
+        self.held = HeldWriter(lambda: self.recording.writer(self.stores))
+        r = self.recording
+        return Recorder(connect, list(r.names), r.rate_hz, self.held, source=source,
+                        event_sources=event_sources)
 
-    def finish(self, result: dict[str, Any]) -> list[dict[str, Any]]:
-        """In the parent, after the run: send each child its orders, wait for them all,
-        return their results. Raises PlanningError for bad orders or a failed variant."""
-        assert self.branches is not None
-        if len(self.children) != self.branches.count:
-            raise PlanningError(f"the run ended before its branch point (mount time "
-                                f"{self.branches.at_us}): no variant was forked")
-        orders = list(self.branches.orders(result))
-        if len(orders) != self.branches.count:
-            raise PlanningError(f"{len(orders)} branch orders for {self.branches.count} "
-                                "forked variants")
-        for b in orders:
-            early = [w for w in b.writes if w.t_us < self.branches.at_us]
-            if early or (b.until_us is not None and b.until_us < self.branches.at_us):
-                raise PlanningError(f"a branch forked at mount time {self.branches.at_us} "
-                                    "cannot write or stop before it")
-            if self.recorded and not b.record_to:
-                raise PlanningError("a branch of a recorded run needs stores of its own "
-                                    "(record_to)")
-        for (_, order_fd, _), b in zip(self.children, orders, strict=True):
-            write_all(order_fd, b.as_json())
-            os.close(order_fd)
-        self.children = [(pid, -1, path) for pid, _, path in self.children]
-        out, errors = [], []
-        while self.children:
-            pid, _, path = self.children[0]
-            os.waitpid(pid, 0)
-            self.children.pop(0)
-            try:
-                with open(path) as f:
-                    doc = json.load(f)
-            except (OSError, ValueError):
-                doc = {"error": f"variant process {pid} died without a result"}
-            finally:
-                with contextlib.suppress(OSError):
-                    os.unlink(path)
-            out.append(doc.get("result"))
-            if doc.get("error"):
-                errors.append(doc["error"])
-        if errors:
-            raise PlanningError(f"{len(errors)} branch(es) failed; the first: {errors[0]}")
-        return out
-
-    def abandon(self) -> None:
-        """In the parent, when the run failed: end and reap every child."""
-        for pid, order_fd, path in self.children:
-            with contextlib.suppress(OSError):
-                os.kill(pid, signal.SIGKILL)
-            with contextlib.suppress(OSError):
-                if order_fd >= 0:
-                    os.close(order_fd)
-            with contextlib.suppress(OSError):
-                os.waitpid(pid, 0)
-            with contextlib.suppress(OSError):
-                os.unlink(path)
-        self.children = []
+    def summary(self, recorder: Recorder) -> dict[str, Any]:
+        doc = recorder.summary.as_dict()
+        doc["store"] = ", ".join(self.stores)
+        return doc
 
 
 class _ServerLog:
@@ -234,8 +149,8 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     clock = LockstepClock(start_us if start_us is not None
                           else plan.start_us - int(EMULATOR_LEAD_S * 1e6), pace=speed)
 
-    recording = HeldRecording(record) if branches and record is not None else record
-    forks = _Forks(branches, record is not None)
+    recording = _HeldRecording(record) if branches and record is not None else record
+    forks = Forks()
 
     async def main() -> dict[str, Any]:
         async with embedded_vss(clock=clock, site=site or _plan_site(plan)) as vss:
@@ -269,9 +184,10 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
         await clock.sleep_until_us(at_us)
         await clock.settled()  # a quiet moment: nothing half done is copied
         for _ in range(branches.count):
-            order = forks.fork(asyncio.get_running_loop())
-            if order is not None:  # this process is the variant from here on
-                if isinstance(recording, HeldRecording):
+            doc = forks.fork(asyncio.get_running_loop())
+            if doc is not None:  # this process is the variant from here on
+                order = Branch.from_doc(doc)
+                if isinstance(recording, _HeldRecording):
                     recording.stores = order.record_to
                 helpers += await _helpers(vss, order.writes, order.until_us)
                 return
@@ -310,19 +226,44 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     try:
         result = run_lockstep(main(), clock)
     except BaseException:
-        if forks.result_path is not None:
+        if forks.in_child:
             forks.end_child(error=traceback.format_exc())
         forks.abandon()
         raise
     result["wall_s"] = time.perf_counter() - t0
-    if forks.result_path is not None:
+    if forks.in_child:
         forks.end_child(result=result)
     if branches is not None:
         try:
-            result["branches"] = forks.finish(result)
+            result["branches"] = _run_branches(branches, forks, result, record is not None)
         finally:
             forks.abandon()
     return result
+
+
+def _run_branches(branches: Branches, forks: Forks, result: dict[str, Any],
+                  recorded: bool) -> list[dict[str, Any]]:
+    """Send the variants waiting at the branch point their orders; return their results."""
+    if len(forks.children) != branches.count:
+        raise PlanningError(f"the run ended before its branch point (mount time "
+                            f"{branches.at_us}): no variant was forked")
+    orders = list(branches.orders(result))
+    if len(orders) != branches.count:
+        raise PlanningError(f"{len(orders)} branch orders for {branches.count} forked "
+                            "variants")
+    for b in orders:
+        if any(w.t_us < branches.at_us for w in b.writes) or (
+                b.until_us is not None and b.until_us < branches.at_us):
+            raise PlanningError(f"a branch forked at mount time {branches.at_us} cannot "
+                                "write or stop before it")
+        if recorded and not b.record_to:
+            raise PlanningError("a branch of a recorded run needs stores of its own "
+                                "(record_to)")
+    forks.send([b.as_doc() for b in orders])
+    try:
+        return forks.wait()
+    except ForkError as exc:
+        raise PlanningError(str(exc)) from None
 
 
 async def _start_writes(vss, clock, writes: Sequence[TimedWrite]) -> asyncio.Task:
