@@ -1,11 +1,13 @@
-"""A variant forked off a lockstep run at a mount time (`run_plan_on_emulator(branches=)`)
-is the same recording, bit for bit, as the variant simulated whole from the start: the
-anomaly tests' faulty nights are forked off their clean night (test_vss_nights.py)."""
+"""A variant forked off a run at a mount time (`run_plan_on_emulator(branches=)`,
+`run_sine_experiment(branches=)`) is the same recording, bit for bit, as the variant
+simulated whole from the start: the anomaly tests' faulty nights and sine recordings are
+forked off their clean ones (test_vss_nights.py, conftest.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from anomaly_helpers import CASES, record
 from vss_nights import RATE_HZ, SIGNALS, injections, utc_us
 
 from virtualstar.astro import load_site
@@ -13,6 +15,7 @@ from virtualstar.planning import PlanRequest, load_program, plan_program
 from virtualstar.planning.emulated import Branch, Branches, run_plan_on_emulator
 from virtualstar.planning.exceptions import PlanningError
 from virtualstar.planning.recording import RunRecording
+from virtualstar.recorder.experiment import Injection, SineBranch
 from virtualstar.recorder.parquet_store import ParquetStoreReader
 
 PROGRAM = """
@@ -92,3 +95,35 @@ def test_branch_orders_that_write_before_the_fork_are_refused(short_plan):
     with pytest.raises(PlanningError, match="cannot write or stop before it"):
         run_plan_on_emulator(plan, until_us=at_us + 1_000_000, branches=Branches(
             at_us, 2, lambda result: [Branch(injections(at_us - 100)), Branch()]))
+
+
+def _same_samples(a: ParquetStoreReader, b: ParquetStoreReader, to_us: int) -> int:
+    wa, wb = a.window(a.time_range()[0], to_us), b.window(b.time_range()[0], to_us)
+    assert np.array_equal(wa.t_us, wb.t_us)
+    for name in wa.columns:
+        assert np.array_equal(wa.columns[name], wb.columns[name]), name
+    return len(wa.t_us)
+
+
+def test_a_sine_recording_forked_at_its_faults_records_what_the_whole_one_records(tmp_path):
+    # three minutes of the sine, the three growths (CASES) injected at 60 s, the forked
+    # variant stopped at 120 s; the whole one (the same sine, the same faults) runs on
+    faults = tuple(Injection(60.0, j.name, j.value) for j in
+                   CASES["clock drift, heat runaway and a loosened part rattling louder"][0])
+    whole = record(tmp_path / "whole", faults, minutes=3.0, detect=True)
+    run = record(tmp_path / "run", (), minutes=3.0, detect=True,
+                 branches=(SineBranch(60.0, faults, str(tmp_path / "branch"), 120.0),))
+    (branch,) = run.branches
+    assert branch["trajectory_t0_us"] == whole.trajectory_t0_us == run.trajectory_t0_us
+    a, b = ParquetStoreReader(whole.store), ParquetStoreReader(branch["store"])
+    end_us = b.time_range()[1] + 1
+    assert end_us - b.time_range()[0] > 119_000_000
+    assert _same_samples(a, b, end_us) > 119_000
+    assert [(e.t_us, e.kind, e.fields) for e in a.events() if e.kind == "param"] == \
+        [(e.t_us, e.kind, e.fields) for e in b.events() if e.kind == "param"] != []
+    # the run it was forked off went on without the faults: the same until 60 s only
+    clean = ParquetStoreReader(run.store)
+    fault_us = run.trajectory_t0_us + 60_000_000
+    assert _same_samples(clean, b, fault_us) > 59_000
+    assert not np.array_equal(clean.window(fault_us, end_us).columns["axis.az.temperature"],
+                              b.window(fault_us, end_us).columns["axis.az.temperature"])
