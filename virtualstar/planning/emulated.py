@@ -6,7 +6,7 @@ goes through the VSS API (`run_plan`), exactly as against a real server.
 
 Variants of a run (`Branches`: the same night with a fault injected here or there) are
 forked off it at a mount time instead of being simulated again from the start: until
-then they would move exactly as the run (planning/forking.py).
+then they would move exactly as the run (virtualstar/forking.py).
 """
 
 from __future__ import annotations
@@ -50,9 +50,8 @@ class TimedWrite:
 class Branch:
     """What a variant forked off a run (`Branches`) does from its fork on: the run, plus
     its own `writes` (each at or after the fork), stopped at `until_us` if given (instead
-    of the run's `until_us`), and its
-    recording (the run's until the fork) written to `record_to` (store specs; required
-    when the run records)."""
+    of the run's `until_us`), and its recording (the run's until the fork) written to
+    `record_to` (store specs; required when the run records)."""
 
     writes: Sequence[TimedWrite] = ()
     until_us: int | None = None
