@@ -55,7 +55,7 @@ def test_a_star_is_reached_and_tracked_on_astropys_place(seen):
     info = op["info"]
     samples = [s for s in seen["star_samples"]
                if s[0] * 1e6 >= info["tracking_from_us"] and s[0] * 1e6 <= info["tracking_to_us"]]
-    # Alpaca is read 20 times a second; INDI pushes a place only when it has changed (a
+    # the Alpaca observer reads 5 times a second; INDI pushes a place only when it has changed (a
     # well-held star: seldom), and the observer asks for it after 0.5 s without one
     assert len(samples) >= 4
     t = np.array([s[0] for s in samples])
