@@ -1,12 +1,12 @@
 """One run of the VSS on a simulator we did not write, in real time; prints what it saw as JSON.
 
-Usage: backend_scenario.py alpaca|indi sky|pass OUT_DIR
+Usage: backend_scenario.py alpaca|indi sky|route|pass|kill OUT_DIR
 
-Two parts, each on its own simulator, so that the test modules (one per simulator and
-part) run side by side under pytest-xdist: ``sky`` (a star: slew, landing, sidereal
-track, recorded by `vs record`; `vs run` of a small plan; the Sun refused; a slew
-routed round it) and ``pass`` (an ISS-like pass stopped mid-pass; the driver killed
-mid-track).
+Four parts, each on its own simulator: ``sky`` (a star: slew, landing, sidereal track,
+recorded by `vs record`; `vs run` of a small plan; an offset during a track), ``route``
+(the Sun refused; a slew routed round it), ``pass`` (an ISS-like pass stopped mid-pass)
+and ``kill`` (the driver killed mid-track). A test module runs two at once (sky and route,
+pass and kill: scenario_run.py), and pytest-xdist runs the modules side by side.
 
 Run inside a private network namespace (`unshare -n`, loopback up): indiserver binds
 every interface, and the Alpaca simulator is kept there too. The VSS drives the
@@ -422,7 +422,7 @@ async def scenario(kind: str, part: str, out_dir: Path) -> dict:
     try:
         # the pass part at night: no Sun zone between the mount and the pass (a detour
         # would only lengthen the test; the sky part proves the routes)
-        site, eop = daytime_site(-37.5 if part == "sky" else 180.0)
+        site, eop = daytime_site(-37.5 if part in ("sky", "route") else 180.0)
         doc["site"] = site_doc(site)
         await rig.open(kind, site, out_dir, sim=sim, obs=obs, signals_url="ws://127.0.0.1:0")
         t, obs, sim, url = rig.t, rig.obs, rig.sim, rig.url
@@ -432,8 +432,12 @@ async def scenario(kind: str, part: str, out_dir: Path) -> dict:
         doc["steps_s"]["connected"] = time.monotonic() - t0
         if part == "sky":
             await sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0)
+        elif part == "route":
+            await route_part(doc, t, sun_azel, obs, t0)
+        elif part == "pass":
+            await pass_part(doc, t, site, sun_azel, obs, t0)
         else:
-            rig.obs = await pass_part(doc, t, site, sun_azel, sim, obs, t0)
+            rig.obs = await kill_part(doc, t, sim, obs, t0)
         doc["final_backend"] = json.loads(json.dumps((await t.status())["backend"], default=str))
     except Exception:
         doc["errors"].append(traceback.format_exc())
@@ -444,17 +448,15 @@ async def scenario(kind: str, part: str, out_dir: Path) -> dict:
 
 
 async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
-    """A star (landing, track, recorder), `vs run`, the Sun refused, a slew routed round it."""
-    from virtualstar.astro import IcrsStar, SolarSystemBody
+    """A star (landing, track, recorder), `vs run`, an offset during a track."""
+    from virtualstar.astro import IcrsStar
 
     # 1. a star: slew, land, sidereal track (its reports judged against astropy)
-    # the star of the shortest slews: from where the mount is, and on to the nearer end of
-    # step 4's route (any bright star proves the same; the slews are a third of the wall)
-    ends = route_ends(sun_azel)
+    # the star nearest the mount (any bright star proves the same; the slew is a third of
+    # this step's wall)
     here = await t.motion.position()
     here_azel = (math.degrees(here.az_rad) % 360.0, math.degrees(here.el_rad))
-    star = pick_star(site, eop, sun_azel, slew_cost=lambda az, el: sep_deg(*here_azel, az, el)
-                     + min(sep_deg(az, el, *end) for end in ends))
+    star = pick_star(site, eop, sun_azel, slew_cost=lambda az, el: sep_deg(*here_azel, az, el))
     doc["star"] = star.name
     # `vs plan` of step 2 runs beside the star's track (its start-up and search take seconds)
     planning = asyncio.ensure_future(plan_small_program(site, star.name, out_dir))
@@ -520,6 +522,11 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     await t.stop()
     doc["steps_s"]["offset"] = time.monotonic() - t0
 
+
+async def route_part(doc, t, sun_azel, obs, t0) -> None:
+    """The Sun refused, and a slew routed round its zone."""
+    from virtualstar.astro import SolarSystemBody
+
     # 3. the Sun: refused before anything moves
     try:
         await t.follow_target(SolarSystemBody("sun"), "Sun", duration_s=10)
@@ -532,6 +539,7 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     # on either side of the Sun in azimuth, `ROUTE_OFF_DEG` of azimuth × cos el from it, both
     # on the same side of north (the VSS reports azimuths 0..360°): the straight way passes
     # the Sun, and the detour's gotos run 30-odd degrees from it
+    ends = route_ends(sun_azel)
     off = ROUTE_OFF_DEG / math.cos(math.radians(ends[0][1]))
     if not off < sun_azel[0] < 360.0 - off:
         doc["errors"].append(f"the Sun's azimuth {sun_azel[0]:.1f}° leaves no room")
@@ -561,9 +569,9 @@ def route_ends(sun_azel) -> tuple[tuple[float, float], tuple[float, float]]:
     return ((sun_azel[0] - off) % 360.0, el), ((sun_azel[0] + off) % 360.0, el)
 
 
-async def pass_part(doc, t, site, sun_azel, sim, obs, t0):
-    """An ISS-like pass stopped mid-pass, then the driver killed mid-track."""
-    from virtualstar.astro import IcrsStar, Satellite
+async def pass_part(doc, t, site, sun_azel, obs, t0) -> None:
+    """An ISS-like pass stopped mid-pass."""
+    from virtualstar.astro import Satellite
 
     # 5. a satellite pass (ISS-like, culminating away from the Sun), stopped mid-pass,
     # timed so that the stretch the mount follows begins ~PASS_JOIN_S from now
@@ -597,6 +605,11 @@ async def pass_part(doc, t, site, sun_azel, sim, obs, t0):
     doc["pass_op"] = op_doc(op)
     doc["pass_samples"] = obs.since(k)
     doc["steps_s"]["pass"] = time.monotonic() - t0
+
+
+async def kill_part(doc, t, sim, obs, t0):
+    """The driver killed mid-track (returns the observer of the restarted simulator)."""
+    from virtualstar.astro import IcrsStar
 
     # 6. the driver killed mid-track: a fault, the mount told to stop, nothing resumed.
     # The track follows the place the mount points at (no slew first: the test is short)
