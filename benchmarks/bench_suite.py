@@ -52,6 +52,9 @@ def main() -> int:
                     help="print the N modules that used the most CPU")
     ap.add_argument("--processes", action="store_true",
                     help="count the Python processes the suite started, and their CPU, by kind")
+    ap.add_argument("--log", type=Path, default=None,
+                    help="write pytest's whole output here (default: a file in the temporary "
+                         "directory when a test failed, so that its message is never lost)")
     ap.add_argument("pytest_args", nargs="*", help="more pytest arguments (after --)")
     args = ap.parse_args()
     env = _suite_env()
@@ -98,6 +101,12 @@ def main() -> int:
     for line in proc.stdout.splitlines():
         if line.startswith(("FAILED", "ERROR")):
             print(f"  {line[:300]}")
+    log = args.log
+    if log is None and proc.returncode != 0:
+        log = Path(tempfile.mkstemp(prefix="bench-suite-", suffix=".log")[1])
+    if log is not None:
+        log.write_text(proc.stdout + proc.stderr)
+        print(f"  pytest's whole output (the failures' messages): {log}")
     print(f"ours: wall {wall_s:.0f} s ({wall_s / 60:.1f} min) with {args.workers} workers")
     print(f"reference: CPU used {cpu_s:.0f} s / {share:.2f} cores left to it = "
           f"{cpu_s / share:.0f} s, a perfectly packed run ({wall_s / (cpu_s / share):.2f}× that)")
