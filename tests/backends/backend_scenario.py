@@ -65,7 +65,8 @@ ASK_QUIET_S = 0.5  # the INDI observer asks for the place again after this long 
 # the Alpaca observer reads the place this often: 5 places a second are 30 on a 6-s track,
 # 7 in the offset's 1.5-s hold and dozens on a route or a pass (the checks need 4, 3 and 20);
 # each place's time is known to its request's milliseconds whatever the pace, while every
-# read costs the simulator a request (at 20 a second the observer's were 3/4 of its CPU)
+# read costs the simulator two requests (at its old pace, 0.05 s between reads, the observer
+# made a third of the simulator's requests; the VSS's own polling makes the rest)
 OBSERVE_PERIOD_S = 0.2
 
 
