@@ -102,28 +102,10 @@ class StateLog:
         return states[states.index(state):] if state in states else states
 
 
-class _Status:
-    """The server's status over one VSS connection kept open, on a loop of its own thread
-    (what `vs status --json` prints; a process of it each time cost a Python start-up, a
-    second and more of wall on a loaded host, in the poll of the phases during a slew)."""
-
-    def __init__(self) -> None:
-        self.loop = asyncio.new_event_loop()
-        threading.Thread(target=self.loop.run_forever, daemon=True).start()
-        self.client = None
-
-    def __call__(self) -> dict:
-        return asyncio.run_coroutine_threadsafe(self._ask(), self.loop).result(60)
-
-    async def _ask(self) -> dict:
-        from virtualstar.vss_client import VssClient
-
-        if self.client is None:
-            self.client = await VssClient.connect(os.environ["VS_SERVER"])
-        return await self.client.request("status")
-
-
-status = _Status()
+def status() -> dict:
+    out = subprocess.run([str(BIN / "vs"), "status", "--json"], capture_output=True, text=True,
+                         timeout=60)
+    return json.loads(out.stdout)
 
 
 def phase() -> str:
@@ -210,13 +192,7 @@ async def python_client() -> dict:
         await until(lambda: vector("SAT_PASS_WINDOW")["SAT_PASS_WINDOW_START"] != "")
         out["sat_window"] = [vector("SAT_PASS_WINDOW")["SAT_PASS_WINDOW_START"],
                              vector("SAT_PASS_WINDOW")["SAT_PASS_WINDOW_END"]]
-        # the server's operation: the hand pad's `move` ends as the track begins (asked
-        # until it is the track, 30 s at most: a quick ask may still see the move)
-        deadline = time.monotonic() + 30.0
         out["sat_operation"] = status()["operation"]["kind"]
-        while out["sat_operation"] != "track_satellite" and time.monotonic() < deadline:
-            await asyncio.sleep(0.1)
-            out["sat_operation"] = status()["operation"]["kind"]
         await client.send_newVector(D, "TELESCOPE_ABORT_MOTION", members={"ABORT": "On"})
         out["sat_after_abort"] = await until(
             lambda: vector("SAT_TRACKING_STAT").state == "Alert", 30)
