@@ -23,6 +23,12 @@ __all__ = ["DEFAULT_ENDPOINT_PORT", "CameraSim", "EmbeddedCamera", "EmbeddedEmul
 # VSS's own 8740.
 DEFAULT_ENDPOINT_PORT = 8741
 IN_MEMORY_QUEUE = 256  # frames in flight per direction of an in-process connection
+# A request over an in-process connection is answered by a task of the same event loop: no
+# network can lose it, so its wall-clock deadline only measures how starved the host is. At
+# 5 s (a socket's) a lockstep run on a loaded host (a 4-worker suite beside other jobs) took
+# a slow answer for a lost mount ("lost the connection to the mount") and faulted the
+# operation; a hung peer is still found, later.
+IN_MEMORY_TIMEOUT_S = 30.0
 LOCKSTEP_STREAM_FLUSH_S = 0.2  # mount seconds of samples per stream packet in lockstep
 
 
@@ -48,7 +54,7 @@ class EmbeddedEmulator:
         return int(self.emulator.model.mount_time_us)
 
     async def connect_in_memory(self, *, password: str | None = None, name: str = "in-process",
-                                timeout_s: float = 5.0):
+                                timeout_s: float = IN_MEMORY_TIMEOUT_S):
         """Return an ASTCom `Client` joined to the emulator's endpoint in this process."""
         from astcom_client import Client
 
@@ -208,7 +214,7 @@ class EmbeddedCamera:
     device: Any
 
     async def connect_in_memory(self, *, name: str = "in-process", password: str | None = None,
-                                timeout_s: float = 5.0):
+                                timeout_s: float = IN_MEMORY_TIMEOUT_S):
         from astcom_client import Client
 
         end = self.device.endpoint.connect_in_memory(IN_MEMORY_QUEUE)

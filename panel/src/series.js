@@ -15,7 +15,20 @@ function withGaps(y) {
 
 export class SeriesStore {
   constructor() {
+    this.listeners = new Set();
+    this.version = 0; // +1 per change (append, reset): the plot redraws only when it moved
     this.reset([], 1000);
+  }
+
+  /** Call `fn` after each change of the samples (append, reset); return the unsubscribe. */
+  subscribe(fn) {
+    this.listeners.add(fn);
+    return () => this.listeners.delete(fn);
+  }
+
+  changed() {
+    this.version++;
+    for (const fn of this.listeners) fn();
   }
 
   /** Start over for a stream of `names` at `rateHz`. */
@@ -27,8 +40,8 @@ export class SeriesStore {
     this.head = 0; // index of the next write
     this.count = 0;
     this.t0Us = null;
-    this.version = 0; // +1 per appended packet: the plot redraws only when it moved
     this.lastTUs = null;
+    this.changed();
   }
 
   /** Add (or replace) a computed series; it fills from the next packet on. */
@@ -62,7 +75,7 @@ export class SeriesStore {
     this.head = (this.head + n) % cap;
     this.count = Math.min(cap, this.count + n);
     this.lastTUs = tUs[n - 1];
-    this.version++;
+    this.changed();
   }
 
   /** Return the ring index range [start, end) (end may exceed capacity) of the last `windowS`. */

@@ -30,7 +30,7 @@ export const series = new SeriesStore();
 const links = { control: null, data: null, stream: null, compiled: [], password: '', retry: null, streamWanted: null };
 
 /** Debug counters the end-to-end tests and the benchmark read from the page. */
-export const probe = { plotUpdates: 0, plotPoints: 0, lastPlotSeries: [] };
+export const probe = { plotUpdates: 0, plotFrames: 0, plotPoints: 0, lastPlotSeries: [] };
 if (typeof window !== 'undefined') window.panelProbe = { session, series, probe };
 
 export function logEvent(text, level = 'error') {

@@ -12,7 +12,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 from virtualstar.anomalies.scoring import InjectedFault
-from virtualstar.recorder.experiment import Injection, SineExperiment, run_sine_experiment
+from virtualstar.recorder.experiment import (
+    Injection,
+    SineBranch,
+    SineExperiment,
+    SineResult,
+    run_sine_experiment,
+)
 
 MINUTES = 30.0  # the clean recording: a 15-minute reference, then 15 minutes scored
 AT_S = 960.0  # injections 16 minutes in: after the 15-minute reference stretch
@@ -76,12 +82,12 @@ def _lock_within(lock, wait_s: float) -> bool:
 
 def record(out: Path, injections: tuple[Injection, ...], *, minutes: float = MINUTES,
            extra: tuple[str, ...] = ("axis.az.temperature",),
-           detect: bool = False) -> tuple[Path, int]:
-    """Record the sine experiment with `injections`; return (store, trajectory start µs).
+           detect: bool = False, branches: tuple[SineBranch, ...] = ()) -> SineResult:
+    """Record the sine experiment with `injections` (and `branches` forked off it).
     `detect` runs the detectors live: what they find is logged in the store's events."""
     exp = SineExperiment(hours=minutes / 60, extra_names=extra, injections=injections)
-    result = asyncio.run(run_sine_experiment(exp, out, plots=False, detect=detect))
-    return result.store, result.trajectory_t0_us
+    return asyncio.run(run_sine_experiment(exp, out, plots=False, detect=detect,
+                                           branches=branches))
 
 
 # name: (injections, expected faults as (kind, axis, from s, to s or None = the end)).
@@ -89,7 +95,9 @@ def record(out: Path, injections: tuple[Injection, ...], *, minutes: float = MIN
 # one where each is of another kind than the others (a flag says which it found): the three
 # growths of different kinds together, the glitches and the winding fault (both sudden) one
 # after the other, and the friction alone (its current is the winding fault's kind). The
-# friction's recording also runs the detectors live (test_live_anomalies.py reads its log).
+# first two are forked off the clean recording at AT_S (until then they are the clean
+# recording) and stopped at FAULT_MINUTES; the friction's is recorded whole, with the
+# detectors running live (test_live_anomalies.py reads its log).
 CASES = {
     "clock drift, heat runaway and a loosened part rattling louder": (
         (Injection(AT_S, "time.inject_drift_growth", 12.0),

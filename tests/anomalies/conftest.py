@@ -1,42 +1,65 @@
-"""Recordings shared by the anomaly tests (each made once per session, whatever the
-workers: ~8 s of CPU apiece)."""
+"""Recordings shared by the anomaly tests (made once per session, whatever the workers):
+the clean 30-minute sine recording, ~5 s of CPU, and the fault cases forked off it at
+their injections (virtualstar/forking.py), ~2 s each; LIVE_CASE, recorded with the
+detectors live, is recorded whole (~6.5 s): the clean recording does not run them (they
+would cost it 2.5 s, and each forked case, which would fit the detectors anew, 2 s more)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
-from anomaly_helpers import CASES, FAULT_MINUTES, LIVE_CASE, MINUTES, made_once, record
+from anomaly_helpers import AT_S, CASES, FAULT_MINUTES, LIVE_CASE, made_once, record
+
+from virtualstar.recorder.experiment import SineBranch
 
 
-def _recorded(tmp_path_factory, name: str, injections, *, minutes: float = MINUTES,
-              detect: bool = False) -> tuple[Path, int]:
+def _slug(name: str) -> str:
+    return name.replace(" ", "-").replace(",", "")
+
+
+FORKED = sorted(set(CASES) - {LIVE_CASE})
+
+
+@pytest.fixture(scope="session")
+def sine_recordings(tmp_path_factory) -> dict[str, tuple[Path, int]]:
+    """{"clean" or a case name of FORKED: (store, trajectory start µs)}: the clean
+    recording, and each case forked off it at AT_S and stopped at FAULT_MINUTES."""
+
     def build(directory: Path):
-        store, t0 = record(directory, injections, minutes=minutes, detect=detect)
-        return str(store), t0
+        result = record(directory / "clean", (), branches=tuple(
+            SineBranch(AT_S, CASES[name][0], str(directory / _slug(name)),
+                       FAULT_MINUTES * 60) for name in FORKED))
+        made = {"clean": [str(result.store), result.trajectory_t0_us]}
+        for name, branch in zip(FORKED, result.branches, strict=True):
+            made[name] = [branch["store"], branch["trajectory_t0_us"]]
+        return made
 
-    store, t0 = made_once(tmp_path_factory, name, build)
+    made = made_once(tmp_path_factory, "sine", build)
+    return {name: (Path(store), t0) for name, (store, t0) in made.items()}
+
+
+@pytest.fixture(scope="session")
+def live_recording(tmp_path_factory) -> tuple[Path, int]:
+    """(store, trajectory start µs) of LIVE_CASE, recorded with the detectors live."""
+
+    def build(directory: Path):
+        result = record(directory, CASES[LIVE_CASE][0], minutes=FAULT_MINUTES, detect=True)
+        return str(result.store), result.trajectory_t0_us
+
+    store, t0 = made_once(tmp_path_factory, "sine-" + _slug(LIVE_CASE), build)
     return Path(store), t0
 
 
-def _case(tmp_path_factory, name: str) -> tuple[Path, int]:
-    return _recorded(tmp_path_factory, "sine-" + name.replace(" ", "-").replace(",", ""),
-                     CASES[name][0], minutes=FAULT_MINUTES, detect=name == LIVE_CASE)
-
-
 @pytest.fixture(scope="session")
-def clean_recording(tmp_path_factory):
+def clean_recording(sine_recordings):
     """A 30-minute sine recording with nothing injected: (store, trajectory start µs)."""
-    return _recorded(tmp_path_factory, "sine-clean", ())
+    return sine_recordings["clean"]
 
 
 @pytest.fixture(scope="session", params=sorted(CASES))
-def faulty_recording(request, tmp_path_factory):
+def faulty_recording(request, sine_recordings, tmp_path_factory):
     """(case name, store, trajectory start µs) of each fault case (FAULT_MINUTES long)."""
-    return (request.param, *_case(tmp_path_factory, request.param))
-
-
-@pytest.fixture(scope="session")
-def live_recording(tmp_path_factory):
-    """(store, trajectory start µs) of LIVE_CASE, recorded with the detectors live."""
-    return _case(tmp_path_factory, LIVE_CASE)
+    if request.param == LIVE_CASE:
+        return (request.param, *request.getfixturevalue("live_recording"))
+    return (request.param, *sine_recordings[request.param])

@@ -152,16 +152,20 @@ def _slews_after(seconds_tracking: float, total_s: float):
 
 
 def test_a_reference_of_one_motion_phase_is_refused_when_the_night_holds_others(tmp_path):
-    store = _store(tmp_path / "s", _block(1800.0, position=_slews_after(900.0, 1800.0)))
+    # ten minutes of tracking, then five of slews: a third of the night in another phase
+    # (the refusal's bound is a fifth)
+    store = _store(tmp_path / "s", _block(900.0, position=_slews_after(600.0, 900.0)))
     with pytest.raises(ReferenceRefused, match="one motion phase only"):
         _detect(store, reference=[(T0_US, T0_US + 600_000_000)])
     with pytest.raises(ReferenceRefused, match="300 s or more"):
         _detect(store, reference=[(T0_US, T0_US + 120_000_000)])
 
 
-@pytest.fixture
-def small_store(tmp_path):
-    return _store(tmp_path / "store", _block(1200.0, current=lambda t: 0.25 + 0.001 * np.sin(t)))
+@pytest.fixture(scope="module")
+def small_store(tmp_path_factory):
+    """A steady 20-minute store, written once: the CLI only reads it."""
+    return _store(tmp_path_factory.mktemp("small") / "store",
+                  _block(1200.0, current=lambda t: 0.25 + 0.001 * np.sin(t)))
 
 
 @pytest.mark.parametrize(("args", "message"), [

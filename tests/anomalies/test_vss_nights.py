@@ -6,8 +6,10 @@ kind and axis, when injected in the middle of a slew and during a satellite pass
 moments are read from the emulator's own state events, not from our phases); a
 reference holding the powered-off mount is refused; live detection fed the same store
 block by block raises the same anomalies as the offline run. The three nights are
-recorded once for this module (~13 s of CPU each; the faulty ones stop FOUND_WITHIN_S
-after their fault, and move exactly as the clean one until it)."""
+recorded once for this module: the clean one (~13 s of CPU), and the faulty ones forked
+off it at FORK_US (they move exactly as the clean one until their fault;
+test_forked_runs.py shows a forked night is the night simulated whole), stopped
+FOUND_WITHIN_S after their fault."""
 
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from anomaly_helpers import MADE_ONCE_TIMEOUT_S, made_once
 from typer.testing import CliRunner
 from vss_nights import (
     DEGRADATIONS,
+    FORK_US,
     FOUND_WITHIN_S,
     SIGNALS,
     Moments,
@@ -36,6 +39,7 @@ from virtualstar.anomalies.phases import MotionPhase, PhaseLabeller
 from virtualstar.anomalies.report import read_segments
 from virtualstar.anomalies.scoring import InjectedFault, matches
 from virtualstar.cli.main import app
+from virtualstar.planning.emulated import Branch, Branches
 from virtualstar.recorder.parquet_store import ParquetStoreReader
 
 WINDOW_US = 30_000_000  # a flag may begin up to one detector window before the injection
@@ -51,14 +55,19 @@ def nights(tmp_path_factory):
     Recorded once per session, whichever workers run this module's tests."""
 
     def build(work):
-        plan = make_plan(work / "plan")
-        record_night(plan, work / "clean")
-        # the clean night's report, kept for the tests if they run in this process
-        when = moments(work / "clean", report=_detect(work / "clean")[0])
-        for name, at_us in (("slew", when.slew_us), ("pass", when.pass_us)):
-            record_night(plan, work / name, injections(at_us),
-                         until_us=at_us + round(FOUND_WITHIN_S * 1e6))
-        return {"work": str(work), "moments": list(astuple(when))}
+        found: list[Moments] = []
+
+        def faulty_nights(result) -> list[Branch]:
+            # the clean night's report, kept for the tests if they run in this process
+            found.append(moments(work / "clean", report=_detect(work / "clean")[0]))
+            return [Branch(injections(at_us), at_us + round(FOUND_WITHIN_S * 1e6),
+                           (f"parquet:{work / name}",))
+                    for name, at_us in (("slew", found[0].slew_us),
+                                        ("pass", found[0].pass_us))]
+
+        record_night(make_plan(work / "plan"), work / "clean",
+                     branches=Branches(FORK_US, 2, faulty_nights))
+        return {"work": str(work), "moments": list(astuple(found[0]))}
 
     made = made_once(tmp_path_factory, "vss-nights", build)
     out = {name: Path(made["work"]) / name for name in ("clean", "slew", "pass")}

@@ -11,9 +11,11 @@ program's blocks would go on the same (a later end only adds blocks after it), a
 fault of the tests is flagged within two minutes of its injection. Fault injections are
 timed from the clean run: in the middle of the first slew after the reference, and three
 minutes into the satellite pass after it (the runs are deterministic, so the faulty night
-moves exactly as the clean one until the fault begins). A faulty night is stopped
-FOUND_WITHIN_S after its fault (twice the two minutes its faults need): the rest of the
-night would only cost CPU (a night is ~13 s of it).
+moves exactly as the clean one until the fault begins). The faulty nights are therefore
+forked off the clean one (`run_plan_on_emulator(branches=)`) at FORK_US, the earliest the
+automatic reference can end, instead of being simulated again from the start; each is
+stopped FOUND_WITHIN_S after its fault (twice the two minutes its faults need): the rest
+of the night would only cost CPU (a night is ~13 s of it).
 """
 
 from __future__ import annotations
@@ -25,9 +27,10 @@ from pathlib import Path
 
 from catalogs import sample_tle_path
 from virtualstar.anomalies import DetectorConfig, detect_anomalies
+from virtualstar.anomalies.reference import ReferenceConfig
 from virtualstar.astro import UtcTimes, load_site
 from virtualstar.planning import PlanRequest, load_program, plan_program
-from virtualstar.planning.emulated import TimedWrite, run_plan_on_emulator
+from virtualstar.planning.emulated import Branches, TimedWrite, run_plan_on_emulator
 from virtualstar.planning.recording import RunRecording
 from virtualstar.recorder.parquet_store import ParquetStoreReader
 
@@ -93,6 +96,12 @@ def utc_us(iso: str) -> int:
     return int(UtcTimes.from_iso([iso]).to_unix_us()[0])
 
 
+# The faulty nights fork off the clean one here: the mount is powered on at the window's
+# start and the automatic reference is its first 15 minutes of usable time at the least,
+# so every fault (after the reference) comes later.
+FORK_US = utc_us(WINDOW[0]) + round(ReferenceConfig().length_s * 1e6)
+
+
 def make_plan(workdir: Path) -> dict:
     """Plan the test night (the program's TLE file is copied beside it)."""
     workdir.mkdir(parents=True, exist_ok=True)
@@ -106,12 +115,12 @@ def make_plan(workdir: Path) -> dict:
 
 
 def record_night(plan: dict, store: Path, writes: list[TimedWrite] = (),
-                 until_us: int | None = None) -> dict:
+                 until_us: int | None = None, branches: Branches | None = None) -> dict:
     """Run the plan on the embedded emulator, recording SIGNALS at 1 kHz into `store`
-    (stopped at mount time `until_us`, if given)."""
+    (stopped at mount time `until_us`, if given; `branches` forked off it)."""
     recording = RunRecording(SIGNALS, RATE_HZ, (f"parquet:{store}",))
     return run_plan_on_emulator(plan, record=recording, writes=list(writes),
-                                until_us=until_us)
+                                until_us=until_us, branches=branches)
 
 
 @dataclass(frozen=True)

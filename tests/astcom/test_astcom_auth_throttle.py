@@ -29,6 +29,21 @@ from astcom_client.throttle import ThrottlePolicy
 
 # the spec's defaults (§10): what the devices run with unless told otherwise
 SPEC = ThrottlePolicy()
+TIME_SCALE = 10  # see `spec_sped_up`
+
+
+def spec_sped_up(k: float) -> ThrottlePolicy:
+    """The spec's policy on a clock k times faster: every duration divided by k, the overall
+    rate multiplied by k, the counts (burst, lockout failures, addresses) unchanged. A
+    device that runs it gives the same verdicts, in the same order, to guesses k times
+    quicker, as long as the guessers' round trips stay short beside the shortest delay
+    (25 ms for k = 10; a slower guesser only meets shorter waits, never other codes)."""
+    s = SPEC
+    return ThrottlePolicy(first_delay_s=s.first_delay_s / k, max_delay_s=s.max_delay_s / k,
+                          lockout_failures=s.lockout_failures, lockout_s=s.lockout_s / k,
+                          forget_s=s.forget_s / k, global_rate_per_s=s.global_rate_per_s * k,
+                          global_burst=s.global_burst, max_hold_s=s.max_hold_s / k,
+                          max_addresses=s.max_addresses)
 CLIENT_LABEL = b"ASTCom-1 client\x00"  # §5: 15 ASCII bytes and a zero byte
 WRONG_PASSWORD_RE = re.compile(r"auth: wrong password from (\S+) \((\d+) in a row")
 
@@ -116,13 +131,53 @@ def serve(impl: str, **config: Any):
     return serve_impl(impl, scheme=scheme_of(impl), **config)
 
 
+def guessing_verdicts(policy: ThrottlePolicy, addresses: int, attempts: int, round_trip_s: float
+                      ) -> list[tuple[str, bool, str, float]]:
+    """The reference throttle's verdicts for `addresses` guessers, each sending `attempts`
+    wrong passwords one after the other, a round trip apart (as the guessers below do):
+    (address, refused, reason, wait_s) in the order the device would see them."""
+    from astcom_client.throttle import AuthThrottle
+
+    throttle = AuthThrottle(policy)
+    arrivals = [(0.0, f"127.0.0.{k}", 0) for k in range(2, 2 + addresses)]
+    out = []
+    while arrivals:
+        arrivals.sort()
+        now_s, address, n = arrivals.pop(0)
+        verdict = throttle.reserve(address, now_s)
+        out.append((address, verdict.refused, verdict.reason, verdict.wait_s))
+        done_s = now_s if verdict.refused else now_s + verdict.wait_s
+        if not verdict.refused:
+            throttle.failed(address, done_s)
+        if n + 1 < attempts:
+            arrivals.append((done_s + round_trip_s, address, n + 1))
+    return out
+
+
+def test_the_spec_sped_up_gives_the_spec_verdicts_in_the_same_order():
+    """What lets the next test run the spec's policy ten times faster: the reference throttle
+    gives the same verdicts to the same guesses on a clock ten times faster, the waits
+    divided by ten, with round trips from none to a tenth of the shortest delay."""
+    for round_trip_s in (0.0, 0.001, 0.01, 0.025):
+        spec = guessing_verdicts(SPEC, 6, 12, round_trip_s)
+        fast = guessing_verdicts(spec_sped_up(TIME_SCALE), 6, 12, round_trip_s / TIME_SCALE)
+        assert [v[:3] for v in fast] == [v[:3] for v in spec], round_trip_s
+        assert [v[3] * TIME_SCALE for v in fast] == pytest.approx([v[3] for v in spec], abs=1e-9)
+        assert any(v[1] for v in spec) and not all(v[1] for v in spec)  # both kinds met
+
+
 @pytest.mark.parametrize("impl", ALL_IMPLS)
 def test_guesses_from_many_addresses_are_throttled_per_address_and_each_failure_reported(impl):
-    """The twin of tests/hostile/test_hostile_astcom.py's test, on every implementation."""
+    """The twin of tests/hostile/test_hostile_astcom.py's test, on every implementation.
+
+    The spec's policy sped up ten times (`spec_sped_up`): what is proved here is that each
+    address is throttled on its own and each failure reported once, in order, not the
+    spec's delays, which the next test proves at their own pace on every implementation
+    (at the spec's pace each guesser would wait 7.75 s for the same verdicts)."""
     sources = [f"127.0.0.{k}" for k in range(2, 8)]
 
     async def run() -> tuple[dict[str, list[tuple[int, str]]], int, FailureLog]:
-        async with serve(impl) as dut:
+        async with serve(impl, throttle=spec_sped_up(TIME_SCALE)) as dut:
             log = FailureLog(dut)
 
             async def guesser(source: str) -> list[tuple[int, str]]:

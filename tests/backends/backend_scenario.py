@@ -1,12 +1,12 @@
 """One run of the VSS on a simulator we did not write, in real time; prints what it saw as JSON.
 
-Usage: backend_scenario.py alpaca|indi sky|pass OUT_DIR
+Usage: backend_scenario.py alpaca|indi sky|route|pass|kill OUT_DIR
 
-Two parts, each on its own simulator, so that the test modules (one per simulator and
-part) run side by side under pytest-xdist: ``sky`` (a star: slew, landing, sidereal
-track, recorded by `vs record`; `vs run` of a small plan; the Sun refused; a slew
-routed round it) and ``pass`` (an ISS-like pass stopped mid-pass; the driver killed
-mid-track).
+Four parts, each on its own simulator: ``sky`` (a star: slew, landing, sidereal track,
+recorded by `vs record`; `vs run` of a small plan; an offset during a track), ``route``
+(the Sun refused; a slew routed round it), ``pass`` (an ISS-like pass stopped mid-pass)
+and ``kill`` (the driver killed mid-track). A test module runs two at once (sky and route,
+pass and kill: scenario_run.py), and pytest-xdist runs the modules side by side.
 
 Run inside a private network namespace (`unshare -n`, loopback up): indiserver binds
 every interface, and the Alpaca simulator is kept there too. The VSS drives the
@@ -54,11 +54,20 @@ OFFSET_GUARD_S = 90.0  # hang guard of the offset's waits (a quiet host: a few s
 HELD_S = 1.5  # a place is held when the places reported over this long agree ...
 HELD_ARCSEC = 1.0  # ... within this (INDI pushes a change of 0.1 s of RA: 1.5″·cos δ)
 PASS_JOIN_S = 35.0  # the followed stretch of the pass begins about this long after the command
-PASS_TRACK_S = 12.0  # ... and is stopped this long after the landing check (mid-pass)
+PASS_TRACK_S = 8.0  # ... and is stopped this long after the landing check (mid-pass)
 PASS_SETTLE_S = 2.0  # the pass is judged from this long after the landing check ...
 PASS_PLACES = 20  # ... on at least this many reported places (the track goes on until then)
+# where the Alpaca simulator's mount starts: near the south pole, about 30° high over the
+# scenario's sites (latitude -30°) whatever their longitude and the time
+ALPACA_START_DEC_DEG = -89.0
 START_TIMEOUT_S = 120.0  # a loaded host takes long to start a simulator (FastAPI, indiserver)
 ASK_QUIET_S = 0.5  # the INDI observer asks for the place again after this long without one
+# the Alpaca observer reads the place this often: 5 places a second are 30 on a 6-s track,
+# 7 in the offset's 1.5-s hold and dozens on a route or a pass (the checks need 4, 3 and 20);
+# each place's time is known to its request's milliseconds whatever the pace, while every
+# read costs the simulator two requests (at its old pace, 0.05 s between reads, the observer
+# made a third of the simulator's requests; the VSS's own polling makes the rest)
+OBSERVE_PERIOD_S = 0.2
 
 
 def now_us() -> int:
@@ -101,13 +110,43 @@ class Simulator:
         return f"indi://127.0.0.1:{self.port}/{INDI_DEVICE.replace(' ', '%20')}"
 
     def start(self) -> None:
+        self.launch()
+        self.wait_listening()
+
+    def launch(self) -> None:
+        """Start the simulator's process (`wait_listening` waits until it serves): its
+        start-up (FastAPI's imports: seconds) runs while this process prepares the rest."""
+        env = None
         if self.kind == "alpaca":
-            cmd = [sys.executable, "-m", "alpaca_simulators.run_simulator", "--host",
-                   "127.0.0.1", "--port", str(self.port)]
+            # the simulator's ASGI app under uvicorn's own command, as its run_simulator
+            # serves it (the configuration named by ASTRA_SIMULATORS_CONFIG, idle keep-alive
+            # connections held 300 s) but without a log line per request: a tenth of the
+            # CPU of each of the ~60 requests a second the VSS and the observer make
+            env = dict(os.environ, ASTRA_SIMULATORS_CONFIG=str(self.alpaca_config()))
+            cmd = [sys.executable, "-m", "uvicorn", "alpaca_simulators.main:app", "--host",
+                   "127.0.0.1", "--port", str(self.port), "--timeout-keep-alive", "300",
+                   "--no-access-log"]
         else:
             cmd = ["indiserver", "-p", str(self.port), "indi_simulator_telescope"]
-        self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=self.log,
+        self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=self.log, env=env,
                                      start_new_session=True)
+
+    def alpaca_config(self) -> Path:
+        """The simulator's configuration (a path): its template, with the mount
+        starting at `ALPACA_START_DEC_DEG` instead of the template's +89°, which lies 29°
+        below the horizon of the scenario's sites (latitude -30°): the first goto of each part
+        (the star's, the pass's) would climb from there, and the VSS waits out its estimate of
+        that long slew before the pass's join."""
+        import yaml
+        from alpaca_simulators.config import CONFIG_DIR
+
+        doc = yaml.safe_load((CONFIG_DIR / "template.yaml").read_text())
+        doc["devices"]["telescope"][0]["declination"] = ALPACA_START_DEC_DEG
+        path = (self.out_dir / "alpaca-simulator.yaml").resolve()
+        path.write_text(yaml.safe_dump(doc))
+        return path
+
+    def wait_listening(self) -> None:
         deadline = time.monotonic() + START_TIMEOUT_S
         while time.monotonic() < deadline:
             with socket.socket() as s:
@@ -222,7 +261,7 @@ def _observe_alpaca(port: int, put) -> None:
         t1 = time.time()
         # the simulator answers each with where the mount is when asked (~1 ms apart)
         put((t0 + t1) / 2, float(ra), float(dec))
-        time.sleep(0.05)
+        time.sleep(OBSERVE_PERIOD_S)
 
 
 async def _observe_indi(port: int, put) -> None:
@@ -280,8 +319,9 @@ def daytime_site(sun_hour_angle_deg: float = -37.5):
     return base.with_overrides(lon_deg=lon), eop
 
 
-def pick_star(site, eop, sun_azel):
-    """A bright star 35–70° high, ≥ 60° from the Sun, ≥ 20° of hour angle from the meridian."""
+def pick_star(site, eop, sun_azel, slew_cost=None):
+    """A bright star 35–70° high, ≥ 60° from the Sun, ≥ 20° of hour angle from the meridian:
+    the brightest, or with `slew_cost(az_deg, el_deg)` the one of least cost."""
     from catalogs import bright_stars
     from virtualstar.astro import IcrsStar, observe_mount_times
     from virtualstar.astro.mount_frames import hour_angle_rad, observed_to_apparent_radec
@@ -299,9 +339,10 @@ def pick_star(site, eop, sun_azel):
             continue
         if sep_deg(az, el, *sun_azel) < 60:
             continue
-        if best is None or s.vmag < best.vmag:
-            best = s
-    return best
+        key = s.vmag if slew_cost is None else slew_cost(az, el)
+        if best is None or key < best[0]:
+            best = (key, s)
+    return best[1]
 
 
 def sky_sep_arcsec(places: np.ndarray, ref) -> np.ndarray:
@@ -341,15 +382,21 @@ def sun_azel_now(site, eop) -> tuple[float, float]:
 class Rig:
     """A simulator, the VSS driving it (`--mount alpaca://…|indi://…`) and the observer."""
 
-    async def open(self, kind: str, site, out_dir: Path, **build) -> Rig:
+    async def open(self, kind: str, site, out_dir: Path, sim: Simulator | None = None,
+                   obs: Observer | None = None, **build) -> Rig:
+        """Start what is not started yet: `sim` may be launched and `obs` observing
+        already (their processes start while the caller works out the site)."""
         from virtualstar.server import build_server
 
-        self.sim = Simulator(kind, out_dir)
-        self.sim.start()
+        if sim is None:
+            sim = Simulator(kind, out_dir)
+            sim.launch()
+        self.sim = sim
+        self.obs = obs or Observer(sim)  # it reads (retrying) once the simulator serves
+        sim.wait_listening()
         self.vss = build_server(mount_url=self.sim.url, site=site, **build)
         self.url = await self.vss.start("ws://127.0.0.1:0")
         self.t = self.vss.telescope
-        self.obs = Observer(self.sim)
         await self.t.link.wait_connected(START_TIMEOUT_S)
         await asyncio.sleep(1.0)
         return self
@@ -367,13 +414,18 @@ class Rig:
 async def scenario(kind: str, part: str, out_dir: Path) -> dict:
     doc: dict = {"kind": kind, "part": part, "errors": [], "steps_s": {}}
     t0 = time.monotonic()
-    # the pass part at night: no Sun zone between the mount and the pass (a detour would
-    # only lengthen the test; the sky part proves the routes)
-    site, eop = daytime_site(-37.5 if part == "sky" else 180.0)
-    doc["site"] = site_doc(site)
     rig = Rig()
+    # the simulator and the observer start first: their processes' start-up (imports,
+    # FastAPI, indiserver) runs beside this one's (astropy, the site's Sun)
+    rig.sim = sim = Simulator(kind, out_dir)
+    sim.launch()
+    rig.obs = obs = Observer(sim)
     try:
-        await rig.open(kind, site, out_dir, signals_url="ws://127.0.0.1:0")
+        # the pass part at night: no Sun zone between the mount and the pass (a detour
+        # would only lengthen the test; the sky part proves the routes)
+        site, eop = daytime_site(-37.5 if part in ("sky", "route") else 180.0)
+        doc["site"] = site_doc(site)
+        await rig.open(kind, site, out_dir, sim=sim, obs=obs, signals_url="ws://127.0.0.1:0")
         t, obs, sim, url = rig.t, rig.obs, rig.sim, rig.url
         doc["connected"] = json.loads(json.dumps((await t.status())["backend"], default=str))
         sun_azel = sun_azel_now(site, eop)
@@ -381,8 +433,12 @@ async def scenario(kind: str, part: str, out_dir: Path) -> dict:
         doc["steps_s"]["connected"] = time.monotonic() - t0
         if part == "sky":
             await sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0)
+        elif part == "route":
+            await route_part(doc, t, sun_azel, obs, t0)
+        elif part == "pass":
+            await pass_part(doc, t, site, sun_azel, obs, t0)
         else:
-            rig.obs = await pass_part(doc, t, site, sun_azel, sim, obs, t0)
+            rig.obs = await kill_part(doc, t, sim, obs, t0)
         doc["final_backend"] = json.loads(json.dumps((await t.status())["backend"], default=str))
     except Exception:
         doc["errors"].append(traceback.format_exc())
@@ -393,12 +449,18 @@ async def scenario(kind: str, part: str, out_dir: Path) -> dict:
 
 
 async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
-    """A star (landing, track, recorder), `vs run`, the Sun refused, a slew routed round it."""
-    from virtualstar.astro import IcrsStar, SolarSystemBody
+    """A star (landing, track, recorder), `vs run`, an offset during a track."""
+    from virtualstar.astro import IcrsStar
 
     # 1. a star: slew, land, sidereal track (its reports judged against astropy)
-    star = pick_star(site, eop, sun_azel)
+    # the star nearest the mount (any bright star proves the same; the slew is a third of
+    # this step's wall)
+    here = await t.motion.position()
+    here_azel = (math.degrees(here.az_rad) % 360.0, math.degrees(here.el_rad))
+    star = pick_star(site, eop, sun_azel, slew_cost=lambda az, el: sep_deg(*here_azel, az, el))
     doc["star"] = star.name
+    # `vs plan` of step 2 runs beside the star's track (its start-up and search take seconds)
+    planning = asyncio.ensure_future(plan_small_program(site, star.name, out_dir))
     # the recorder records the backend's reports like any signal, all through (started
     # first: a loaded host takes seconds to start a process)
     store = out_dir / "store"
@@ -414,7 +476,8 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
         "rate.axis1_arcsec_s", "error.sky_arcsec", "--rate", "50", "--duration", "600",
         "--store", f"parquet:{store}",
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-    await asyncio.sleep(2.0)
+    # the track begins once the recorder streams (a loaded host takes seconds to start it)
+    await wait_streaming(t.signals, rec, START_TIMEOUT_S)
     op = await t.follow_target(IcrsStar.from_catalog(star), star.name,
                                duration_s=STAR_TRACK_S)
     await op.begun
@@ -425,19 +488,21 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     t.link.report_listeners.remove(tell)
     doc["star_op"] = op_doc(op)
     doc["star_samples"] = obs.since(k)
+    # the store is read back (`vs data query`) beside the steps that follow
     q = await asyncio.create_subprocess_exec(
         str(BIN / "vs"), "data", "query", str(store), "--to", "end", "--json",
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-    q_out, q_err = await q.communicate()
+    querying = asyncio.ensure_future(q.communicate())
     doc["recorded"] = {"record_exit": rec.returncode, "record_stderr": rec_err.decode()[-1500:],
-                       "query_exit": q.returncode, "query_stderr": q_err.decode()[-1500:],
-                       "data": json.loads(q_out) if q.returncode == 0 else None,
                        "report_period_s": t.link.stats.period_s(), "told": told}
 
     doc["steps_s"]["star"] = time.monotonic() - t0
     # 2. vs run of a small plan: one block of the same star, planned and run by the CLI
-    doc["run"] = await run_small_plan(url, site, star.name, out_dir)
+    doc["run"] = await run_small_plan(url, await planning, out_dir)
     doc["steps_s"]["run"] = time.monotonic() - t0
+    q_out, q_err = await querying
+    doc["recorded"].update({"query_exit": q.returncode, "query_stderr": q_err.decode()[-1500:],
+                            "data": json.loads(q_out) if q.returncode == 0 else None})
 
     # 2b. a PWI4-style offset during a track: the rate loop follows the offset path
     k = obs.mark()  # from the slew on
@@ -458,6 +523,11 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     await t.stop()
     doc["steps_s"]["offset"] = time.monotonic() - t0
 
+
+async def route_part(doc, t, sun_azel, obs, t0) -> None:
+    """The Sun refused, and a slew routed round its zone."""
+    from virtualstar.astro import SolarSystemBody
+
     # 3. the Sun: refused before anything moves
     try:
         await t.follow_target(SolarSystemBody("sun"), "Sun", duration_s=10)
@@ -470,12 +540,11 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     # on either side of the Sun in azimuth, `ROUTE_OFF_DEG` of azimuth × cos el from it, both
     # on the same side of north (the VSS reports azimuths 0..360°): the straight way passes
     # the Sun, and the detour's gotos run 30-odd degrees from it
-    el = 35.0 if sun_azel[1] > 30 else 25.0
-    off = ROUTE_OFF_DEG / math.cos(math.radians(el))
+    ends = route_ends(sun_azel)
+    off = ROUTE_OFF_DEG / math.cos(math.radians(ends[0][1]))
     if not off < sun_azel[0] < 360.0 - off:
         doc["errors"].append(f"the Sun's azimuth {sun_azel[0]:.1f}° leaves no room")
-    a = ((sun_azel[0] - off) % 360.0, el)
-    b = ((sun_azel[0] + off) % 360.0, el)
+    a, b = ends
     # the first slew puts the mount at one end without passing the Sun (the end on the
     # mount's side of it): only the second must go round
     here_az = math.degrees((await t.motion.position()).az_rad) % 360.0
@@ -493,9 +562,17 @@ async def sky_part(doc, t, url, site, eop, sun_azel, obs, out_dir, t0) -> None:
     doc["steps_s"]["route"] = time.monotonic() - t0
 
 
-async def pass_part(doc, t, site, sun_azel, sim, obs, t0):
-    """An ISS-like pass stopped mid-pass, then the driver killed mid-track."""
-    from virtualstar.astro import IcrsStar, Satellite
+def route_ends(sun_azel) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The ends (az, el deg) of the slew past the Sun: either side of it in azimuth,
+    `ROUTE_OFF_DEG` × 1/cos el from it, 35° high (25° when the Sun is lower than 30°)."""
+    el = 35.0 if sun_azel[1] > 30 else 25.0
+    off = ROUTE_OFF_DEG / math.cos(math.radians(el))
+    return ((sun_azel[0] - off) % 360.0, el), ((sun_azel[0] + off) % 360.0, el)
+
+
+async def pass_part(doc, t, site, sun_azel, obs, t0) -> None:
+    """An ISS-like pass stopped mid-pass."""
+    from virtualstar.astro import Satellite
 
     # 5. a satellite pass (ISS-like, culminating away from the Sun), stopped mid-pass,
     # timed so that the stretch the mount follows begins ~PASS_JOIN_S from now
@@ -530,6 +607,11 @@ async def pass_part(doc, t, site, sun_azel, sim, obs, t0):
     doc["pass_samples"] = obs.since(k)
     doc["steps_s"]["pass"] = time.monotonic() - t0
 
+
+async def kill_part(doc, t, sim, obs, t0):
+    """The driver killed mid-track (returns the observer of the restarted simulator)."""
+    from virtualstar.astro import IcrsStar
+
     # 6. the driver killed mid-track: a fault, the mount told to stop, nothing resumed.
     # The track follows the place the mount points at (no slew first: the test is short)
     from virtualstar.astro.equatorial import jnow_to_icrs
@@ -555,10 +637,11 @@ async def pass_part(doc, t, site, sun_azel, sim, obs, t0):
     doc["calls_after_kill"] = [c.role for c in t.link.calls if c.seq > calls_before]
     calls_before = len(t.link.calls) and t.link.calls[-1].seq
     obs.close()
-    sim.start()
+    sim.launch()
+    obs = Observer(sim)  # its start-up beside the simulator's (it reads once that serves)
+    sim.wait_listening()
     await t.link.wait_connected(START_TIMEOUT_S)
-    await asyncio.sleep(3.0)
-    obs = Observer(sim)
+    # 5 s from the reconnection in which nothing may be sent; the places of its last 3 s
     await asyncio.sleep(2.0)
     k = obs.mark()
     await asyncio.sleep(3.0)
@@ -604,8 +687,8 @@ def timed_pass(site, sun_az_deg: float, geometry: str) -> tuple[str, str, str, f
     return name, l1, l2, culm_s
 
 
-async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
-    """`vs plan` a one-star program over the next minutes, then `vs run` it on this VSS."""
+async def plan_small_program(site, star: str, out_dir: Path) -> dict:
+    """`vs plan` a one-star program over the next minutes: {"plan_exit", "stderr"}."""
     from virtualstar.astro import iso_utc
 
     site_file = out_dir / "site.toml"
@@ -619,20 +702,29 @@ async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
         "sun_max_el_deg = 90\nmoon_min_sep_deg = 0\n\n"
         f'[[target]]\nstar = "{star}"\nduration_s = 8\n')
     start = now_us() + 3_000_000
-    plan = out_dir / "plan.json"
-    run = out_dir / "run.json"
     p = await asyncio.create_subprocess_exec(
         str(BIN / "vs"), "plan", str(program), "--from", iso_utc(start), "--to",
-        iso_utc(start + 240_000_000), "--site-file", str(site_file), "-o", str(plan),
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-    out, err = await p.communicate()
-    if p.returncode != 0:
-        return {"plan_exit": p.returncode, "stderr": err.decode()[-2000:]}
-    # the planner times the first slew from its park place (it cannot know the mount is
-    # already on the star, a minute's wait here): the block is moved to begin soon
+        iso_utc(start + 240_000_000), "--site-file", str(site_file), "-o",
+        str(out_dir / "plan.json"), stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE)
+    _out, err = await p.communicate()
+    return {"plan_exit": p.returncode, "stderr": err.decode()[-2000:]}
+
+
+async def run_small_plan(url: str, planned: dict, out_dir: Path) -> dict:
+    """`vs run` the plan of `plan_small_program` on this VSS."""
+    from virtualstar.astro import iso_utc
+
+    if planned["plan_exit"] != 0:
+        return planned
+    plan = out_dir / "plan.json"
+    run = out_dir / "run.json"
+    # the planner times the first slew from its park place, and planned while the mount
+    # tracked the star (it cannot know the mount is on the star already): the block is
+    # moved to begin soon, 12 s from now (`vs run`'s start-up on a loaded host)
     doc_plan = json.loads(plan.read_text())
     for block in doc_plan["blocks"][:1]:
-        shift = min(0, now_us() + 12_000_000 - block["start_us"])
+        shift = now_us() + 12_000_000 - block["start_us"]
         for key in ("start", "end"):
             block[f"{key}_us"] += shift
             block[f"{key}_utc"] = iso_utc(block[f"{key}_us"])
@@ -646,6 +738,16 @@ async def run_small_plan(url: str, site, star: str, out_dir: Path) -> dict:
     if run.exists():
         doc["record"] = json.loads(run.read_text())
     return doc
+
+
+async def wait_streaming(signals, rec, guard_s: float) -> None:
+    """Wait until a client (the recorder `rec`) streams the backend's signals."""
+    deadline = time.monotonic() + guard_s
+    while not signals.endpoint.service.groups:
+        if rec.returncode is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"vs record did not stream within {guard_s:.0f} s "
+                               f"(exit {rec.returncode})")
+        await asyncio.sleep(0.05)
 
 
 def log_vss_to(path: Path) -> None:

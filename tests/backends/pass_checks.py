@@ -1,6 +1,7 @@
 """The checks of the `pass` part, shared by test_alpaca_pass.py and test_indi_pass.py: an
-ISS-like pass against skyfield, `stop` mid-pass, the driver killed mid-track (see
-scenario_run.py for how the part runs).
+ISS-like pass against skyfield, `stop` mid-pass (fixture `seen`, the pass part); the
+driver killed mid-track (`seen_kill`, the kill part, run at once beside it on its own
+simulator; see scenario_run.py for how the parts run).
 
 Truth: every place the simulator reported, recorded with its time by an independent
 client (ASCOM's alpyca, indipyclient), against skyfield's topocentric apparent place of
@@ -59,7 +60,8 @@ def test_stop_mid_pass_leaves_the_mount_at_rest(seen):
     assert np.ptp(dec) * 3600 < 5.0
 
 
-def test_a_driver_killed_mid_track_ends_the_track_with_a_fault_and_no_runaway(seen):
+def test_a_driver_killed_mid_track_ends_the_track_with_a_fault_and_no_runaway(seen_kill):
+    seen = seen_kill  # the kill part (run beside the pass's, scenario_run.py)
     op = seen["kill_op"]
     assert op["phase"] == "failed", op
     assert op["info"]["error"]["code"] == "mount_fault", op["info"]["error"]

@@ -1,6 +1,8 @@
-"""The checks of the `sky` part, shared by test_alpaca_sky.py and test_indi_sky.py: a star
-(slew, landing, sidereal track against astropy, the recorder), `vs run` of a small plan,
-the Sun refused and a slew routed round it (see scenario_run.py for how the part runs).
+"""The checks of the `sky` and `route` parts, shared by test_alpaca_sky.py and
+test_indi_sky.py: a star (slew, landing, sidereal track against astropy, the recorder),
+`vs run` of a small plan, an offset (fixture `seen`, the sky part); the Sun refused and a
+slew routed round it (`seen_route`, the route part, run at once beside it on its own
+simulator; see scenario_run.py for how the parts run).
 
 Truth: every place the simulator reported, recorded with its time by an independent
 client (ASCOM's alpyca, indipyclient), against astropy's topocentric apparent place of
@@ -55,7 +57,7 @@ def test_a_star_is_reached_and_tracked_on_astropys_place(seen):
     info = op["info"]
     samples = [s for s in seen["star_samples"]
                if s[0] * 1e6 >= info["tracking_from_us"] and s[0] * 1e6 <= info["tracking_to_us"]]
-    # Alpaca is read 20 times a second; INDI pushes a place only when it has changed (a
+    # the Alpaca observer reads 5 times a second; INDI pushes a place only when it has changed (a
     # well-held star: seldom), and the observer asks for it after 0.5 s without one
     assert len(samples) >= 4
     t = np.array([s[0] for s in samples])
@@ -65,12 +67,14 @@ def test_a_star_is_reached_and_tracked_on_astropys_place(seen):
     assert info["on_sky_rms_arcsec"] < 3.0  # the VSS's own figure agrees
 
 
-def test_the_sun_is_refused_before_anything_moves(seen):
+def test_the_sun_is_refused_before_anything_moves(seen_route):
+    seen = seen_route  # the route part (run beside the star's, scenario_run.py)
     assert seen["sun_refusal"]["code"] == "exclusion_zone", seen["sun_refusal"]
     assert "Sun" in seen["sun_refusal"]["message"]
 
 
-def test_a_slew_past_the_sun_goes_round_its_zone(seen):
+def test_a_slew_past_the_sun_goes_round_its_zone(seen_route):
+    seen = seen_route
     op = seen["route_op"]
     assert op["phase"] == "done", op
     assert op["info"].get("detour_deg"), "the straight path crossed the zone: a detour is due"

@@ -5,7 +5,7 @@ import pytest
 pytest.register_assert_rewrite("pass_checks")
 
 from pass_checks import *  # noqa: E402, F403
-from scenario_run import SCENARIO_TIMEOUT_S, scenario_fixture  # noqa: E402
+from scenario_run import SCENARIO_TIMEOUT_S, scenario_fixtures  # noqa: E402
 
 pytestmark = pytest.mark.timeout(SCENARIO_TIMEOUT_S + 60)
-seen = scenario_fixture("indi", "pass")
+seen_parts, seen, seen_kill = scenario_fixtures("indi", "pass", "kill")

@@ -4,8 +4,8 @@ import pytest
 
 pytest.register_assert_rewrite("sky_checks")
 
-from scenario_run import SCENARIO_TIMEOUT_S, scenario_fixture  # noqa: E402
+from scenario_run import SCENARIO_TIMEOUT_S, scenario_fixtures  # noqa: E402
 from sky_checks import *  # noqa: E402, F403
 
 pytestmark = pytest.mark.timeout(SCENARIO_TIMEOUT_S + 60)
-seen = scenario_fixture("indi", "sky")
+seen_parts, seen, seen_route = scenario_fixtures("indi", "sky", "route")

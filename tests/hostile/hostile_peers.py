@@ -237,10 +237,37 @@ class Session:
             if raw is not None or doc.get("id") == rid:
                 return doc
 
+    def next_reply(self, within_s: float) -> dict[str, Any] | None:
+        """The next answer (events skipped) if one comes within `within_s`, else None; a
+        frame half read when the time runs out stays buffered for the next call."""
+        deadline = time.monotonic() + within_s
+        try:
+            while (left_s := deadline - time.monotonic()) > 0:
+                self.sock.settimeout(left_s)
+                doc = self.reader.json()
+                if "event" not in doc:
+                    return doc
+                self.events.append(doc)
+                del self.events[:-100]
+        except TimeoutError:
+            pass
+        finally:
+            self.sock.settimeout(None)
+        return None
+
     def close(self) -> None:
         with contextlib.suppress(OSError):
             self.sock.sendall(ws_frame(struct.pack("!H", 1000), opcode=8))
         self.sock.close()
+
+
+def stranger(url: str, *, timeout_s: float = 30.0) -> Session:
+    """Connect and read the hello, without authenticating (no password check, so nothing
+    the server's throttle counts): such a peer may send `ping` and `auth` only."""
+    sock, rest = ws_open(url, timeout_s=timeout_s)
+    session = Session(sock, FrameReader(sock, rest))
+    session.events.append(session.reader.json())  # the hello
+    return session
 
 
 def login(url: str, password: str | None, *, timeout_s: float = 30.0) -> Session:

@@ -1,8 +1,8 @@
 """A `vs server --emulator` with passwords, on loopback, under the attacks of issue 25.
 
-Each test starts the server in a process of its own (lockstep simulated time, paced,
-so that the track's figures do not depend on how busy the host is) and attacks it from
-this process through raw sockets. What is checked is what an observatory would check
+Each attack starts the server in a process of its own (lockstep simulated time, paced, so
+that the track's figures do not depend on how busy the host is) and attacks it from this
+process through raw sockets; two light checks share one server. What is checked is what an observatory would check
 afterwards: the operation kept its id and never re-acquired, the tracking error
 against the target did not change, the log still holds the operations and names
 every wrong password, and the server still answers.
@@ -15,6 +15,7 @@ import os
 import threading
 import time
 
+import pytest
 from hostile_peers import (
     OBSERVER,
     OPERATOR,
@@ -225,7 +226,18 @@ def test_ten_thousand_connect_close_cycles_leave_the_operations_in_the_log(tmp_p
     assert still["id"] == op_id and still["phase"] == "tracking"
 
 
-def test_the_embedded_emulators_endpoint_refuses_clients_without_the_password(tmp_path):
+@pytest.fixture(scope="module")
+def quiet_server(tmp_path_factory):
+    """One server for the two tests that neither load it nor need its log to themselves
+    (the attacks above each have a server of their own: their figures and logs must be
+    theirs alone); no traceback on its stderr at the end."""
+    with vs_server(tmp_path_factory.mktemp("quiet"), "--speed", PACE, "--start",
+                   VEGA_NIGHT) as server:
+        yield server
+    assert "Traceback" not in server.stderr, server.stderr[-3000:]
+
+
+def test_the_embedded_emulators_endpoint_refuses_clients_without_the_password(quiet_server):
     import asyncio
 
     from astcom_client import Client
@@ -247,12 +259,12 @@ def test_the_embedded_emulators_endpoint_refuses_clients_without_the_password(tm
             values = await c.read(["mount.state_name"])
         return refused, values
 
-    with vs_server(tmp_path, "--speed", PACE, "--start", VEGA_NIGHT) as server:
-        op = login(server.url, OPERATOR)
-        track = op.request("track", {"star": "Vega"})
-        refused, values = asyncio.run(probe(server.emulator_url))
-        still = op.request("status")["result"]["operation"]
-        op.close()
+    server = quiet_server
+    op = login(server.url, OPERATOR)
+    track = op.request("track", {"star": "Vega"})
+    refused, values = asyncio.run(probe(server.emulator_url))
+    still = op.request("status")["result"]["operation"]
+    op.close()
     assert "takes the server's operator password and its observer password" in server.line
     assert refused.count("password") >= 2, refused
     assert "mount.state_name" in values
@@ -260,7 +272,7 @@ def test_the_embedded_emulators_endpoint_refuses_clients_without_the_password(tm
 
 
 def test_load_model_of_a_file_that_is_no_model_is_refused_without_stalling_the_server(
-        tmp_path):
+        quiet_server, tmp_path):
     fifo = tmp_path / "model.fifo"
     os.mkfifo(fifo)  # no writer: reading it would wait for ever
     huge = tmp_path / "huge.json"
@@ -268,11 +280,11 @@ def test_load_model_of_a_file_that_is_no_model_is_refused_without_stalling_the_s
         f.truncate(64 << 20)  # a sparse 64 MiB file
     cases = {str(fifo): "FIFO", "/dev/zero": "character device", str(tmp_path): "directory",
              str(huge): "more than", "model\x00.json": "NUL character"}
-    with vs_server(tmp_path, "--speed", PACE, "--start", VEGA_NIGHT) as server:
-        op = login(server.url, OPERATOR)
-        replies = {path: op.request("load_model", {"path": path}) for path in cases}
-        status = op.request("status")
-        op.close()
+    server = quiet_server
+    op = login(server.url, OPERATOR)
+    replies = {path: op.request("load_model", {"path": path}) for path in cases}
+    status = op.request("status")
+    op.close()
     for path, words in cases.items():
         reply = replies[path]
         assert reply["ok"] is False and reply["error"]["code"] == "bad_request", reply

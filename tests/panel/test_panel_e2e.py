@@ -139,6 +139,13 @@ def test_page_connects_and_discovers_the_endpoint_list(e2e):
     assert not result.get("pageErrors"), result.get("pageErrors")
 
 
+def test_the_plot_asks_for_no_animation_frame_while_idle_or_hidden(e2e):
+    """A redraw loop would cost the browser CPU on every operator's laptop for nothing."""
+    result, _ = e2e
+    assert result["idlePlotFrames"] == 0
+    assert result["hiddenPlot"]["samples"] > 0 and result["hiddenPlot"]["frames"] == 0
+
+
 def test_streamed_signal_reaches_the_plot_without_loss(e2e):
     result, _ = e2e
     plot = result["plot"]

@@ -3,6 +3,10 @@
 The emulator, the VSS and the program run share one `LockstepClock`: the night takes as
 long as the CPU needs, the same on every host, and the mount is never late. The run
 goes through the VSS API (`run_plan`), exactly as against a real server.
+
+Variants of a run (`Branches`: the same night with a fault injected here or there) are
+forked off it at a mount time instead of being simulated again from the start: until
+then they would move exactly as the run (virtualstar/forking.py).
 """
 
 from __future__ import annotations
@@ -10,20 +14,24 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from astcom_client import AstcomError
 from virtualstar.astro import Site, load_site
+from virtualstar.forking import ForkError, Forks, HeldWriter
 
 from .exceptions import PlanningError
 from .scheduler import Plan
 
 if TYPE_CHECKING:
+    from virtualstar.recorder.subscriber import Connector, Recorder
+
     from .recording import RunRecording  # the recorder (pyarrow) loads only to record
 
-__all__ = ["EMULATOR_LEAD_S", "TimedWrite", "run_plan_on_emulator"]
+__all__ = ["EMULATOR_LEAD_S", "Branch", "Branches", "TimedWrite", "run_plan_on_emulator"]
 
 EMULATOR_LEAD_S = 120.0  # the emulator starts this long before the plan: time to unpark
 
@@ -36,6 +44,67 @@ class TimedWrite:
     t_us: int
     name: str
     value: float
+
+
+@dataclass(frozen=True)
+class Branch:
+    """What a variant forked off a run (`Branches`) does from its fork on: the run, plus
+    its own `writes` (each at or after the fork), stopped at `until_us` if given (instead
+    of the run's `until_us`), and its recording (the run's until the fork) written to
+    `record_to` (store specs; required when the run records)."""
+
+    writes: Sequence[TimedWrite] = ()
+    until_us: int | None = None
+    record_to: tuple[str, ...] = ()
+
+    def as_doc(self) -> dict[str, Any]:
+        return {"writes": [[w.t_us, w.name, w.value] for w in self.writes],
+                "until_us": self.until_us, "record_to": list(self.record_to)}
+
+    @classmethod
+    def from_doc(cls, d: dict[str, Any]) -> Branch:
+        return cls(tuple(TimedWrite(int(t), str(n), float(v)) for t, n, v in d["writes"]),
+                   d["until_us"], tuple(d["record_to"]))
+
+
+@dataclass(frozen=True)
+class Branches:
+    """`count` variants of the run, forked off it (os.fork) at mount time `at_us`.
+
+    Each waits there, costing no CPU, until the run has ended; `orders(result)` (called
+    with the run's result, the run's recording written) then says what each does
+    (`count` Branch), and they run on in parallel. The run's result gains `branches`:
+    theirs, in order. A variant moves exactly as the run until its first own write (the
+    run is deterministic; tests/anomalies/test_forked_runs.py compares one with a variant
+    simulated whole). Linux only; a recording is held in memory until its end."""
+
+    at_us: int
+    count: int
+    orders: Callable[[dict[str, Any]], Sequence[Branch]]
+
+
+class _HeldRecording:
+    """A RunRecording whose recorder writes through a HeldWriter (`held`, once made):
+    the process may fork while it records. `stores` may be changed before the end."""
+
+    def __init__(self, recording: RunRecording) -> None:
+        self.recording = recording
+        self.stores = recording.stores
+        self.held: HeldWriter | None = None  # made with the recorder
+
+    def recorder(self, connect: Connector, source: str, *,
+                 event_sources: list | None = None) -> Recorder:
+        from virtualstar.recorder.subscriber import Recorder
+
+        self.held = HeldWriter(lambda: self.recording.writer(self.stores))
+        r = self.recording
+        return Recorder(connect, list(r.names), r.rate_hz, self.held, source=source,
+                        event_sources=event_sources)
+
+    def summary(self, recorder: Recorder) -> dict[str, Any]:
+        doc = recorder.summary.as_dict()
+        doc["store"] = ", ".join(self.stores)
+        return doc
 
 
 class _ServerLog:
@@ -55,7 +124,8 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
                          on_event: Callable[[str, dict[str, Any]], None] = lambda k, d: None,
                          record: RunRecording | None = None,
                          writes: Sequence[TimedWrite] = (),
-                         until_us: int | None = None) -> dict[str, Any]:
+                         until_us: int | None = None,
+                         branches: Branches | None = None) -> dict[str, Any]:
     """Run the plan on a fresh emulator + VSS; return the run (as the `program` command).
 
     speed: None runs as fast as the CPU allows, else at most ×speed real time;
@@ -67,7 +137,8 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     operator client of their own; an unknown parameter raises PlanningError before the
     run; until_us: stop the run at this mount time, as an operator's `stop` does (a
     rehearsal whose faults are in and found need not run the night out: until then it
-    runs exactly as the whole night). The result gains `wall_s`.
+    runs exactly as the whole night); branches: variants forked off the run (Branches;
+    the result gains `branches`). The result gains `wall_s`.
     """
     from virtualstar.launcher import embedded_vss
     from virtualstar.lockstep import LockstepClock, run_lockstep
@@ -77,25 +148,48 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
     clock = LockstepClock(start_us if start_us is not None
                           else plan.start_us - int(EMULATOR_LEAD_S * 1e6), pace=speed)
 
+    recording = _HeldRecording(record) if branches and record is not None else record
+    forks = Forks()
+
     async def main() -> dict[str, Any]:
         async with embedded_vss(clock=clock, site=site or _plan_site(plan)) as vss:
-            writer = await _start_writes(vss, clock, writes) if writes else None
-            stopper = (asyncio.ensure_future(_stop_at(vss, clock, until_us))
-                       if until_us is not None else None)
+            # writes, stops, the branch point: cancelled at the end, their errors raised
+            helpers = await _helpers(vss, writes, until_us)
+            if branches is not None:
+                helpers.append(asyncio.ensure_future(fork_at(vss, branches.at_us, helpers)))
             try:
-                if record is None:
+                if recording is None:
                     return await follow(vss)
                 return await recorded(vss)
             finally:
-                if stopper is not None:
-                    stopper.cancel()
+                for task in helpers:
+                    task.cancel()
                     with contextlib.suppress(asyncio.CancelledError):
-                        await stopper  # a stop the server refused raises here
-                if writer is not None:
-                    if not writer.done():
-                        writer.cancel()
-                    with contextlib.suppress(asyncio.CancelledError):
-                        await writer  # a write the emulator refused raises here
+                        await task  # a stop or a write refused raises here
+
+    stoppers: list[asyncio.Future] = []
+
+    async def _helpers(vss, writes, until_us) -> list[asyncio.Future]:
+        tasks = [await _start_writes(vss, clock, writes)] if writes else []
+        if until_us is not None:
+            for old in stoppers:
+                old.cancel()  # a branch's stop replaces the run's
+            stoppers.append(asyncio.ensure_future(_stop_at(vss, clock, until_us)))
+            tasks.append(stoppers[-1])
+        return tasks
+
+    async def fork_at(vss, at_us: int, helpers: list[asyncio.Future]) -> None:
+        assert branches is not None
+        await clock.sleep_until_us(at_us)
+        await clock.settled()  # a quiet moment: nothing half done is copied
+        for _ in range(branches.count):
+            doc = forks.fork(asyncio.get_running_loop())
+            if doc is not None:  # this process is the variant from here on
+                order = Branch.from_doc(doc)
+                if isinstance(recording, _HeldRecording):
+                    recording.stores = order.record_to
+                helpers += await _helpers(vss, order.writes, order.until_us)
+                return
 
     async def recorded(vss) -> dict[str, Any]:
         from virtualstar.eventlog import VssEventSource
@@ -105,9 +199,9 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
         async def connect():
             return await vss.emulator.connect_in_memory(name="vs-run-recorder")
 
-        assert record is not None
+        assert recording is not None
         result, summary = await record_beside(
-            record, connect, "embedded emulator", follow(vss),
+            recording, connect, "embedded emulator", follow(vss),
             event_sources=[VssEventSource(_ServerLog(vss.server))])
         result["recording"] = summary
         return result
@@ -128,9 +222,47 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
         vss.server.unsubscribe(events)
         return task.result()
 
-    result = run_lockstep(main(), clock)
+    try:
+        result = run_lockstep(main(), clock)
+    except BaseException:
+        if forks.in_child:
+            forks.end_child(error=traceback.format_exc())
+        forks.abandon()
+        raise
     result["wall_s"] = time.perf_counter() - t0
+    if forks.in_child:
+        forks.end_child(result=result)
+    if branches is not None:
+        try:
+            result["branches"] = _run_branches(branches, forks, result, record is not None)
+        finally:
+            forks.abandon()
     return result
+
+
+def _run_branches(branches: Branches, forks: Forks, result: dict[str, Any],
+                  recorded: bool) -> list[dict[str, Any]]:
+    """Send the variants waiting at the branch point their orders; return their results."""
+    if len(forks.children) != branches.count:
+        raise PlanningError(f"the run ended before its branch point (mount time "
+                            f"{branches.at_us}): no variant was forked")
+    orders = list(branches.orders(result))
+    if len(orders) != branches.count:
+        raise PlanningError(f"{len(orders)} branch orders for {branches.count} forked "
+                            "variants")
+    for b in orders:
+        if any(w.t_us < branches.at_us for w in b.writes) or (
+                b.until_us is not None and b.until_us < branches.at_us):
+            raise PlanningError(f"a branch forked at mount time {branches.at_us} cannot "
+                                "write or stop before it")
+        if recorded and not b.record_to:
+            raise PlanningError("a branch of a recorded run needs stores of its own "
+                                "(record_to)")
+    forks.send([b.as_doc() for b in orders])
+    try:
+        return forks.wait()
+    except ForkError as exc:
+        raise PlanningError(str(exc)) from None
 
 
 async def _start_writes(vss, clock, writes: Sequence[TimedWrite]) -> asyncio.Task:

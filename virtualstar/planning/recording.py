@@ -47,10 +47,14 @@ class RunRecording:
     def recorder(self, connect: Connector, source: str, *,
                  event_sources: list | None = None) -> Recorder:
         """`event_sources`: other event logs kept in the store (the VSS's: its phases)."""
-        writers = [open_writer(parse_store_spec(s)) for s in self.stores]
-        writer = writers[0] if len(writers) == 1 else TeeWriter(writers)
-        return Recorder(connect, list(self.names), self.rate_hz, writer, source=source,
+        return Recorder(connect, list(self.names), self.rate_hz, self.writer(), source=source,
                         event_sources=event_sources)
+
+    def writer(self, stores: tuple[str, ...] | None = None):
+        """A writer into `stores` (default: this recording's), all of them at once."""
+        writers = [open_writer(parse_store_spec(s))
+                   for s in (self.stores if stores is None else stores)]
+        return writers[0] if len(writers) == 1 else TeeWriter(writers)
 
     def summary(self, recorder: Recorder) -> dict[str, Any]:
         doc = recorder.summary.as_dict()

@@ -11,6 +11,10 @@ the recorder. Simulated time runs as fast as the recorder keeps up: the loop com
 block of ticks, publishes it, and waits until the recorder has received all but the
 last few packets (so nothing is ever dropped, whatever the machine's load).
 
+Variants of the run (`SineBranch`: the same sine with faults injected from a moment on)
+are forked off it at that moment (virtualstar/forking.py) instead of being recorded again
+from the start: until then they would be the same recording.
+
 The commanded azimuth is ``az(t) = az0 + v·t − (v/ω)·sin(ω·t)``: its speed
 ``v·(1 − cos ω·t)`` starts at zero (no step at the start), never reverses, and averages
 `v` (0.0095 rad/min in the paper: 6.8 rad in 12 h).
@@ -21,7 +25,8 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from collections.abc import Callable
+import traceback
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,7 +40,7 @@ from .parquet_store import ParquetStoreReader, ParquetStoreWriter
 from .plots import plot_envelope, plot_window
 from .subscriber import Recorder, RecordingSummary
 
-__all__ = ["Injection", "SineExperiment", "SineResult", "commanded_position",
+__all__ = ["Injection", "SineBranch", "SineExperiment", "SineResult", "commanded_position",
            "run_sine_experiment"]
 
 DEFAULT_START_US = 1_772_395_200_000_000  # 2026-03-01T20:00:00Z, an evening in mount time
@@ -61,6 +66,18 @@ class Injection:
 
     def at_us(self, t0_us: int) -> int:
         return t0_us + round(self.at_s * 1e6)
+
+
+@dataclass(frozen=True)
+class SineBranch:
+    """A variant of the run, forked off it (os.fork) `at_s` seconds after the trajectory
+    starts: the same run (the same sine), plus its own `injections` (none before
+    `at_s`), recorded into `out_dir`/store until `stop_s` (default: the run's end)."""
+
+    at_s: float
+    injections: tuple[Injection, ...]
+    out_dir: str
+    stop_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -137,6 +154,7 @@ class SineResult:
     sim_s: float
     ticks: int
     timings_s: dict[str, float] = field(default_factory=dict)
+    branches: list[dict[str, object]] = field(default_factory=list)  # their as_dict()
 
     @property
     def speed(self) -> float:
@@ -150,7 +168,8 @@ class SineResult:
                 "gaps": len(self.recording.gaps), "ticks": self.ticks,
                 "trajectory_t0_us": self.trajectory_t0_us, "sim_s": self.sim_s,
                 "wall_s": round(self.wall_s, 3), "speed": round(self.speed, 1),
-                "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()}}
+                "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
+                "branches": self.branches}
 
 
 async def _embedded_emulator(exp: SineExperiment) -> tuple[Any, Endpoint]:
@@ -199,14 +218,46 @@ async def _push_until(control: Client, exp: SineExperiment, t0_us: int, pushed_t
 
 async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
                               on_progress: Callable[[float, float, float], None] | None = None,
-                              plots: bool = True, detect: bool = False) -> SineResult:
+                              plots: bool = True, detect: bool = False,
+                              branches: Sequence[SineBranch] = ()) -> SineResult:
     """Run `exp` on an in-process emulator, record into `out_dir`/store, write the plots.
 
     `on_progress(sim_s, total_s, speed)` is called about once per simulated minute.
     `detect` runs the anomaly detectors live; what they find goes into the store's event
-    log (virtualstar.anomalies.live).
-    Raises ExperimentError when the mount faults or a sample is lost.
+    log (virtualstar.anomalies.live). `branches` are variants forked off the run (they
+    run in processes of their own, in parallel; the result's `branches` holds theirs).
+    Raises ExperimentError when the mount faults or a sample is lost, here or in a branch.
     """
+    from virtualstar.forking import ForkError, Forks
+
+    for b in branches:
+        if not 0 < b.at_s < (b.stop_s or exp.duration_us / 1e6) <= exp.duration_us / 1e6 or \
+                any(j.at_s < b.at_s for j in b.injections):
+            raise ExperimentError(f"a branch at {b.at_s} s must stop after it, within the run, "
+                                  "and inject nothing before it")
+    forks = Forks()
+    try:
+        result = await _run(exp, out_dir, on_progress, plots, detect, branches, forks)
+    except BaseException:
+        if forks.in_child:
+            forks.end_child(error=traceback.format_exc())
+        forks.abandon()
+        raise
+    if forks.in_child:
+        forks.end_child(result=result.as_dict())
+    if branches:
+        try:
+            result.branches = forks.wait()
+        except ForkError as exc:
+            raise ExperimentError(str(exc)) from None
+        finally:
+            forks.abandon()
+    return result
+
+
+async def _run(exp: SineExperiment, out_dir: str | Path,
+               on_progress: Callable[[float, float, float], None] | None, plots: bool,
+               detect: bool, branches: Sequence[SineBranch], forks) -> SineResult:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     store = out / "store"
@@ -215,7 +266,12 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
     emb, served = await _embedded_emulator(exp)
     emu = emb.emulator
     control = await Client.open(emu.endpoint.connect_in_memory(), name="experiment")
-    writer = ParquetStoreWriter(store)
+    if branches:  # a store that can be forked: held in memory, written whole at the end
+        from virtualstar.forking import HeldWriter
+
+        writer = HeldWriter(lambda: ParquetStoreWriter(store))
+    else:
+        writer = ParquetStoreWriter(store)
 
     async def connect() -> Client:
         return await Client.open(emu.endpoint.connect_in_memory(maxsize=256), name="recorder",
@@ -253,13 +309,29 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
         loop_start = time.perf_counter()
         step_s = 0.0
         pending = sorted(exp.injections, key=lambda j: j.at_s)
+        forking = sorted(branches, key=lambda b: b.at_s)
         while done < total_ticks:
             n = min(BLOCK_TICKS, total_ticks - done)
+            while forking and round(forking[0].at_s * 1e6) + t0_us <= emb.mount_time_us:
+                b = forking.pop(0)
+                if forks.fork(asyncio.get_running_loop(), orders=b) is not None:
+                    # this process is the variant from here on: its faults, store and end
+                    forking = []
+                    pending = sorted(b.injections, key=lambda j: j.at_s)
+                    out = Path(b.out_dir)
+                    out.mkdir(parents=True, exist_ok=True)
+                    store = out / "store"
+                    if b.stop_s is not None:
+                        total_ticks = (round(b.stop_s * 1e6) + START_DELAY_US) // 100
+                    n = min(BLOCK_TICKS, total_ticks - done)
             while pending and pending[0].at_us(t0_us) <= emb.mount_time_us:
                 j = pending.pop(0)
                 await control.write({j.name: j.value})
-            if pending:  # end the block on the tick the next injection is due
-                n = max(1, min(n, (pending[0].at_us(t0_us) - emb.mount_time_us) // 100))
+            # end the block on the tick the next injection or fork is due
+            due = [j.at_us(t0_us) for j in pending[:1]] + \
+                [round(b.at_s * 1e6) + t0_us for b in forking[:1]]
+            if due:
+                n = max(1, min(n, (min(due) - emb.mount_time_us) // 100))
             s0 = time.perf_counter()
             emu.advance(n)
             step_s += time.perf_counter() - s0
@@ -280,6 +352,8 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
                 if on_progress is not None:
                     wall = time.perf_counter() - loop_start
                     on_progress(done / 10_000, total_ticks / 10_000, done / 10_000 / max(wall, 1e-9))
+        if forking:
+            raise ExperimentError(f"the run ended before its branch at {forking[0].at_s} s")
         state = await control.read([f"axis.{exp.axis}.state_name", f"axis.{exp.axis}.fault_text",
                                     "traj.underruns", "traj.late"])
         # the endpoint sends a packet when it is full: run on until the last one is out

@@ -11,6 +11,18 @@ const ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '
   '--disable-background-networking', '--disable-component-update', '--disable-sync',
   '--disable-dev-shm-usage'];
 
+// How often page.waitForFunction evaluates its condition unless told otherwise. Playwright's
+// default polls at every animation frame, which makes the browser render 60 frames a second
+// for as long as a test waits; every condition the scripts wait for holds for seconds once
+// true (a state reached, a count grown), so a tenth of a second loses nothing.
+export const WAIT_POLL_MS = 100;
+
+function pollingEvery(page, ms) {
+  const waitForFunction = page.waitForFunction.bind(page);
+  page.waitForFunction = (fn, arg, options = {}) => waitForFunction(fn, arg, { polling: ms, ...options });
+  return page;
+}
+
 /** Return {context, close()}: a persistent context in a fresh, empty profile folder. */
 export async function launch({ width = 1400, height = 900 } = {}) {
   const profile = mkdtempSync(join(tmpdir(), 'panel-chromium-'));
@@ -21,6 +33,8 @@ export async function launch({ width = 1400, height = 900 } = {}) {
     viewport: { width, height },
     acceptDownloads: true,
   });
+  const newPage = context.newPage.bind(context);
+  context.newPage = async (...args) => pollingEvery(await newPage(...args), WAIT_POLL_MS);
   return {
     context,
     async close() {

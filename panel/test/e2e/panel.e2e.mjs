@@ -36,6 +36,12 @@ try {
   await openAndConnect(page, env.PANEL_URL, env.ASTCOM_URL, env.ASTCOM_PASSWORD);
   step('connected');
   result.entries = await page.evaluate(() => window.panelProbe.session.entries.length);
+  // The plot asks for animation frames only when it has something new to draw: none on an
+  // idle page (a frame loop there costs the browser CPU for nothing)
+  const plotFrames = () => page.evaluate(() => window.panelProbe.probe.plotFrames);
+  const idleFrames = await plotFrames();
+  await page.waitForTimeout(1000);
+  result.idlePlotFrames = (await plotFrames()) - idleFrames;
 
   // Input: power the mount on (Start), then check a function call returns a value.
   await tab(page, 'Input');
@@ -51,6 +57,12 @@ try {
   // Signals: stream two signals at 1 kHz on the stream channel.
   await streamSignals(page, ['axis.az.error', 'axis.az.position_deg'], 1000);
   step('streaming');
+  // nor while the samples stream in but the Plot tab is not shown
+  const hiddenFrames = await plotFrames();
+  const hiddenSamples = await page.evaluate(() => window.panelProbe.session.stream.samples);
+  await page.waitForTimeout(500);
+  result.hiddenPlot = { frames: (await plotFrames()) - hiddenFrames,
+    samples: (await page.evaluate(() => window.panelProbe.session.stream.samples)) - hiddenSamples };
 
   // Compute: an expression over a streamed signal, checked sample by sample in the page.
   await computeSeries(page, 'az_err_arcsec', 'axis.az.error * 3600 * 180 / pi', { unit: 'arcsec', timeout: 10_000 });

@@ -25,6 +25,21 @@ test('ring buffer keeps the newest samples in order after wrapping', () => {
   assert.equal(s.latest('a'), 1499);
 });
 
+test('the store tells its subscribers of each change, and only while subscribed', () => {
+  const s = new SeriesStore();
+  let calls = 0;
+  const unsubscribe = s.subscribe(() => { calls += 1; });
+  const v0 = s.version;
+  s.reset(['a'], 100);
+  fill(s, 10, 100, (i) => i);
+  fill(s, 10, 100, (i) => i, 10);
+  assert.equal(calls, 3);
+  assert.equal(s.version, v0 + 3); // a reset moves the version on too (never back to 0)
+  unsubscribe();
+  fill(s, 10, 100, (i) => i, 20);
+  assert.equal(calls, 3);
+});
+
 test('decimated plot data keeps every bucket minimum and maximum of the window', () => {
   const s = new SeriesStore();
   s.reset(['a'], 10_000);
