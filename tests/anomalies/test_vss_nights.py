@@ -218,11 +218,12 @@ def test_live_detection_raises_the_same_anomalies_as_the_offline_run(nights):
 
     assert report.anomalies
     assert [key(a) for a in live.detection.anomalies] == [key(a) for a in report.anomalies]
-    # the same scores to a part in 1e12, not rounded to 9 decimals: numpy's SIMD loops may
-    # round a last bit by an element's place in memory (the live run's blocks against the
-    # offline arrays), and a score on a rounding boundary then differed once in the 9th decimal
+    # the same scores to a part in 1e9, not rounded to 9 decimals: the live run's sums over
+    # its blocks and the offline run's over whole arrays differ in their last bits (measured:
+    # 4e-12 relative, varying from run to run), and a score on a rounding boundary then
+    # differed once in the 9th decimal
     assert [a.score for a in live.detection.anomalies] == pytest.approx(
-        [a.score for a in report.anomalies], rel=1e-12, abs=0.0)
+        [a.score for a in report.anomalies], rel=1e-9, abs=0.0)
     # each reported once, as it opened
     assert sorted((a.start_us, a.kind, a.axis) for a in live.reported) == \
         [(a.start_us, a.kind, a.axis) for a in report.anomalies]
