@@ -29,7 +29,7 @@ import selectors
 import signal
 import tempfile
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any, NoReturn
 
 if TYPE_CHECKING:
@@ -202,6 +202,19 @@ class Forks:
         if errors:
             raise ForkError(f"{len(errors)} forked variant(s) failed; the first: {errors[0]}")
         return out
+
+    @contextlib.contextmanager
+    def guard(self) -> Iterator[None]:
+        """Around a run that may fork: if it fails, a child leaves its traceback for the
+        parent and exits (it never returns into the caller's code), and the parent ends
+        and reaps its children before the error goes on."""
+        try:
+            yield
+        except BaseException:
+            if self.in_child:
+                self.end_child(error=traceback.format_exc())
+            self.abandon()
+            raise
 
     def end_child(self, *, result: Any = None, error: str = "") -> NoReturn:
         """In a child: leave its result (or error) for the parent and exit."""

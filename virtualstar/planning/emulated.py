@@ -14,7 +14,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -222,13 +221,8 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
         vss.server.unsubscribe(events)
         return task.result()
 
-    try:
+    with forks.guard():
         result = run_lockstep(main(), clock)
-    except BaseException:
-        if forks.in_child:
-            forks.end_child(error=traceback.format_exc())
-        forks.abandon()
-        raise
     result["wall_s"] = time.perf_counter() - t0
     if forks.in_child:
         forks.end_child(result=result)

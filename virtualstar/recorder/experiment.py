@@ -25,7 +25,6 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -236,13 +235,8 @@ async def run_sine_experiment(exp: SineExperiment, out_dir: str | Path, *,
             raise ExperimentError(f"a branch at {b.at_s} s must stop after it, within the run, "
                                   "and inject nothing before it")
     forks = Forks()
-    try:
+    with forks.guard():
         result = await _run(exp, out_dir, on_progress, plots, detect, branches, forks)
-    except BaseException:
-        if forks.in_child:
-            forks.end_child(error=traceback.format_exc())
-        forks.abandon()
-        raise
     if forks.in_child:
         forks.end_child(result=result.as_dict())
     if branches:
