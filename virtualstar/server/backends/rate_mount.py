@@ -246,6 +246,7 @@ class RateMountLink(ConnectionWaits):
         self.pace = PollPace(driver.poll_s, getattr(driver, "rest_poll_s", 0.0) or driver.poll_s)
         self._wake = asyncio.Event()
         self._read_fast = True  # the pause before the newest read was the fast one
+        self._pause_s = driver.poll_s  # the pause chosen last (`_pause`)
         self._demand_seen: tuple[object, float, bool] = (None, 0.0, False)
         self.last_error_arcsec: float | None = None  # set by the rate loop (status)
         # how each driver axis moves the place of date: measured by the rate loop's first
@@ -285,8 +286,7 @@ class RateMountLink(ConnectionWaits):
             "capabilities": self.capabilities.as_dict(),
             "report_period_s": period,
             "report_rate_hz": None if not period else 1.0 / period,
-            "poll_period_s": (None if not self.driver.poll_s else self.pace.fast_s
-                              if self.pace.fast(time.monotonic()) else self.pace.rest_s),
+            "poll_period_s": self._pause_s or None,  # the pause the poller is in
             "poll_fast_period_s": self.driver.poll_s or None,
             "poll_rest_period_s": self.pace.rest_s if self.driver.poll_s else None,
             "reads": self.stats.reads,
@@ -446,7 +446,7 @@ class RateMountLink(ConnectionWaits):
     async def _pause(self) -> None:
         """Wait before the next read: the fast period while busy (`_busy`) or lately so,
         else the rest period, cut short by a command (`call` sets `_wake`)."""
-        period = self.pace.period_s(time.monotonic(), self._busy())
+        period = self._pause_s = self.pace.period_s(time.monotonic(), self._busy())
         self._read_fast = period <= self.pace.fast_s
         if self._read_fast:
             await asyncio.sleep(period)
