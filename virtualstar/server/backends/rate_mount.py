@@ -83,7 +83,7 @@ DEMAND_STILL_ARCSEC = 1.0  # a followed path that moves less than this within
 RATE_AT_REST_ARCSEC_S = 1.0  # commanded rates below this move the place < 0.25″ in a rest
 # period: a star's fine corrections, not a motion that needs fast reads
 ERROR_AT_REST_ARCSEC = 1.0  # a followed path held within this needs no fast reads
-DEMAND_CHECK_S = 0.5  # how often (wall s) whether the followed path moves is worked out
+DEMAND_CHECK_S = 1.0  # how often (wall s) whether the followed path moves is worked out
 PUSH_SILENCE_ARCSEC = 1.0  # a silent pushing driver's last place counts as current while the
 # commanded rates could have moved it less than this since it was pushed
 
