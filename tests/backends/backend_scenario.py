@@ -136,7 +136,10 @@ class Simulator:
             # connections held 300 s) but without a log line per request: a tenth of the
             # CPU of each of the ~60 requests a second the VSS and the observer make
             env = dict(os.environ, ASTRA_SIMULATORS_CONFIG=str(self.alpaca_config()))
-            cmd = [sys.executable, "-m", "uvicorn", "alpaca_simulators.main:app", "--host",
+            # (alpaca_sim_serve.py: uvicorn's own command, the camera's image library loaded
+            # only if a camera image is made)
+            cmd = [sys.executable, str(Path(__file__).with_name("alpaca_sim_serve.py")),
+                   "alpaca_simulators.main:app", "--host",
                    "127.0.0.1", "--port", str(self.port), "--timeout-keep-alive", "300",
                    "--no-access-log"]
         else:

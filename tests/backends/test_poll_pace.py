@@ -110,6 +110,7 @@ def test_at_rest_the_link_stops_reading_and_any_command_wakes_it_at_once(eop):
         link = _link(driver, eop)
         link.start()
         await link.wait_connected(10)
+        await link.call("stop")  # tracking off, no rates: seen at rest while read fast
         n = await _reads_stop(link)
         assert link.state_name() == "holding"
         status = link.describe()

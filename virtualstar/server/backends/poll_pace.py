@@ -9,8 +9,8 @@ VSS's (~0.15 core each on alpaca-simulators). `PollPace` is the choice, free of 
 
 * **fast** (`fast_s`, the driver's ``poll_s``) while the link says it is *busy*
   (`RateMountLink._busy`): a call in progress (a goto waits on the slew's end), rates
-  commanded that move the place (more than ~1″/s), the driver flags a slew, the mount
-  not yet seen at rest after a stop, a followed path more than ~1″ off, or one that
+  commanded that move the place (more than ~1″/s), the driver flags a goto, a followed
+  path more than ~1″ off, or one that
   moves within `DEMAND_LOOKAHEAD_S` (a satellite's run-up and pass, an offset); and for
   `hold_s` after any of these and after every command, so that a procedure's next step
   (the loop's sign probe and join after a goto) still sees fresh reports;

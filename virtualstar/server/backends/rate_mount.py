@@ -457,8 +457,8 @@ class RateMountLink(ConnectionWaits):
 
     def _busy(self) -> bool:
         """Whether fresh reports matter now: a call in progress (a goto waits on its slew's
-        end), the mount moving at commanded rates or slewing or not yet seen at rest, or a
-        followed path that moves soon or is not yet held (`poll_pace`). The rate loop's
+        end), the mount moving at commanded rates or slewing, or a followed path that moves
+        soon or is not yet held (`poll_pace`). The rate loop's
         corrections of a star held by the mount's own tracking (hundredths of an arcsecond
         a second, errors of hundredths of an arcsecond) are not motion."""
         rep = self._report
@@ -466,11 +466,13 @@ class RateMountLink(ConnectionWaits):
             return True
         if math.hypot(*self._rates_rad_s) * ARCSEC_PER_RAD > RATE_AT_REST_ARCSEC_S:
             return True
-        f = rep.flags
         # an Alpaca driver flags Slewing while any MoveAxis rate is on, however small: a
-        # slew is a goto only when no rates are commanded
-        still = self._rates_rad_s == (0.0, 0.0)
-        if (f.slewing and still) or not (f.at_park or f.tracking or self._at_rest):
+        # slew is a goto only when no rates are commanded. (Whether the mount is seen at
+        # rest is not asked: a stop is a command, read fast for the hold after it, and a
+        # mount held with tracking off moves 15″/s in right ascension, so a read a loaded
+        # host delayed by 70 ms no longer looks at rest; that judgement goes on at the
+        # rest pace.)
+        if rep.flags.slewing and self._rates_rad_s == (0.0, 0.0):
             return True
         if self.demand is None:
             return False
