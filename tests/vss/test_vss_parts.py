@@ -42,6 +42,79 @@ def test_error_statistics_over_any_window_equal_a_direct_computation():
     assert w.n == pytest.approx(10_000, abs=200)
 
 
+def _stats_by_plain_python(h: TrackingErrorHistory, from_us, to_us) -> dict:
+    """The window's figures from the history's bins, summed one by one in Python (the rules
+    `stats` states: sequential sums, the first of equal maxima, a bin's clock offset the
+    larger in size of the measurements just before and after its start)."""
+    import bisect
+
+    sel = h._select(from_us, to_us).tolist()
+    n = sum(b[1] for b in sel)
+    clock = []
+    for b in sel:
+        k = bisect.bisect_right(h._offset_t, int(b[0]) * h.bin_us)
+        around = h._offset_us[max(k - 1, 0):k + 1]
+        offset = max(around, key=abs) if around else 0
+        clock.append((h._rates.get(int(b[0]), 0.0) * abs(offset) / 1e6, offset))
+    sky_n = sky_s = sky_peak = 0.0
+    for b, (c, _) in zip(sel, clock, strict=True):
+        cnt, s2, pk = (b[6], b[7], b[8]) if b[6] > 0 else (b[1], b[2], b[5])
+        sky_n += cnt
+        sky_s += s2 + cnt * c * c
+        sky_peak = max(sky_peak, pk + c)
+    targeted = [b for b in sel if b[6] > 0]
+    n_t = sum(b[6] for b in sel)
+    return {"n": int(n), "rms_arcsec": math.sqrt(sum(b[2] for b in sel) / n),
+            "peak_arcsec": max(b[5] for b in sel),
+            "az_rms_arcsec": math.sqrt(sum(b[3] for b in sel) / n),
+            "el_rms_arcsec": math.sqrt(sum(b[4] for b in sel) / n),
+            "from_us": int(sel[0][0]) * h.bin_us, "to_us": (int(sel[-1][0]) + 1) * h.bin_us,
+            "on_sky_rms_arcsec": math.sqrt(sky_s / sky_n), "on_sky_peak_arcsec": sky_peak,
+            "clock_error_peak_arcsec": max(c[0] for c in clock),
+            "clock_offset_us": max((c[1] for c in clock), key=abs), "target_samples": int(n_t),
+            "on_target_rms_arcsec": math.sqrt(sum(b[7] for b in targeted) / n_t) if n_t
+            else math.nan,
+            "on_target_peak_arcsec": max((b[8] for b in targeted), default=math.nan),
+            "off_target_s": sum(b[9] for b in sel) / 1e6,
+            "off_target_threshold_arcsec": h.off_target_arcsec,
+            "planned_deviation_peak_arcsec": max((b[10] for b in targeted), default=math.nan),
+            "planned_deviation_s": sum(b[11] for b in sel) / 1e6}
+
+
+def test_compiled_window_figures_equal_the_bins_summed_one_by_one_in_python():
+    """`stats` sums the bins compiled (a status asks for three windows): every figure equals,
+    to the last bit, the same bins summed in Python, over windows inside, across and outside
+    the clock-offset measurements, with and without a followed target."""
+    rng = np.random.default_rng(7)
+    t0 = 1_700_000_000_000_000
+    t = t0 + np.arange(120_000, dtype=np.int64) * 1000  # 1 kHz, 120 s
+    az, el_err = rng.normal(0, 0.3, t.size), rng.normal(0, 0.2, t.size)
+    el = np.radians(rng.uniform(10, 80, t.size))
+    on = np.abs(rng.normal(0, 3.0, t.size))
+    on[(t >= t0 + 40_000_000) & (t < t0 + 70_000_000)] = np.nan  # no target: a slew
+    dev = np.abs(rng.normal(0, 2.0, t.size))
+    h = TrackingErrorHistory()
+    for k in range(0, t.size, 1013):
+        h.add(t[k:k + 1013], az[k:k + 1013], el_err[k:k + 1013], el[k:k + 1013],
+              on[k:k + 1013], np.where(np.isnan(on[k:k + 1013]), np.nan, dev[k:k + 1013]))
+    h.note_rates(t[::50], rng.uniform(10.0, 2000.0, t[::50].size))
+    for s, off in ((20, 300), (20.05, -300), (35, 0), (50, -1_200), (50.3, 900), (90, 40)):
+        h.note_clock_offset(t0 + int(s * 1e6), off)  # equal sizes of both signs: the first
+    windows = [(None, None), (t0 + 3_000_000, t0 + 17_000_000), (t0 + 19_950_000, t0 + 20_150_000),
+               (t0 + 30_000_000, t0 + 100_000_000), (t0 + 45_000_000, t0 + 65_000_000),
+               (t0 + 89_000_000, None), (t0 + 5_000_050, t0 + 5_100_000),
+               (t0 + 20_000_000, t0 + 20_100_000)]  # starts in the equal sizes
+    windows += [(h.last_t_us - seconds * 1_000_000, None) for seconds in (1, 10, 60)]
+    for lo, hi in windows:
+        ours = h.stats(lo, hi).as_dict()
+        plain = _stats_by_plain_python(h, lo, hi)
+        assert ours.keys() == plain.keys()
+        for key, value in plain.items():
+            assert ours[key] == value or (math.isnan(ours[key]) and math.isnan(value)), (
+                lo, hi, key, ours[key], value)
+    assert h.window(10.0).n == pytest.approx(10_000, abs=100)
+
+
 def test_error_history_keeps_a_bounded_number_of_bins():
     h = TrackingErrorHistory(max_bins=50)
     t = np.arange(0, 20_000_000, 1000, dtype=np.int64)
