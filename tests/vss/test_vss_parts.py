@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from error_windows import stats_by_plain_python
 
 from virtualstar.astro import MountLimits, Satellite, Site, UtcTimes, observe_mount_times
 from virtualstar.server import (
@@ -42,45 +43,6 @@ def test_error_statistics_over_any_window_equal_a_direct_computation():
     assert w.n == pytest.approx(10_000, abs=200)
 
 
-def _stats_by_plain_python(h: TrackingErrorHistory, from_us, to_us) -> dict:
-    """The window's figures from the history's bins, summed one by one in Python (the rules
-    `stats` states: sequential sums, the first of equal maxima, a bin's clock offset the
-    larger in size of the measurements just before and after its start)."""
-    import bisect
-
-    sel = h._select(from_us, to_us).tolist()
-    n = sum(b[1] for b in sel)
-    clock = []
-    for b in sel:
-        k = bisect.bisect_right(h._offset_t, int(b[0]) * h.bin_us)
-        around = h._offset_us[max(k - 1, 0):k + 1]
-        offset = max(around, key=abs) if around else 0
-        clock.append((h._rates.get(int(b[0]), 0.0) * abs(offset) / 1e6, offset))
-    sky_n = sky_s = sky_peak = 0.0
-    for b, (c, _) in zip(sel, clock, strict=True):
-        cnt, s2, pk = (b[6], b[7], b[8]) if b[6] > 0 else (b[1], b[2], b[5])
-        sky_n += cnt
-        sky_s += s2 + cnt * c * c
-        sky_peak = max(sky_peak, pk + c)
-    targeted = [b for b in sel if b[6] > 0]
-    n_t = sum(b[6] for b in sel)
-    return {"n": int(n), "rms_arcsec": math.sqrt(sum(b[2] for b in sel) / n),
-            "peak_arcsec": max(b[5] for b in sel),
-            "az_rms_arcsec": math.sqrt(sum(b[3] for b in sel) / n),
-            "el_rms_arcsec": math.sqrt(sum(b[4] for b in sel) / n),
-            "from_us": int(sel[0][0]) * h.bin_us, "to_us": (int(sel[-1][0]) + 1) * h.bin_us,
-            "on_sky_rms_arcsec": math.sqrt(sky_s / sky_n), "on_sky_peak_arcsec": sky_peak,
-            "clock_error_peak_arcsec": max(c[0] for c in clock),
-            "clock_offset_us": max((c[1] for c in clock), key=abs), "target_samples": int(n_t),
-            "on_target_rms_arcsec": math.sqrt(sum(b[7] for b in targeted) / n_t) if n_t
-            else math.nan,
-            "on_target_peak_arcsec": max((b[8] for b in targeted), default=math.nan),
-            "off_target_s": sum(b[9] for b in sel) / 1e6,
-            "off_target_threshold_arcsec": h.off_target_arcsec,
-            "planned_deviation_peak_arcsec": max((b[10] for b in targeted), default=math.nan),
-            "planned_deviation_s": sum(b[11] for b in sel) / 1e6}
-
-
 def test_compiled_window_figures_equal_the_bins_summed_one_by_one_in_python():
     """`stats` sums the bins compiled (a status asks for three windows): every figure equals,
     to the last bit, the same bins summed in Python, over windows inside, across and outside
@@ -107,7 +69,7 @@ def test_compiled_window_figures_equal_the_bins_summed_one_by_one_in_python():
     windows += [(h.last_t_us - seconds * 1_000_000, None) for seconds in (1, 10, 60)]
     for lo, hi in windows:
         ours = h.stats(lo, hi).as_dict()
-        plain = _stats_by_plain_python(h, lo, hi)
+        plain = stats_by_plain_python(h, lo, hi)
         assert ours.keys() == plain.keys()
         for key, value in plain.items():
             assert ours[key] == value or (math.isnan(ours[key]) and math.isnan(value)), (
