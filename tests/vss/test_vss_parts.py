@@ -75,6 +75,23 @@ def test_compiled_window_figures_equal_the_bins_summed_one_by_one_in_python():
             assert ours[key] == value or (math.isnan(ours[key]) and math.isnan(value)), (
                 lo, hi, key, ours[key], value)
     assert h.window(10.0).n == pytest.approx(10_000, abs=100)
+    # a history that forgot its oldest bins (kept as a moving view of one array)
+    short = TrackingErrorHistory(max_bins=300)
+    for k in range(0, t.size, 1013):
+        short.add(t[k:k + 1013], az[k:k + 1013], el_err[k:k + 1013], el[k:k + 1013],
+                  on[k:k + 1013], dev[k:k + 1013])
+    assert short.stats().from_us == int(t[-1]) // 100_000 * 100_000 - 299 * 100_000
+    for lo, hi in [(None, None), (t0 + 100_000_000, t0 + 110_000_000), (t0, t0 + 95_000_000)]:
+        ours, plain = short.stats(lo, hi).as_dict(), _plain_or_empty(short, lo, hi)
+        assert ours.keys() >= plain.keys() and all(
+            ours[k] == v or (math.isnan(ours[k]) and math.isnan(v)) for k, v in plain.items())
+
+
+def _plain_or_empty(h, lo, hi) -> dict:
+    """The plain figures, or what `stats` says of a window without samples (n = 0)."""
+    if not len(h._select(lo, hi)):
+        return {"n": 0}
+    return stats_by_plain_python(h, lo, hi)
 
 
 def test_error_history_keeps_a_bounded_number_of_bins():
