@@ -285,25 +285,33 @@ def scan_cogging_periods(p: np.ndarray, v: np.ndarray, x0: np.ndarray, i: np.nda
     g00, b0, yy = x0.T @ x0, x0.T @ i, float(i @ i)
     k0 = x0.shape[1]
     eye = np.eye(k0 + 4)
-    z1 = np.exp(1j * p)
-    zn = np.exp(1j * (ns[0] - 1) * p)
+    # e^(iNp) and e^(iNh), h = v·T/2, for each N by recurrence (a product per N, not
+    # cosines and sines): the cogging's phase and the fade's, sinc(k·N·v·T/2π) =
+    # sin(kNh)/(kNh), of both harmonics (sin(2x)/2x = sin(x)/x · cos(x))
     half_vt = v * (segment_s / 2)
+    step = np.exp(1j * np.stack([p, half_vt]))
+    at_n = np.exp(1j * (ns[0] - 1) * np.stack([p, half_vt]))
+    moving = half_vt != 0
+    inv_h = np.zeros(len(p))
+    inv_h[moving] = 1.0 / half_vt[moving]
     for first in range(0, len(ns), SCAN_BATCH):
         nb = ns[first:first + SCAN_BATCH].astype(np.float64)
-        # e^(iNp) for the batch's N by recurrence (a product per N, not four cosines)
-        z = np.empty((len(nb), len(p)), dtype=np.complex128)
+        zw = np.empty((len(nb), 2, len(p)), dtype=np.complex128)
         for j in range(len(nb)):
-            zn = zn * z1
-            z[j] = zn
+            at_n = at_n * step
+            zw[j] = at_n
+        z, w = zw[:, 0], zw[:, 1]
+        fade1 = w.imag * (inv_h[None, :] / nb[:, None])
+        fade1[:, ~moving] = 1.0
+        fade2 = fade1 * w.real
         # the same columns as _regressors, one row per column (each contiguous over the
-        # points): cos(kNp)·fade and sin(kNp)·fade, fade = sinc(k·N·v·T/2π) = sin(x)/x
+        # points): cos(kNp)·fade and sin(kNp)·fade
         c = np.empty((len(nb), 4, len(p)))
-        x1 = nb[:, None] * half_vt[None, :]
-        for k, zk in ((1, z), (2, z * z)):
-            x = k * x1
-            fade = np.divide(np.sin(x), x, out=np.ones_like(x), where=x != 0)
-            np.multiply(zk.real, fade, out=c[:, 2 * k - 2])
-            np.multiply(zk.imag, fade, out=c[:, 2 * k - 1])
+        z2 = z * z
+        np.multiply(z.real, fade1, out=c[:, 0])
+        np.multiply(z.imag, fade1, out=c[:, 1])
+        np.multiply(z2.real, fade2, out=c[:, 2])
+        np.multiply(z2.imag, fade2, out=c[:, 3])
         # scale the products rather than the columns: a column's mean square is its
         # product with itself over the points
         g_cc = c @ np.transpose(c, (0, 2, 1))
