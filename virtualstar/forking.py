@@ -78,6 +78,16 @@ class HeldWriter:
         if events:
             self._ops.append(("events", list(events)))
 
+    def replay(self, blocks: Callable[[Any], None], events: Callable[[list], None]) -> None:
+        """Hand what is held so far, in the order it was written, to `blocks` (each sample
+        block) and `events` (each batch of events): a watcher switched on after the start
+        (a forked variant's live detectors) catches up on the recording."""
+        for op, arg in self._ops:
+            if op == "write":
+                blocks(arg)
+            elif op == "events":
+                events(arg)
+
     def close(self) -> None:
         """Write the held session into `open_target()`'s store; raise what it raises."""
         if self._begin is None:

@@ -94,10 +94,10 @@ def record(out: Path, injections: tuple[Injection, ...], *, minutes: float = MIN
 # A recording takes ~8 s of CPU (the emulator's 10 kHz physics most of it), so faults share
 # one where each is of another kind than the others (a flag says which it found): the three
 # growths of different kinds together, the glitches and the winding fault (both sudden) one
-# after the other, and the friction alone (its current is the winding fault's kind). The
-# first two are forked off the clean recording at AT_S (until then they are the clean
-# recording) and stopped at FAULT_MINUTES; the friction's is recorded whole, with the
-# detectors running live (test_live_anomalies.py reads its log).
+# after the other, and the friction alone (its current is the winding fault's kind). All
+# three are forked off the clean recording at AT_S (until then they are the clean
+# recording) and stopped at FAULT_MINUTES; the friction's variant runs the detectors live,
+# switched on at the fork (test_live_anomalies.py reads its log).
 CASES = {
     "clock drift, heat runaway and a loosened part rattling louder": (
         (Injection(AT_S, "time.inject_drift_growth", 12.0),
@@ -115,7 +115,7 @@ CASES = {
         (Injection(AT_S, "axis.az.inject_friction_growth", 6.0),),
         (("current", "az", AT_S, None),)),
 }
-LIVE_CASE = "friction rising"  # recorded with the detectors running live
+LIVE_CASE = "friction rising"  # its variant runs the detectors live
 
 
 def faults(spec, t0_us: int, end_us: int) -> list[InjectedFault]:
