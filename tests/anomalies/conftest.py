@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from anomaly_helpers import AT_S, CASES, FAULT_MINUTES, LIVE_CASE, made_once, record
+from anomaly_helpers import AT_S, CASES, LIVE_CASE, STOP_MINUTES, made_once, record
 
 from virtualstar.recorder.experiment import SineBranch
 
@@ -25,13 +25,14 @@ FORKED = sorted(CASES)
 @pytest.fixture(scope="session")
 def sine_recordings(tmp_path_factory) -> dict[str, tuple[Path, int]]:
     """{"clean" or a case name of CASES: (store, trajectory start µs)}: the clean
-    recording, and each case forked off it at AT_S and stopped at FAULT_MINUTES (LIVE_CASE
+    recording, and each case forked off it at AT_S and stopped at STOP_MINUTES (LIVE_CASE
     with the detectors live)."""
 
     def build(directory: Path):
         result = record(directory / "clean", (), branches=tuple(
             SineBranch(AT_S, CASES[name][0], str(directory / _slug(name)),
-                       FAULT_MINUTES * 60, detect=name == LIVE_CASE) for name in FORKED))
+                       STOP_MINUTES[name] * 60, detect=name == LIVE_CASE)
+            for name in FORKED))
         made = {"clean": [str(result.store), result.trajectory_t0_us]}
         for name, branch in zip(FORKED, result.branches, strict=True):
             made[name] = [branch["store"], branch["trajectory_t0_us"]]
@@ -55,5 +56,5 @@ def clean_recording(sine_recordings):
 
 @pytest.fixture(scope="session", params=sorted(CASES))
 def faulty_recording(request, sine_recordings, tmp_path_factory):
-    """(case name, store, trajectory start µs) of each fault case (FAULT_MINUTES long)."""
+    """(case name, store, trajectory start µs) of each fault case (STOP_MINUTES long)."""
     return (request.param, *sine_recordings[request.param])
