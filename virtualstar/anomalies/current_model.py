@@ -149,9 +149,14 @@ class CurrentModel:
         alternatives)."""
         best = self.predict(p, v, a)
         out = np.zeros(len(best))
+        if not self.alternatives:
+            return out
+        # only the friction column differs between the alternatives: the others (the
+        # cogging's cosines, sines and fades among them) are computed once
+        x = _regressors(p, v, a, self.gravity, self.cogging_periods, self.friction,
+                        self.segment_s)
         for friction, coef, scales in self.alternatives:
-            x = _regressors(p, v, a, self.gravity, self.cogging_periods, friction,
-                            self.segment_s)
+            x[:, FRICTION_COLUMN] = friction(v)
             np.maximum(out, np.abs((x / scales) @ coef - best), out=out)
         return out
 
