@@ -143,6 +143,27 @@ def _print_modules(directory: Path, n: int) -> None:
     for name, (o, c, wall, count) in sorted(modules.items(),
                                             key=lambda kv: -(kv[1][0] + kv[1][1]))[:n]:
         print(f"  {o + c:6.1f} {o:5.1f} {c:9.1f} {wall:8.1f} {count:6d}  {name}")
+    _print_timeline(directory)
+
+
+def _print_timeline(directory: Path) -> None:
+    """Each worker's start-up, busy span and idle end: where the run waits for its last modules."""
+    workers = {p.stem: json.loads(p.read_text()) for p in sorted(directory.glob("gw*.json"))}
+    if not workers:
+        return
+    t0 = min(w["process_start"] for w in workers.values())
+    end = max(w["session_end"] for w in workers.values())
+    print("timeline (s from the first worker's start): worker, first test, last test's end, "
+          "idle before the suite's end, its last modules")
+    for name, w in workers.items():
+        spans = sorted(w["spans"].items(), key=lambda kv: kv[1][1])
+        if not spans:
+            continue
+        first = min(s for s, _ in w["spans"].values()) - t0
+        last = spans[-1][1][1] - t0
+        tail = ", ".join(f"{m.removeprefix('tests/')} {s - t0:.0f}-{e - t0:.0f}"
+                         for m, (s, e) in spans[-3:])
+        print(f"  {name}: {first:5.1f} {last:6.1f} {end - t0 - last:5.1f}  {tail}")
 
 
 def _print_processes(log: Path, cpu_s: float) -> None:

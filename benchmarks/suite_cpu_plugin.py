@@ -19,6 +19,10 @@ from pathlib import Path
 
 _modules: dict[str, list[float]] = {}  # module: [own CPU s, children's CPU s, wall s, tests]
 _started: dict[str, tuple[float, float, float]] = {}
+# module: [first test's start, last test's end] in Unix time, so that the workers' timelines
+# can be laid side by side (where the run's tail is: one worker busy while the others wait)
+_spans: dict[str, list[float]] = {}
+_process_start = time.time()
 
 
 def _cpu_s() -> tuple[float, float]:
@@ -29,6 +33,7 @@ def _cpu_s() -> tuple[float, float]:
 
 def pytest_runtest_protocol(item, nextitem) -> None:
     _started[item.nodeid] = (*_cpu_s(), time.monotonic())
+    _spans.setdefault(item.nodeid.split("::")[0], [time.time(), 0.0])
 
 
 def pytest_runtest_logfinish(nodeid, location) -> None:
@@ -41,6 +46,7 @@ def pytest_runtest_logfinish(nodeid, location) -> None:
     row[1] += children1 - children0
     row[2] += time.monotonic() - wall0
     row[3] += 1
+    _spans[nodeid.split("::")[0]][1] = time.time()
 
 
 def pytest_sessionfinish(session) -> None:
@@ -50,4 +56,5 @@ def pytest_sessionfinish(session) -> None:
     own, children = _cpu_s()
     name = os.environ.get("PYTEST_XDIST_WORKER", "main")
     Path(out, f"{name}.json").write_text(json.dumps(
-        {"modules": _modules, "own_cpu_s": own, "children_cpu_s": children}))
+        {"modules": _modules, "own_cpu_s": own, "children_cpu_s": children, "spans": _spans,
+         "process_start": _process_start, "session_end": time.time()}))
