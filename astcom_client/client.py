@@ -13,6 +13,7 @@ import ssl
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -82,10 +83,15 @@ class StreamPacket:
     def n(self) -> int:
         return int(self.values.shape[0])
 
-    @property
+    @cached_property
     def t_us(self) -> np.ndarray:
-        """Return the sample times, int64 µs (the exact rounding rule of the spec, §6)."""
-        return self.first_t_us + sample_offsets_us(self.period_us, self.n)
+        """Return the sample times, int64 µs (the exact rounding rule of the spec, §6).
+
+        Computed once a packet (its consumers, the VSS, the recorder, the panel, ask for
+        them several times); the packet is frozen, so are they."""
+        t = self.first_t_us + sample_offsets_us(self.period_us, self.n)
+        t.flags.writeable = False
+        return t
 
     @property
     def ticks(self) -> np.ndarray:

@@ -14,6 +14,11 @@ simulator's truth cost, ours beside the way it was done before, in the same run.
    from a 409-point grid chunk computed for each round (monkeypatched back), same rounds.
 3. **The camera's satellite truth** for ten minutes of an ISS pass: ours on a 0.2-s grid,
    reference the 0.1-s grid, both against skyfield at 400 random instants (max error).
+4. **A status's error windows** (1, 10 and 60 s: 711 bins, every `status` asks for them)
+   over an hour's history with a target, its rates and a clock offset every 10 s: ours
+   summed compiled over a view of the bins (`tracking_errors._reduce_bins`); reference the
+   same bins summed one by one in Python (tests/vss/error_windows.py), which is how
+   `stats` summed them before; the figures compared field by field.
 
 CPU is `time.process_time()` of this process, so a loaded host slows the wall, not these.
 
@@ -23,8 +28,10 @@ CPU is `time.process_time()` of this process, so a loaded host slows the wall, n
 from __future__ import annotations
 
 import math
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import erfa
 import numpy as np
@@ -141,6 +148,38 @@ def camera_truth(iss, site: CameraSite) -> None:
               f"{err:.3f} mas")
 
 
+def status_windows() -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "vss"))
+    from error_windows import stats_by_plain_python
+
+    from virtualstar.server.tracking_errors import TrackingErrorHistory
+
+    rng = np.random.default_rng(26)
+    t0, h = _us(TRACK_START), TrackingErrorHistory()
+    for k in range(3600 * 5):  # an hour of 50 Hz packets of 10 samples (500 Hz)
+        t = t0 + k * 200_000 + np.arange(10, dtype=np.int64) * 2_000
+        e = rng.normal(0.0, 0.01, 10)
+        h.add(t, e, e, np.full(10, 0.8), np.abs(e) * 2, np.abs(e))
+        if k % 50 == 0:
+            h.note_rates(t[:1], np.array([15.0]))
+            h.note_clock_offset(int(t[0]), int(rng.integers(-40, 40)))
+    runs = 300
+    print(f"4. a status's error windows (1, 10, 60 s) over an hour's history, {runs} statuses:")
+    same = True
+    for name, figures in (("ours (compiled over a view of the bins)",
+                           lambda w: h.window(w).as_dict()),
+                          ("reference (the bins summed in Python)",
+                           lambda w: stats_by_plain_python(h, h.last_t_us - w * 1_000_000, None))):
+        cpu = time.process_time()
+        for _ in range(runs):
+            out = [figures(w) for w in (1, 10, 60)]
+        cpu = time.process_time() - cpu
+        same = same and all(h.window(w).as_dict()[k] == v for w, o in zip((1, 10, 60), out, strict=True)
+                            for k, v in o.items())
+        print(f"   {name:<40} {cpu / runs * 1e3:6.3f} ms a status")
+    print(f"   figures identical: {same}")
+
+
 def main() -> None:
     site = load_site()
     eop = EarthOrientation.from_astropy_iers_data()
@@ -153,6 +192,7 @@ def main() -> None:
     camera_site = CameraSite.from_object(site)
     moved_elements(iss, camera_site)
     camera_truth(iss, camera_site)
+    status_windows()
 
 
 if __name__ == "__main__":

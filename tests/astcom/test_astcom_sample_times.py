@@ -37,6 +37,8 @@ def test_packet_sample_times_round_half_up_the_double_product(loop_rate_hz: floa
                 expected = [packet.first_t_us + reference_offset_us(i, packet.period_us)
                             for i in range(packet.n)]
                 assert packet.t_us.tolist() == expected
+                # computed once a packet, and nobody's to change: a second reader sees the same
+                assert packet.t_us is packet.t_us and not packet.t_us.flags.writeable
                 # the endpoint's first_t_us of a packet follows the same rule from the block's start
                 assert packet.first_t_us == T0_US + math.floor(
                     Fraction(float(packet.first_tick) * float(tick_us)) + Fraction(1, 2))

@@ -171,6 +171,27 @@ def test_satellite_passes_match_a_one_second_scan(site, eop):
                                                      abs=0.01)
 
 
+def test_a_pass_search_computes_each_instant_once(site, eop):
+    """The root search asks for a bracket's ends again (and an event's place at its root):
+    each instant is computed once, so a `vs track --tle` answers sooner, the same passes."""
+    asked: list[float] = []
+
+    class Counted:
+        satrec = ISS.satrec  # a satellite: its scan step
+
+        def observe(self, times, site_, eop_):
+            asked.extend(times.seconds_since(DAY_START.jd1[0], DAY_START.jd2[0]).tolist())
+            return ISS.observe(times, site_, eop_)
+
+    events = find_events(Counted(), site, DAY_START, 86400.0, horizon_deg=10.0, eop=eop)
+    single = asked[4321:]  # after the one vectorised scan of 20-s steps
+    assert len(asked) - len(single) == 4321
+    assert len(single) == len(set(single))
+    assert [(e.kind, e.el_deg) for e in events] == [
+        (e.kind, e.el_deg) for e in find_events(ISS, site, DAY_START, 86400.0,
+                                                horizon_deg=10.0, eop=eop)]
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_keyhole_path_reaches_the_known_optimum_of_the_max_azimuth_error(seed):
     """For a rate limit L the least possible max |command - az| is

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from error_windows import stats_by_plain_python
 
 from virtualstar.astro import MountLimits, Satellite, Site, UtcTimes, observe_mount_times
 from virtualstar.server import (
@@ -40,6 +41,57 @@ def test_error_statistics_over_any_window_equal_a_direct_computation():
     assert s.az_rms_arcsec == pytest.approx(math.sqrt(np.mean((az * np.cos(el))[sel] ** 2)))
     w = h.window(10.0)
     assert w.n == pytest.approx(10_000, abs=200)
+
+
+def test_compiled_window_figures_equal_the_bins_summed_one_by_one_in_python():
+    """`stats` sums the bins compiled (a status asks for three windows): every figure equals,
+    to the last bit, the same bins summed in Python, over windows inside, across and outside
+    the clock-offset measurements, with and without a followed target."""
+    rng = np.random.default_rng(7)
+    t0 = 1_700_000_000_000_000
+    t = t0 + np.arange(120_000, dtype=np.int64) * 1000  # 1 kHz, 120 s
+    az, el_err = rng.normal(0, 0.3, t.size), rng.normal(0, 0.2, t.size)
+    el = np.radians(rng.uniform(10, 80, t.size))
+    on = np.abs(rng.normal(0, 3.0, t.size))
+    on[(t >= t0 + 40_000_000) & (t < t0 + 70_000_000)] = np.nan  # no target: a slew
+    dev = np.abs(rng.normal(0, 2.0, t.size))
+    h = TrackingErrorHistory()
+    for k in range(0, t.size, 1013):
+        h.add(t[k:k + 1013], az[k:k + 1013], el_err[k:k + 1013], el[k:k + 1013],
+              on[k:k + 1013], np.where(np.isnan(on[k:k + 1013]), np.nan, dev[k:k + 1013]))
+    h.note_rates(t[::50], rng.uniform(10.0, 2000.0, t[::50].size))
+    for s, off in ((20, 300), (20.05, -300), (35, 0), (50, -1_200), (50.3, 900), (90, 40)):
+        h.note_clock_offset(t0 + int(s * 1e6), off)  # equal sizes of both signs: the first
+    windows = [(None, None), (t0 + 3_000_000, t0 + 17_000_000), (t0 + 19_950_000, t0 + 20_150_000),
+               (t0 + 30_000_000, t0 + 100_000_000), (t0 + 45_000_000, t0 + 65_000_000),
+               (t0 + 89_000_000, None), (t0 + 5_000_050, t0 + 5_100_000),
+               (t0 + 20_000_000, t0 + 20_100_000)]  # starts in the equal sizes
+    windows += [(h.last_t_us - seconds * 1_000_000, None) for seconds in (1, 10, 60)]
+    for lo, hi in windows:
+        ours = h.stats(lo, hi).as_dict()
+        plain = stats_by_plain_python(h, lo, hi)
+        assert ours.keys() == plain.keys()
+        for key, value in plain.items():
+            assert ours[key] == value or (math.isnan(ours[key]) and math.isnan(value)), (
+                lo, hi, key, ours[key], value)
+    assert h.window(10.0).n == pytest.approx(10_000, abs=100)
+    # a history that forgot its oldest bins (kept as a moving view of one array)
+    short = TrackingErrorHistory(max_bins=300)
+    for k in range(0, t.size, 1013):
+        short.add(t[k:k + 1013], az[k:k + 1013], el_err[k:k + 1013], el[k:k + 1013],
+                  on[k:k + 1013], dev[k:k + 1013])
+    assert short.stats().from_us == int(t[-1]) // 100_000 * 100_000 - 299 * 100_000
+    for lo, hi in [(None, None), (t0 + 100_000_000, t0 + 110_000_000), (t0, t0 + 95_000_000)]:
+        ours, plain = short.stats(lo, hi).as_dict(), _plain_or_empty(short, lo, hi)
+        assert ours.keys() >= plain.keys() and all(
+            ours[k] == v or (math.isnan(ours[k]) and math.isnan(v)) for k, v in plain.items())
+
+
+def _plain_or_empty(h, lo, hi) -> dict:
+    """The plain figures, or what `stats` says of a window without samples (n = 0)."""
+    if not len(h._select(lo, hi)):
+        return {"n": 0}
+    return stats_by_plain_python(h, lo, hi)
 
 
 def test_error_history_keeps_a_bounded_number_of_bins():

@@ -60,8 +60,15 @@ def find_events(target, site: Site, start: UtcTimes, duration_s: float, *,
     h = math.radians(horizon_deg)
     el, rate = obs.el_rad - h, obs.el_rate_rad_s
 
+    seen: dict[float, object] = {}
+
     def at(s: float):
-        return target.observe(start.shifted(np.array([s])), site, eop)
+        # the same instant is asked for again (each bracket's ends by _root and by brentq,
+        # an event's place at its root): computed once, the same figures
+        o = seen.get(s)
+        if o is None:
+            o = seen[s] = target.observe(start.shifted(np.array([s])), site, eop)
+        return o
 
     events: list[tuple[float, str]] = []
     for i in np.flatnonzero(np.sign(el[:-1]) != np.sign(el[1:])):

@@ -5,7 +5,7 @@ elevation in rad) are reduced on arrival into fixed bins of `bin_us` mount
 time holding the count, the sums of squares and the peak of the on-sky error
 (azimuth error × cos(elevation) combined with the elevation error) and of each
 axis. Any window's RMS and peak are then exact sums over bins, and memory is
-bounded by the number of bins kept (a deque), whatever the sample rate.
+bounded by the number of bins kept (rows of one array), whatever the sample rate.
 
 Three errors, kept apart (`on_target.py` computes the last two per sample):
 
@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numba
@@ -121,7 +120,9 @@ class TrackingErrorHistory:
                  off_target_arcsec: float = DEFAULT_OFF_TARGET_ARCSEC) -> None:
         self.bin_us = int(bin_us)
         self.off_target_arcsec = float(off_target_arcsec)
-        self._bins: deque[list[float]] = deque(maxlen=max_bins)
+        # the bins, oldest first, as rows of one array (rows[lo:hi]): a window is a view
+        self._rows = np.zeros((min(256, 2 * max_bins), 12))
+        self._lo = self._hi = 0
         self._max_bins = max_bins
         self._rates: dict[int, float] = {}  # bin index -> the target's on-sky rate, arcsec/s
         self._offset_t: list[int] = []  # mount times of clock-offset measurements (increasing)
@@ -134,7 +135,7 @@ class TrackingErrorHistory:
         self.last_deviation_arcsec = math.nan
 
     def clear(self) -> None:
-        self._bins.clear()
+        self._lo = self._hi = 0
         self._rates.clear()
         self._offset_t.clear()
         self._offset_us.clear()
@@ -162,16 +163,6 @@ class TrackingErrorHistory:
         if len(self._offset_t) > self._max_bins:
             del self._offset_t[0], self._offset_us[0]
 
-    def _offset_at(self, t_us: int) -> int:
-        """Return the larger of the offsets measured just before and just after `t_us`.
-
-        Between two measurements a drifting clock's offset lies between them, so the
-        larger one bounds it (after the newest measurement, that one alone).
-        """
-        k = bisect.bisect_right(self._offset_t, t_us)
-        around = self._offset_us[max(k - 1, 0):k + 1]
-        return max(around, key=abs) if around else 0
-
     def add(self, t_us: np.ndarray, az_err_arcsec: np.ndarray, el_err_arcsec: np.ndarray,
             el_rad: np.ndarray, on_target_arcsec: np.ndarray | None = None,
             deviation_arcsec: np.ndarray | None = None) -> None:
@@ -193,90 +184,89 @@ class TrackingErrorHistory:
                          np.asarray(deviation_arcsec, float), self.bin_us,
                          self.off_target_arcsec, self._period_us)
         for row in rows.tolist():
-            b = int(row[0])
-            if self._bins and self._bins[-1][0] == b:
-                last = self._bins[-1]
+            b = row[0]
+            last = self._rows[self._hi - 1] if self._hi > self._lo else None
+            if last is not None and last[0] == b:
                 for j in (_N, _SKY, _AZ, _EL, _NT, _ON, _OFF_US, _DEV_US):
-                    last[j] += row[j]
+                    last[j] = float(last[j]) + row[j]
                 for j in (_PEAK, _PEAK_ON, _PEAK_DEV):
-                    last[j] = max(last[j], row[j])
-            elif not self._bins or self._bins[-1][0] < b:
-                row[0] = b
-                self._bins.append(row)
+                    last[j] = max(float(last[j]), row[j])
+            elif last is None or last[0] < b:
+                self._append(row)
         self.samples += int(t.size)
         self.last_t_us = int(t[-1])
         self.last_sky_arcsec = float(math.hypot(az_err[-1] * math.cos(el[-1]), el_err[-1]))
         self.last_on_target_arcsec = float(on_target_arcsec[-1])
         self.last_deviation_arcsec = float(deviation_arcsec[-1])
 
-    def _select(self, from_us: int | None, to_us: int | None) -> list[list[float]]:
-        """Return the bins whose start lies in [from_us, to_us), oldest first.
+    def _append(self, row: list[float]) -> None:
+        """Add a bin after the newest; beyond `max_bins` the oldest is forgotten."""
+        if self._hi == len(self._rows):  # full: move the kept bins to the front, or grow
+            kept = self._rows[self._lo:self._hi].copy()
+            size = len(self._rows)
+            if len(kept) > size // 2 and size < 2 * self._max_bins:
+                size = min(2 * size, 2 * self._max_bins)
+            self._rows = np.zeros((size, 12))
+            self._rows[:len(kept)] = kept
+            self._lo, self._hi = 0, len(kept)
+        self._rows[self._hi] = row
+        self._hi += 1
+        if self._hi - self._lo > self._max_bins:
+            self._lo += 1
 
-        Recent windows (the common case) are found scanning from the newest bin.
-        """
-        lo = -(2**62) if from_us is None else int(from_us) // self.bin_us
-        hi = 2**62 if to_us is None else -(-int(to_us) // self.bin_us)
-        sel = []
-        for b in reversed(self._bins):
-            if b[0] < lo:
-                break
-            if b[0] < hi:
-                sel.append(b)
-        sel.reverse()
-        return sel
+    def _select(self, from_us: int | None, to_us: int | None) -> np.ndarray:
+        """Return the bins whose start lies in [from_us, to_us), oldest first (a view)."""
+        rows = self._rows[self._lo:self._hi]
+        lo = 0 if from_us is None else np.searchsorted(
+            rows[:, 0], int(from_us) // self.bin_us, "left")
+        hi = len(rows) if to_us is None else np.searchsorted(
+            rows[:, 0], -(-int(to_us) // self.bin_us), "left")
+        return rows[lo:hi]
 
     def stats(self, from_us: int | None = None, to_us: int | None = None) -> ErrorStats:
         """Return the figures over bins whose start lies in [from_us, to_us)."""
         sel = self._select(from_us, to_us)
-        n = sum(b[_N] for b in sel)
-        if n == 0:
+        if not len(sel) or not sel[:, _N].any():
             return ErrorStats(0, math.nan, math.nan, math.nan, math.nan,
                               int(from_us or 0), int(to_us or 0),
                               off_target_threshold_arcsec=self.off_target_arcsec)
-        sky2 = sum(b[_SKY] for b in sel)
-        clock = self._clock_terms(sel)
-        n_t = sum(b[_NT] for b in sel)
-        # on the sky: per bin the on-target error where a target was followed, else the
-        # following error (the demand is the goal there), with the clock term
-        sky_n = sky_s = 0.0
-        sky_peak = 0.0
-        for b, (c, _) in zip(sel, clock, strict=True):
-            cnt, s2, pk = ((b[_NT], b[_ON], b[_PEAK_ON]) if b[_NT] > 0
-                           else (b[_N], b[_SKY], b[_PEAK]))
-            sky_n += cnt
-            sky_s += s2 + cnt * c * c
-            sky_peak = max(sky_peak, pk + c)
-        targeted = [b for b in sel if b[_NT] > 0]
+        # every status asks for three windows (711 bins): the sums run compiled, in the
+        # bins' order, with Python's own rules (sequential sums, first of equal maxima)
+        rates = np.array([self._rates.get(b, 0.0) for b in sel[:, _IDX].astype(np.int64).tolist()],
+                         dtype=np.float64)
+        off_t, off_us = self._offsets_around(int(sel[0][0]) * self.bin_us,
+                                             int(sel[-1][0]) * self.bin_us)
+        (n, sky2, peak, az2, el2, sky_n, sky_s, sky_peak, clock_peak, clock_offset, n_t, on2,
+         peak_on, off_us_sum, peak_dev, dev_us_sum) = _reduce_bins(sel, rates, self.bin_us,
+                                                                   off_t, off_us)
         return ErrorStats(
             int(n),
             math.sqrt(sky2 / n),
-            max(b[_PEAK] for b in sel),
-            math.sqrt(sum(b[_AZ] for b in sel) / n),
-            math.sqrt(sum(b[_EL] for b in sel) / n),
-            int(sel[0][0] * self.bin_us),
-            int((sel[-1][0] + 1) * self.bin_us),
+            peak,
+            math.sqrt(az2 / n),
+            math.sqrt(el2 / n),
+            int(sel[0][0]) * self.bin_us,
+            (int(sel[-1][0]) + 1) * self.bin_us,
             on_sky_rms_arcsec=math.sqrt(sky_s / sky_n),
             on_sky_peak_arcsec=sky_peak,
-            clock_error_peak_arcsec=max(c[0] for c in clock),
-            clock_offset_us=max((c[1] for c in clock), key=abs),
+            clock_error_peak_arcsec=clock_peak,
+            clock_offset_us=int(clock_offset),
             target_samples=int(n_t),
-            on_target_rms_arcsec=(math.sqrt(sum(b[_ON] for b in targeted) / n_t) if n_t
-                                  else math.nan),
-            on_target_peak_arcsec=max((b[_PEAK_ON] for b in targeted), default=math.nan),
-            off_target_s=sum(b[_OFF_US] for b in sel) / 1e6,
+            on_target_rms_arcsec=math.sqrt(on2 / n_t) if n_t else math.nan,
+            on_target_peak_arcsec=peak_on,
+            off_target_s=off_us_sum / 1e6,
             off_target_threshold_arcsec=self.off_target_arcsec,
-            planned_deviation_peak_arcsec=max((b[_PEAK_DEV] for b in targeted),
-                                              default=math.nan),
-            planned_deviation_s=sum(b[_DEV_US] for b in sel) / 1e6,
+            planned_deviation_peak_arcsec=peak_dev,
+            planned_deviation_s=dev_us_sum / 1e6,
         )
 
-    def _clock_terms(self, sel: list[list[float]]) -> list[tuple[float, int]]:
-        """Return per bin (rate × |clock offset| in arcsec, the offset in µs)."""
-        out = []
-        for b in sel:
-            offset = self._offset_at(int(b[0]) * self.bin_us)
-            out.append((self._rates.get(int(b[0]), 0.0) * abs(offset) / 1e6, offset))
-        return out
+    def _offsets_around(self, t0_us: int, t1_us: int) -> tuple[np.ndarray, np.ndarray]:
+        """The clock-offset measurements a bin starting in [t0_us, t1_us] may use: the last
+        one at or before t0_us, those between, and the first after t1_us."""
+        lo = max(bisect.bisect_right(self._offset_t, t0_us) - 1, 0)
+        hi = bisect.bisect_right(self._offset_t, t1_us) + 1
+        return (np.array(self._offset_t[lo:hi], dtype=np.int64),
+                np.array(self._offset_us[lo:hi], dtype=np.int64))
 
     def window(self, seconds: float) -> ErrorStats:
         """Return the statistics of the last `seconds` of mount time received."""
@@ -293,10 +283,10 @@ class TrackingErrorHistory:
             "t_us", "rms_arcsec", "peak_arcsec", "az_rms_arcsec", "el_rms_arcsec",
             "on_target_rms_arcsec", "on_target_peak_arcsec", "planned_deviation_arcsec")}
         for k in range(0, len(sel), step):
-            group = sel[k:k + step]
+            group = sel[k:k + step].tolist()
             n = sum(b[_N] for b in group)
             n_t = sum(b[_NT] for b in group)
-            out["t_us"].append(int(group[0][0] * self.bin_us))
+            out["t_us"].append(int(group[0][0]) * self.bin_us)
             out["rms_arcsec"].append(math.sqrt(sum(b[_SKY] for b in group) / n))
             out["peak_arcsec"].append(max(b[_PEAK] for b in group))
             out["az_rms_arcsec"].append(math.sqrt(sum(b[_AZ] for b in group) / n))
@@ -313,6 +303,76 @@ def warm_up() -> None:
     """Compile the kernel (or load it from numba's cache) before the first packet arrives."""
     x = np.zeros(2)
     _bin_rows(np.zeros(2, np.int64), x, x, x, x, x, DEFAULT_BIN_US, 1.0, 1000.0)
+    _reduce_bins(np.zeros((1, 12)), np.zeros(1), DEFAULT_BIN_US, np.zeros(1, np.int64),
+                 np.zeros(1, np.int64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _reduce_bins(bins, rates, bin_us, off_t, off_us):  # pragma: no cover - compiled
+    """`stats`' sums over bin rows, in their order, as the Python it replaces computed them:
+    sums left to right from zero, a maximum replaced only by a larger value (NaN never
+    replaces), the clock offset of a bin the larger in size of the measurements just
+    before and just after its start, the first of equal sizes."""
+    n = sky2 = az2 = el2 = n_t = on2 = off_s = dev_s = 0.0
+    sky_n = sky_s = sky_peak = 0.0
+    peak = bins[0, 5]
+    peak_on = peak_dev = math.nan
+    clock_peak = 0.0
+    clock_offset = 0
+    targeted = False
+    k = 0
+    m = off_t.shape[0]
+    for i in range(bins.shape[0]):
+        b = bins[i]
+        n += b[1]
+        sky2 += b[2]
+        az2 += b[3]
+        el2 += b[4]
+        if i > 0 and b[5] > peak:
+            peak = b[5]
+        n_t += b[6]
+        off_s += b[9]
+        dev_s += b[11]
+        # the clock term: bisect_right over the measurements
+        t = np.int64(b[0]) * bin_us
+        while k < m and off_t[k] <= t:
+            k += 1
+        if m == 0:
+            offset = 0
+        elif k == 0 or k >= m:
+            offset = off_us[max(k - 1, 0)]
+        else:
+            offset = off_us[k - 1]
+            if abs(off_us[k]) > abs(offset):
+                offset = off_us[k]
+        c = rates[i] * abs(offset) / 1e6
+        if i == 0:
+            clock_peak = c
+            clock_offset = offset
+        else:
+            if c > clock_peak:
+                clock_peak = c
+            if abs(offset) > abs(clock_offset):
+                clock_offset = offset
+        if b[6] > 0:
+            cnt, s2, pk = b[6], b[7], b[8]
+            on2 += b[7]
+            if not targeted:
+                peak_on, peak_dev = b[8], b[10]
+                targeted = True
+            else:
+                if b[8] > peak_on:
+                    peak_on = b[8]
+                if b[10] > peak_dev:
+                    peak_dev = b[10]
+        else:
+            cnt, s2, pk = b[1], b[2], b[5]
+        sky_n += cnt
+        sky_s += s2 + cnt * c * c
+        if pk + c > sky_peak:
+            sky_peak = pk + c
+    return (n, sky2, peak, az2, el2, sky_n, sky_s, sky_peak, clock_peak, clock_offset, n_t, on2,
+            peak_on, off_s, peak_dev, dev_s)
 
 
 @numba.njit(cache=True, nogil=True)
