@@ -7,6 +7,10 @@ Each command runs as a fresh process, as a user types it; the median and worst o
 free loopback port (the server's own start-up is not counted). Then every `vs` command's
 and subcommand's `--help` and every `pointing-model` one's, --help-runs times each: the
 slowest medians are listed (tests/test_import_rules.py keeps their imports light).
+Last, the façades' start: importing the Alpaca and the INDI façade (what `vs alpaca` and
+`vs-indi` import before serving) beside the same import followed by the whole astronomy
+package's modules, which is what the package's __init__ imported before its names loaded
+lazily (scipy's splines, numba's SGP4 kernels).
 
     python benchmarks/bench_cli_startup.py [--runs 15] [--help-runs 5]
 """
@@ -118,6 +122,26 @@ def main() -> None:
           f"{sum(h[2] > 0.3 for h in helps)} over 0.3 s of CPU")
     for name, wall, cpu_s in helps[:5]:
         print(f"  {name:<40} CPU median {cpu_s:.3f} s   wall median {wall:.3f} s")
+    facades(args.runs)
+
+
+_EVERY_ASTRO_MODULE = ("; import virtualstar.astro.altaz, virtualstar.astro.avoidance, "
+                       "virtualstar.astro.bodies, virtualstar.astro.events, "
+                       "virtualstar.astro.observed, virtualstar.astro.satellites, "
+                       "virtualstar.astro.slew, virtualstar.astro.stars, virtualstar.astro.targets")
+
+
+def facades(runs: int) -> None:
+    """The façades' import, beside it with every astronomy module (the eager package)."""
+    print(f"façade start-up, {runs} runs each (CPU median: ours, then with the whole astronomy "
+          "package as its __init__ used to import it)")
+    for module in ("virtualstar.alpaca", "virtualstar.indi.driver"):
+        ours = [sys.executable, "-c", f"import {module}"]
+        eager = [sys.executable, "-c", f"import {module}{_EVERY_ASTRO_MODULE}"]
+        timed(ours, runs)
+        timed(eager, runs)
+        print(f"  import {module:<24} CPU median {cpu(ours):.3f} s   with every astronomy "
+              f"module {cpu(eager):.3f} s")
 
 
 if __name__ == "__main__":

@@ -17,7 +17,16 @@ import sys
 import tempfile
 from pathlib import Path
 
-from session_order import longest_first
+# OpenBLAS's threads, one per core, before numpy loads it here or in any process the suite
+# starts (xdist workers and `vs` subprocesses inherit the environment). The suite runs more
+# worker processes than the host has cores, and the threads a worker's matrix product starts
+# spin while they wait for a core: the current model's friction search with its cogging
+# terms took 0.43 s of CPU with two threads on a loaded 2-core host and 0.02 s with one,
+# and tests/anomalies 76 s instead of 83 s (benchmarks/bench_suite.py, 2 workers). A user's
+# own setting stays.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from session_order import longest_first  # noqa: E402
 
 _OWNER_VAR = "VIRTUALSTAR_TEST_CACHE_OWNER"  # the pid of the process that made the directory
 if os.environ.get(_OWNER_VAR) and os.path.isdir(os.environ.get("VIRTUALSTAR_CACHE_DIR", "")):

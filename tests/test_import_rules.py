@@ -219,6 +219,38 @@ def test_the_facades_reach_the_mount_only_through_a_vss_client(package):
                 f"{path.relative_to(ROOT)} imports {name}"
 
 
+@pytest.mark.parametrize("module", ["virtualstar.alpaca", "virtualstar.indi.driver"])
+def test_the_facades_start_without_scipy_or_numba(module):
+    """The façades convert coordinates with ERFA alone: importing one (as `vs alpaca` and
+    `vs-indi` do at start) loads the astronomy package's names lazily, so neither scipy's
+    splines nor numba's kernels are imported (~0.8 s of CPU at each start)."""
+    import subprocess
+    import sys
+
+    code = (f"import sys\nimport {module}\n"
+            "print(sorted({m for m in ('scipy', 'numba', 'skyfield') if m in sys.modules}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout + out.stderr
+
+
+def test_the_astronomy_package_names_every_public_name_and_loads_it_when_used():
+    """`virtualstar.astro` imports its modules when a name is first used (PEP 562): every
+    name in __all__ resolves to the object its module defines, and an unknown name raises
+    AttributeError as a plain module would."""
+    import importlib
+
+    import virtualstar.astro as astro
+
+    for name in astro.__all__:
+        value = getattr(astro, name)
+        assert getattr(importlib.import_module(f"virtualstar.astro.{astro._MODULE_OF[name]}"),
+                       name) is value, name
+    assert set(astro.__all__) <= set(dir(astro))
+    with pytest.raises(AttributeError, match="no_such_name"):
+        astro.no_such_name  # noqa: B018
+
+
 @pytest.mark.parametrize("module", ["virtualstar/alpaca/protocol.py", "virtualstar/indi/protocol.py"])
 def test_the_facade_protocols_do_no_io(module):
     names = imported(ROOT / module)

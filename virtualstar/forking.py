@@ -78,6 +78,16 @@ class HeldWriter:
         if events:
             self._ops.append(("events", list(events)))
 
+    def replay(self, blocks: Callable[[Any], None], events: Callable[[list], None]) -> None:
+        """Hand what is held so far, in the order it was written, to `blocks` (each sample
+        block) and `events` (each batch of events): a watcher switched on after the start
+        (a forked variant's live detectors) catches up on the recording."""
+        for op, arg in self._ops:
+            if op == "write":
+                blocks(arg)
+            elif op == "events":
+                events(arg)
+
     def close(self) -> None:
         """Write the held session into `open_target()`'s store; raise what it raises."""
         if self._begin is None:
@@ -170,14 +180,25 @@ class Forks:
         return orders
 
     def send(self, orders: list[Any]) -> None:
-        """In the parent: hand each waiting child its orders, in the order forked."""
+        """In the parent: hand each waiting child its orders, in the order forked; a child
+        whose orders are None is dismissed (it exits at once, and is reaped here)."""
         waiting = [c for c in self.children if c[1] >= 0]
         if len(orders) != len(waiting):
             raise ForkError(f"{len(orders)} orders for {len(waiting)} waiting variants")
-        for (_, order_fd, _), doc in zip(waiting, orders, strict=True):
-            write_all(order_fd, json.dumps(doc).encode())
-            os.close(order_fd)
-        self.children = [(pid, -1, path) for pid, _, path in self.children]
+        dismissed = []
+        for child, doc in zip(waiting, orders, strict=True):
+            if doc is None:
+                dismissed.append(child)
+            else:
+                write_all(child[1], json.dumps(doc).encode())
+            os.close(child[1])
+        for pid, _, path in dismissed:
+            os.waitpid(pid, 0)
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+        gone = {pid for pid, _, _ in dismissed}
+        self.children = [(pid, -1, path) for pid, _, path in self.children
+                         if pid not in gone]
 
     def wait(self) -> list[Any]:
         """In the parent: wait for every child; return their results in the order forked.

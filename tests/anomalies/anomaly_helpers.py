@@ -23,7 +23,8 @@ from virtualstar.recorder.experiment import (
 MINUTES = 30.0  # the clean recording: a 15-minute reference, then 15 minutes scored
 AT_S = 960.0  # injections 16 minutes in: after the 15-minute reference stretch
 # The faults' recordings end 10 minutes after the injections: the slowest to be found, the
-# rattling part's growing vibration, is flagged 6 minutes after its injection.
+# rattling part's growing vibration, is flagged 6 minutes after its injection. A case whose
+# faults are all found sooner stops sooner (STOP_MINUTES): the rest would only cost CPU.
 FAULT_MINUTES = 26.0
 # A recording takes ~8 s of CPU alone and a VSS night ~15 s: a few minutes on a loaded host.
 # A waiting worker builds its own copy after this long rather than wait on (the modules
@@ -94,10 +95,10 @@ def record(out: Path, injections: tuple[Injection, ...], *, minutes: float = MIN
 # A recording takes ~8 s of CPU (the emulator's 10 kHz physics most of it), so faults share
 # one where each is of another kind than the others (a flag says which it found): the three
 # growths of different kinds together, the glitches and the winding fault (both sudden) one
-# after the other, and the friction alone (its current is the winding fault's kind). The
-# first two are forked off the clean recording at AT_S (until then they are the clean
-# recording) and stopped at FAULT_MINUTES; the friction's is recorded whole, with the
-# detectors running live (test_live_anomalies.py reads its log).
+# after the other, and the friction alone (its current is the winding fault's kind). All
+# three are forked off the clean recording at AT_S (until then they are the clean
+# recording) and stopped at STOP_MINUTES; the friction's variant runs the detectors live,
+# switched on at the fork (test_live_anomalies.py reads its log).
 CASES = {
     "clock drift, heat runaway and a loosened part rattling louder": (
         (Injection(AT_S, "time.inject_drift_growth", 12.0),
@@ -115,7 +116,14 @@ CASES = {
         (Injection(AT_S, "axis.az.inject_friction_growth", 6.0),),
         (("current", "az", AT_S, None),)),
 }
-LIVE_CASE = "friction rising"  # recorded with the detectors running live
+LIVE_CASE = "friction rising"  # its variant runs the detectors live
+# Where a case's recording stops (minutes), at least twice the time its slowest fault takes
+# to be flagged after its injection and 4 minutes after its last injection: the winding
+# fault is flagged 28 s after it (4 min after the glitches), the friction 80 s after it.
+STOP_MINUTES = {name: FAULT_MINUTES for name in CASES} | {
+    "encoder glitches then a winding fault": (AT_S + 240.0) / 60.0 + 4.0,
+    "friction rising": AT_S / 60.0 + 4.0,
+}
 
 
 def faults(spec, t0_us: int, end_us: int) -> list[InjectedFault]:

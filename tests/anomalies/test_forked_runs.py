@@ -12,7 +12,7 @@ from vss_nights import RATE_HZ, SIGNALS, injections, utc_us
 
 from virtualstar.astro import load_site
 from virtualstar.planning import PlanRequest, load_program, plan_program
-from virtualstar.planning.emulated import Branch, Branches, run_plan_on_emulator
+from virtualstar.planning.emulated import Branch, Branches, TimedWrite, run_plan_on_emulator
 from virtualstar.planning.exceptions import PlanningError
 from virtualstar.planning.recording import RunRecording
 from virtualstar.recorder.experiment import Injection, SineBranch
@@ -33,7 +33,8 @@ star = "Deneb"
 priority = 2
 """
 START = "2021-07-21T01:20:00Z"
-FORK_S, FAULT_S, STOP_S = 30, 40, 100  # after the plan's start: fork, every fault, stop
+FORK_S, STANDBY_S, FAULT_S, STOP_S = 30, 35, 40, 100  # after the plan's start: fork, a
+# variant on standby, every fault, stop
 
 
 @pytest.fixture(scope="module")
@@ -55,12 +56,16 @@ def test_a_variant_forked_at_a_mount_time_records_what_the_whole_variant_records
     writes = injections(fault_us)  # all six degradations of the VSS nights
     whole = run_plan_on_emulator(plan, record=_recording(work / "whole"), writes=writes,
                                  until_us=stop_us)
+    # variants wait at FORK_S and, on standby, at STANDBY_S and after the fault: the
+    # variant runs in the one forked last before its fault
     forked = run_plan_on_emulator(
         plan, record=_recording(work / "main"), until_us=stop_us,
         branches=Branches(start + FORK_S * 1_000_000, 1, lambda result: [
-            Branch(writes, stop_us, (f"parquet:{work / 'branch'}",))]))
+            Branch(writes, stop_us, (f"parquet:{work / 'branch'}",))],
+            standby_us=[start + s * 1_000_000 for s in (FAULT_S + 5, STANDBY_S)]))
     assert [b["recording"]["samples_per_signal"] for b in forked["branches"]] == \
         [whole["recording"]["samples_per_signal"]]
+    assert [b["forked_at_us"] for b in forked["branches"]] == [start + STANDBY_S * 1_000_000]
     a, b, main = (ParquetStoreReader(work / n) for n in ("whole", "branch", "main"))
     assert a.time_range() == b.time_range()
     assert main.time_range()[0] == a.time_range()[0]
@@ -87,6 +92,24 @@ def test_a_variant_forked_at_a_mount_time_records_what_the_whole_variant_records
     assert np.array_equal(tm.columns[current][before], tb.columns[current][before])
     assert not np.array_equal(tm.columns[current][after], tb.columns[current][after])
     assert not any(e[3] == "param" for e in log(main))
+
+
+def test_each_order_runs_in_the_variant_forked_last_before_its_start():
+    # forked at 10 (two), 20, 30 and 40 s; orders starting at 35, 12, 30 and 50 s (the
+    # last by its stop): the latest starts choose first, and the two children at 10 s
+    # leave every order one
+    from virtualstar.planning.emulated import _assign
+
+    s = 1_000_000
+    orders = [Branch([TimedWrite(35 * s, "x", 1.0)]), Branch([TimedWrite(12 * s, "x", 1.0)]),
+              Branch([TimedWrite(30 * s, "x", 1.0), TimedWrite(60 * s, "x", 0.0)]),
+              Branch((), 50 * s)]
+    forked_at = [10 * s, 10 * s, 20 * s, 30 * s, 40 * s]
+    assert _assign(orders, forked_at, 10 * s) == [3, 0, 2, 4]
+    # two orders at the same start, a single child at their point: the second one goes back
+    # to the latest point left
+    same = [Branch([TimedWrite(45 * s, "x", 1.0)]), Branch([TimedWrite(45 * s, "x", 1.0)])]
+    assert sorted(_assign(same, forked_at, 10 * s)) == [3, 4]
 
 
 def test_branch_orders_that_write_before_the_fork_are_refused(short_plan):

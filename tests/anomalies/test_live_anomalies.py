@@ -6,6 +6,7 @@ import pytest
 from anomaly_helpers import CASES, LIVE_CASE, MADE_ONCE_TIMEOUT_S
 
 from virtualstar.anomalies.live import LiveAnomalies
+from virtualstar.forking import HeldWriter
 from virtualstar.recorder.parquet_store import ParquetStoreReader
 
 # a fixture's setup (a recording, or the wait for another worker's) counts toward the
@@ -38,3 +39,45 @@ def test_live_detection_on_a_clean_recording_reports_nothing(clean_recording):
         live.feed(block)
     live.finish()
     assert found == [] and live.active and live.detection.fitted
+
+
+def test_detectors_switched_on_mid_recording_catch_up_to_what_they_find_from_the_start(
+        live_recording):
+    # LIVE_CASE's variant switches its detectors on at its fork and first replays the
+    # recording held until then (HeldWriter.replay): fed so, they must find what
+    # detectors fed from the start find. The friction store, fed as a recorder feeds it
+    # (blocks, and the events stored by then), to detectors running from the start and to
+    # a HeldWriter that detectors switched on at the injection catch up on.
+    store, t0_us = live_recording
+    switch_us = CASES[LIVE_CASE][0][0].at_us(t0_us)
+    reader = ParquetStoreReader(store)
+    names = [s.name for s in reader.signals()]
+    events = sorted(reader.events(), key=lambda e: e.t_us)
+    whole = LiveAnomalies(names, 1000.0, lambda a: None)
+    held = HeldWriter(lambda: None)
+    held.begin([])
+    late: LiveAnomalies | None = None
+    k = 0
+    for block in reader.iter_blocks(batch_rows=7_777):
+        end = int(block.t_us[-1])
+        first = k
+        while k < len(events) and events[k].t_us <= end:
+            k += 1
+        for feed in ([whole] + ([late] if late else [])):
+            feed.feed_events(events[first:k])
+            feed.feed(block)
+        if late is None:
+            held.write_events(events[first:k])
+            held.write(block)
+            if end >= switch_us:
+                late = LiveAnomalies(names, 1000.0, lambda a: None)
+                held.replay(late.feed, late.feed_events)
+    for feed in (whole, late):
+        feed.feed_events(events[k:])
+        feed.finish()
+
+    def key(live):
+        return [(a.kind, a.axis, a.start_us, a.end_us, a.score) for a in live.reported]
+
+    assert late is not None and key(whole) and key(late) == key(whole)
+    assert late.reference.stretches == whole.reference.stretches

@@ -142,9 +142,8 @@ def test_a_linear_form_of_the_coefficients_has_the_variance_the_covariance_gives
     # u·β over many fits with independent noise: its spread is sqrt(u Σ uᵀ) (white
     # noise, one row per cluster: the sandwich is the textbook covariance then)
     rng = np.random.default_rng(7)
-    # rows per fit: the claim is the formula's, not a size's (a fit's cost is mostly its
-    # friction search; 1000 rows cost 6 s of CPU here, 4000 19 s). The 200 fits stay:
-    # they pin the spread to ~5 %, the tolerance is 25 %
+    # rows per fit: the claim is the formula's, not a size's. The 200 fits stay: they pin
+    # the spread to ~5 %, the tolerance is 25 %
     n = 250
     p = rng.uniform(0.3, 1.3, n)
     v = rng.uniform(-2e-3, 2e-3, n)

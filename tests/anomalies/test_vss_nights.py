@@ -26,6 +26,7 @@ from vss_nights import (
     FORK_US,
     FOUND_WITHIN_S,
     SIGNALS,
+    STANDBY_US,
     Moments,
     injections,
     make_plan,
@@ -51,7 +52,8 @@ pytestmark = pytest.mark.timeout(MADE_ONCE_TIMEOUT_S)
 
 @pytest.fixture(scope="module")
 def nights(tmp_path_factory):
-    """{"clean", "slew", "pass"}: store paths; "moments": when the faults were injected.
+    """{"clean", "slew", "pass"}: store paths; "moments": when the faults were injected;
+    "forked_at_us": where each faulty night was forked off the clean one.
     Recorded once per session, whichever workers run this module's tests."""
 
     def build(work):
@@ -65,13 +67,16 @@ def nights(tmp_path_factory):
                     for name, at_us in (("slew", found[0].slew_us),
                                         ("pass", found[0].pass_us))]
 
-        record_night(make_plan(work / "plan"), work / "clean",
-                     branches=Branches(FORK_US, 2, faulty_nights))
-        return {"work": str(work), "moments": list(astuple(found[0]))}
+        run = record_night(make_plan(work / "plan"), work / "clean",
+                           branches=Branches(FORK_US, 2, faulty_nights, standby_us=STANDBY_US))
+        return {"work": str(work), "moments": list(astuple(found[0])),
+                "forked_at_us": dict(zip(("slew", "pass"), (b["forked_at_us"] for b in
+                                                             run["branches"]), strict=True))}
 
     made = made_once(tmp_path_factory, "vss-nights", build)
     out = {name: Path(made["work"]) / name for name in ("clean", "slew", "pass")}
     out["moments"] = Moments(*made["moments"])
+    out["forked_at_us"] = made["forked_at_us"]
     return out
 
 
@@ -135,6 +140,8 @@ def test_each_degradation_is_found_when_injected_during_a_slew_and_a_pass(nights
 def test_a_faulty_night_moves_exactly_as_the_clean_one_until_its_fault_and_stops_after(
         nights, where):
     at_us = nights["moments"].slew_us if where == "slew" else nights["moments"].pass_us
+    # forked off the clean night in the last minute before its fault (STANDBY_US)
+    assert 0 <= at_us - nights["forked_at_us"][where] < 60_000_000
     clean, faulty = ParquetStoreReader(nights["clean"]), ParquetStoreReader(nights[where])
     assert faulty.time_range()[0] == clean.time_range()[0]
     # bit for bit in the two minutes before the fault (the emulator is deterministic: equal

@@ -12,8 +12,10 @@ fault of the tests is flagged within two minutes of its injection. Fault injecti
 timed from the clean run: in the middle of the first slew after the reference, and three
 minutes into the satellite pass after it (the runs are deterministic, so the faulty night
 moves exactly as the clean one until the fault begins). The faulty nights are therefore
-forked off the clean one (`run_plan_on_emulator(branches=)`) at FORK_US, the earliest the
-automatic reference can end, instead of being simulated again from the start; each is
+forked off the clean one (`run_plan_on_emulator(branches=)`) instead of being simulated
+again from the start: variants wait at FORK_US, the earliest the automatic reference can
+end, and at every minute after it (STANDBY_US), and each faulty night runs in the last
+one before its fault; each is
 stopped FOUND_WITHIN_S after its fault (twice the two minutes its faults need): the rest
 of the night would only cost CPU (a night is ~13 s of it).
 """
@@ -100,6 +102,11 @@ def utc_us(iso: str) -> int:
 # start and the automatic reference is its first 15 minutes of usable time at the least,
 # so every fault (after the reference) comes later.
 FORK_US = utc_us(WINDOW[0]) + round(ReferenceConfig().length_s * 1e6)
+# The fault moments are read from the clean night once it has ended; a variant waits at
+# every minute after FORK_US until the last moment (the pass: 6.4 minutes after it), and
+# each faulty night runs in the one forked last before its fault (a minute of simulation
+# again at most, instead of up to seven).
+STANDBY_US = tuple(FORK_US + k * 60_000_000 for k in range(1, 8))
 
 
 def make_plan(workdir: Path) -> dict:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["CurrentModel", "Friction", "coefficient_covariance", "estimate_cogging_periods",
-           "fit_current_model", "fit_friction"]
+           "fit_current_model", "fit_friction", "friction_fits"]
 
 FRICTION_SHAPES = ("clip", "tanh", "exp")
 FRICTION_KNEES_RAD_S = tuple(float(x) for x in np.logspace(-6, -2, 41))
@@ -149,9 +149,14 @@ class CurrentModel:
         alternatives)."""
         best = self.predict(p, v, a)
         out = np.zeros(len(best))
+        if not self.alternatives:
+            return out
+        # only the friction column differs between the alternatives: the others (the
+        # cogging's cosines, sines and fades among them) are computed once
+        x = _regressors(p, v, a, self.gravity, self.cogging_periods, self.friction,
+                        self.segment_s)
         for friction, coef, scales in self.alternatives:
-            x = _regressors(p, v, a, self.gravity, self.cogging_periods, friction,
-                            self.segment_s)
+            x[:, FRICTION_COLUMN] = friction(v)
             np.maximum(out, np.abs((x / scales) @ coef - best), out=out)
         return out
 
@@ -171,7 +176,7 @@ class CurrentModel:
     def friction_a(self, v: np.ndarray) -> np.ndarray:
         """The dry-friction part of the model's current at each rate (A): the term a
         bearing's friction growth scales."""
-        k = 3  # the column of g(v/v_k) in _regressors
+        k = FRICTION_COLUMN
         return self.friction(v) * (self.coefficients[k] / self.scales[k])
 
     def slope_a_per_rad_s(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -181,6 +186,9 @@ class CurrentModel:
         up = self.predict(p, v + np.sign(v + 1e-30) * dv, a)
         down = self.predict(p, v - np.sign(v + 1e-30) * dv, a)
         return np.abs(up - down) / (2 * dv)
+
+
+FRICTION_COLUMN = 3  # the column of g(v/v_k) in _regressors
 
 
 def _regressors(p, v, a, gravity: bool, cogging_periods: int,
@@ -282,30 +290,44 @@ def scan_cogging_periods(p: np.ndarray, v: np.ndarray, x0: np.ndarray, i: np.nda
     g00, b0, yy = x0.T @ x0, x0.T @ i, float(i @ i)
     k0 = x0.shape[1]
     eye = np.eye(k0 + 4)
-    z1 = np.exp(1j * p)
-    zn = np.exp(1j * (ns[0] - 1) * p)
+    # e^(iNp) and e^(iNh), h = v·T/2, for each N by recurrence (a product per N, not
+    # cosines and sines): the cogging's phase and the fade's, sinc(k·N·v·T/2π) =
+    # sin(kNh)/(kNh), of both harmonics (sin(2x)/2x = sin(x)/x · cos(x))
+    half_vt = v * (segment_s / 2)
+    step = np.exp(1j * np.stack([p, half_vt]))
+    at_n = np.exp(1j * (ns[0] - 1) * np.stack([p, half_vt]))
+    moving = half_vt != 0
+    inv_h = np.zeros(len(p))
+    inv_h[moving] = 1.0 / half_vt[moving]
     for first in range(0, len(ns), SCAN_BATCH):
         nb = ns[first:first + SCAN_BATCH].astype(np.float64)
-        # e^(iNp) for the batch's N by recurrence (a product per N, not four cosines)
-        z = np.empty((len(nb), len(p)), dtype=np.complex128)
+        zw = np.empty((len(nb), 2, len(p)), dtype=np.complex128)
         for j in range(len(nb)):
-            zn = zn * z1
-            z[j] = zn
-        c = np.empty((len(nb), len(p), 4))
-        for k, zk in ((1, z), (2, z * z)):  # the same columns as _regressors
-            fade = np.sinc(k * nb[:, None] * v[None, :] * (segment_s / (2 * math.pi)))
-            c[:, :, 2 * k - 2] = zk.real * fade
-            c[:, :, 2 * k - 1] = zk.imag * fade
-        sc = np.sqrt(np.mean(c * c, axis=1))
+            at_n = at_n * step
+            zw[j] = at_n
+        z, w = zw[:, 0], zw[:, 1]
+        fade1 = w.imag * (inv_h[None, :] / nb[:, None])
+        fade1[:, ~moving] = 1.0
+        fade2 = fade1 * w.real
+        # the same columns as _regressors, one row per column (each contiguous over the
+        # points): cos(kNp)·fade and sin(kNp)·fade
+        c = np.empty((len(nb), 4, len(p)))
+        z2 = z * z
+        np.multiply(z.real, fade1, out=c[:, 0])
+        np.multiply(z.imag, fade1, out=c[:, 1])
+        np.multiply(z2.real, fade2, out=c[:, 2])
+        np.multiply(z2.imag, fade2, out=c[:, 3])
+        # scale the products rather than the columns: a column's mean square is its
+        # product with itself over the points
+        g_cc = c @ np.transpose(c, (0, 2, 1))
+        sc = np.sqrt(np.diagonal(g_cc, axis1=1, axis2=2) / len(p))
         sc[sc == 0] = 1.0
-        c = c / sc[:, None, :]
         gram = np.empty((len(nb), k0 + 4, k0 + 4))
         gram[:, :k0, :k0] = g00
-        gram[:, :k0, k0:] = x0.T[None] @ c
-        gram[:, k0:, :k0] = np.transpose(gram[:, :k0, k0:], (0, 2, 1))
-        ct = np.transpose(c, (0, 2, 1))
-        gram[:, k0:, k0:] = ct @ c
-        b = np.concatenate([np.broadcast_to(b0, (len(nb), k0)), ct @ i], axis=1)
+        gram[:, k0:, k0:] = g_cc / (sc[:, :, None] * sc[:, None, :])
+        gram[:, k0:, :k0] = (c @ x0) / sc[:, :, None]
+        gram[:, :k0, k0:] = np.transpose(gram[:, k0:, :k0], (0, 2, 1))
+        b = np.concatenate([np.broadcast_to(b0, (len(nb), k0)), (c @ i) / sc], axis=1)
         ridge = RIDGE * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-30) / (k0 + 4)
         coef = np.linalg.solve(gram + ridge[:, None, None] * eye, b[:, :, None])[:, :, 0]
         sse = yy - 2 * np.sum(coef * b, axis=1) + np.sum(
@@ -320,17 +342,71 @@ def _equivalent(n: int, m: int) -> bool:
     return n == m or n == 2 * m or m == 2 * n
 
 
+def friction_fits(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray, *,
+                  gravity: bool, cogging_periods: int = 0,
+                  segment_s: float = 0.0) -> list[tuple[Friction, np.ndarray, np.ndarray, float]]:
+    """(friction, coefficients, column scales, residual RMS) of the fit with each friction
+    shape and knee (FRICTION_SHAPES × FRICTION_KNEES_RAD_S, in that order): what `_lstsq`
+    gives for each, solved together.
+
+    Only the friction column differs between the candidates, so the other columns' normal
+    equations are formed once and each candidate adds its column's products with them
+    (one matrix product per shape); the residual RMS comes from the normal equations, as
+    in `scan_cogging_periods`. A fit is then a (k × k) solve, not a pass over the rows."""
+    base = _regressors(p, v, a, gravity, cogging_periods, Friction(), segment_s)
+    k = base.shape[1]
+    others = [c for c in range(k) if c != FRICTION_COLUMN]
+    b_scales = np.sqrt(np.mean(base[:, others] ** 2, axis=0)) if len(p) else np.ones(k - 1)
+    b_scales[b_scales == 0] = 1.0
+    bs = base[:, others] / b_scales
+    g_bb, y_b, yy = bs.T @ bs, bs.T @ i, float(i @ i)
+    n_rows = max(len(p), 1)
+    out = []
+    for shape in FRICTION_SHAPES:
+        frictions = [Friction(shape, knee) for knee in FRICTION_KNEES_RAD_S]
+        f = np.stack([fr(v) for fr in frictions], axis=1) if len(p) else \
+            np.zeros((0, len(frictions)))
+        f_scales = np.sqrt(np.mean(f * f, axis=0)) if len(p) else np.ones(len(frictions))
+        f_scales[f_scales == 0] = 1.0
+        fs = f / f_scales
+        m = len(frictions)
+        gram = np.empty((m, k, k))
+        sub = np.ix_(others, others)
+        gram[:, sub[0], sub[1]] = g_bb
+        cross = (bs.T @ fs).T  # (m, k - 1)
+        gram[:, FRICTION_COLUMN, others] = cross
+        gram[:, others, FRICTION_COLUMN] = cross
+        gram[:, FRICTION_COLUMN, FRICTION_COLUMN] = np.einsum("nm,nm->m", fs, fs)
+        rhs = np.empty((m, k))
+        rhs[:, others] = y_b
+        rhs[:, FRICTION_COLUMN] = fs.T @ i
+        ridge = RIDGE * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-30) / k
+        coef = np.linalg.solve(gram + ridge[:, None, None] * np.eye(k), rhs[:, :, None])[:, :, 0]
+        sse = yy - 2 * np.sum(coef * rhs, axis=1) + np.einsum("mk,mkl,ml->m", coef, gram, coef)
+        rms = np.sqrt(np.maximum(sse, 0.0) / n_rows)
+        for j, fr in enumerate(frictions):
+            scales = np.empty(k)
+            scales[others] = b_scales
+            scales[FRICTION_COLUMN] = f_scales[j]
+            out.append((fr, coef[j], scales, float(rms[j])))
+    return out
+
+
+def _best_friction(fits) -> Friction:
+    """The friction of `fits` (as `friction_fits` returns) with the least residual RMS, the
+    first on a tie; Friction() when none is finite."""
+    best, best_rms = Friction(), math.inf
+    for friction, _, _, rms in fits:
+        if rms < best_rms:
+            best, best_rms = friction, rms
+    return best
+
+
 def fit_friction(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray, *,
                  gravity: bool, cogging_periods: int = 0, segment_s: float = 0.0) -> Friction:
     """Return the friction shape and knee that explain `i` best (see the module docstring)."""
-    best, best_rms = Friction(), math.inf
-    for shape in FRICTION_SHAPES:
-        for knee in FRICTION_KNEES_RAD_S:
-            f = Friction(shape, knee)
-            rms = _rms(_regressors(p, v, a, gravity, cogging_periods, f, segment_s), i)
-            if rms < best_rms:
-                best, best_rms = f, rms
-    return best
+    return _best_friction(friction_fits(p, v, a, i, gravity=gravity,
+                                        cogging_periods=cogging_periods, segment_s=segment_s))
 
 
 def _cogging_choice(p, v, a, i, *, gravity: bool, friction: Friction,
@@ -394,30 +470,23 @@ def fit_current_model(p: np.ndarray, v: np.ndarray, a: np.ndarray, i: np.ndarray
     p, v, a, i = p[rows], v[rows], a[rows], i[rows]
     if len(p) < 10:
         raise ValueError(f"the current model needs rows to learn from; got {len(p)}")
-    friction = fit_friction(p, v, a, i, gravity=gravity)
+    fits = friction_fits(p, v, a, i, gravity=gravity)
+    friction = _best_friction(fits)
     rivals: list[int] = []
     if cogging_periods is None:
         cogging_periods, rivals = _cogging_choice(p, v, a, i, gravity=gravity,
                                                   friction=friction, segment_s=segment_s)
     n = int(round(cogging_periods))
     if n:
-        friction = fit_friction(p, v, a, i, gravity=gravity, cogging_periods=n,
-                                segment_s=segment_s)
+        fits = friction_fits(p, v, a, i, gravity=gravity, cogging_periods=n,
+                             segment_s=segment_s)
+        friction = _best_friction(fits)
     x = _regressors(p, v, a, gravity, n, friction, segment_s)
     coef, scales = _lstsq(x, i)
     res = i - (x / scales) @ coef
     rms = float(np.sqrt(np.mean(res * res)))
-    alternatives = []
-    for shape in FRICTION_SHAPES:
-        for knee in FRICTION_KNEES_RAD_S:
-            f = Friction(shape, knee)
-            if f == friction:
-                continue
-            xf = _regressors(p, v, a, gravity, n, f, segment_s)
-            cf, sf = _lstsq(xf, i)
-            r = i - (xf / sf) @ cf
-            if np.sqrt(np.mean(r * r)) <= ALTERNATIVE_RMS_RATIO * rms:
-                alternatives.append((f, cf, sf))
+    alternatives = [(f, cf, sf) for f, cf, sf, r in fits
+                    if f != friction and r <= ALTERNATIVE_RMS_RATIO * rms]
     # N is certain when the reference rules out every other N it was scanned against (an
     # N given by the caller has no rivals) and N ± 1 explain it clearly worse
     cogging_alternatives = []

@@ -73,13 +73,26 @@ class Branches:
     Each waits there, costing no CPU, until the run has ended; `orders(result)` (called
     with the run's result, the run's recording written) then says what each does
     (`count` Branch), and they run on in parallel. The run's result gains `branches`:
-    theirs, in order. A variant moves exactly as the run until its first own write (the
-    run is deterministic; tests/anomalies/test_forked_runs.py compares one with a variant
-    simulated whole). Linux only; a recording is held in memory until its end."""
+    theirs, in order (each with `forked_at_us`). A variant moves exactly as the run until
+    its first own write (the run is deterministic; tests/anomalies/test_forked_runs.py
+    compares one with a variant simulated whole). Linux only; a recording is held in
+    memory until its end.
+
+    `standby_us`: later mount times where one more variant waits each. An order runs in
+    the variant forked last at or before its start (its first write, or its stop), so
+    that it simulates again only from there: a run whose fault moments are known only at
+    its end (read from its own recording) can still fork each fault close to its moment.
+    The variants given no order exit."""
 
     at_us: int
     count: int
     orders: Callable[[dict[str, Any]], Sequence[Branch]]
+    standby_us: Sequence[int] = ()
+
+    def points(self) -> list[tuple[int, int]]:
+        """(mount time, variants forked there), in time order."""
+        later = sorted(t for t in self.standby_us if t > self.at_us)
+        return [(self.at_us, self.count)] + [(t, 1) for t in later]
 
 
 class _HeldRecording:
@@ -155,7 +168,7 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
             # writes, stops, the branch point: cancelled at the end, their errors raised
             helpers = await _helpers(vss, writes, until_us)
             if branches is not None:
-                helpers.append(asyncio.ensure_future(fork_at(vss, branches.at_us, helpers)))
+                helpers.append(asyncio.ensure_future(fork_at(vss, helpers)))
             try:
                 if recording is None:
                     return await follow(vss)
@@ -177,18 +190,23 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
             tasks.append(stoppers[-1])
         return tasks
 
-    async def fork_at(vss, at_us: int, helpers: list[asyncio.Future]) -> None:
+    forked_at: list[int] = []  # in the parent: each child's fork point, in the order forked
+
+    async def fork_at(vss, helpers: list[asyncio.Future]) -> None:
         assert branches is not None
-        await clock.sleep_until_us(at_us)
-        await clock.settled()  # a quiet moment: nothing half done is copied
-        for _ in range(branches.count):
-            doc = forks.fork(asyncio.get_running_loop())
-            if doc is not None:  # this process is the variant from here on
-                order = Branch.from_doc(doc)
-                if isinstance(recording, _HeldRecording):
-                    recording.stores = order.record_to
-                helpers += await _helpers(vss, order.writes, order.until_us)
-                return
+        for at_us, count in branches.points():
+            await clock.sleep_until_us(at_us)
+            await clock.settled()  # a quiet moment: nothing half done is copied
+            for _ in range(count):
+                doc = forks.fork(asyncio.get_running_loop())
+                if doc is not None:  # this process is the variant from here on
+                    order = Branch.from_doc(doc)
+                    if isinstance(recording, _HeldRecording):
+                        recording.stores = order.record_to
+                    helpers += await _helpers(vss, order.writes, order.until_us)
+                    forked_at.append(at_us)
+                    return
+                forked_at.append(at_us)
 
     async def recorded(vss) -> dict[str, Any]:
         from virtualstar.eventlog import VssEventSource
@@ -225,19 +243,23 @@ def run_plan_on_emulator(plan_doc: dict[str, Any], *, speed: float | None = None
         result = run_lockstep(main(), clock)
     result["wall_s"] = time.perf_counter() - t0
     if forks.in_child:
+        result["forked_at_us"] = forked_at[-1]
         forks.end_child(result=result)
     if branches is not None:
         try:
-            result["branches"] = _run_branches(branches, forks, result, record is not None)
+            result["branches"] = _run_branches(branches, forks, forked_at, result,
+                                               record is not None)
         finally:
             forks.abandon()
     return result
 
 
-def _run_branches(branches: Branches, forks: Forks, result: dict[str, Any],
-                  recorded: bool) -> list[dict[str, Any]]:
-    """Send the variants waiting at the branch point their orders; return their results."""
-    if len(forks.children) != branches.count:
+def _run_branches(branches: Branches, forks: Forks, forked_at: list[int],
+                  result: dict[str, Any], recorded: bool) -> list[dict[str, Any]]:
+    """Send the variants waiting at the branch points their orders (each to the one forked
+    last at or before its start; the others are dismissed); return their results, in the
+    order of the orders."""
+    if len(forked_at) < branches.count:
         raise PlanningError(f"the run ended before its branch point (mount time "
                             f"{branches.at_us}): no variant was forked")
     orders = list(branches.orders(result))
@@ -252,11 +274,35 @@ def _run_branches(branches: Branches, forks: Forks, result: dict[str, Any],
         if recorded and not b.record_to:
             raise PlanningError("a branch of a recorded run needs stores of its own "
                                 "(record_to)")
-    forks.send([b.as_doc() for b in orders])
+    child_of = _assign(orders, forked_at, branches.at_us)
+    docs: list[dict[str, Any] | None] = [None] * len(forked_at)
+    for k, child in enumerate(child_of):
+        docs[child] = orders[k].as_doc()
+    forks.send(docs)
     try:
-        return forks.wait()
+        results = forks.wait()
     except ForkError as exc:
         raise PlanningError(str(exc)) from None
+    by_child = dict(zip(sorted(child_of), results, strict=True))
+    return [by_child[child] for child in child_of]
+
+
+def _assign(orders: Sequence[Branch], forked_at: list[int], at_us: int) -> list[int]:
+    """The child (index into `forked_at`, the fork points in the order forked) each order
+    runs in: the latest free one forked at or before the order's start. The latest starts
+    choose first; the `count` children at `at_us` leave every order one."""
+    def start(b: Branch) -> int:
+        times = [w.t_us for w in b.writes] + ([b.until_us] if b.until_us is not None else [])
+        return min(times, default=at_us)
+
+    free = sorted(range(len(forked_at)), key=lambda c: forked_at[c])
+    child_of = [0] * len(orders)
+    for k in sorted(range(len(orders)), key=lambda k: -start(orders[k])):
+        child = max((c for c in free if forked_at[c] <= start(orders[k])),
+                    key=lambda c: forked_at[c])
+        free.remove(child)
+        child_of[k] = child
+    return child_of
 
 
 async def _start_writes(vss, clock, writes: Sequence[TimedWrite]) -> asyncio.Task:

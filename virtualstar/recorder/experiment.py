@@ -71,12 +71,17 @@ class Injection:
 class SineBranch:
     """A variant of the run, forked off it (os.fork) `at_s` seconds after the trajectory
     starts: the same run (the same sine), plus its own `injections` (none before
-    `at_s`), recorded into `out_dir`/store until `stop_s` (default: the run's end)."""
+    `at_s`), recorded into `out_dir`/store until `stop_s` (default: the run's end).
+    `detect`: the variant runs the anomaly detectors live even where the run does not;
+    they first catch up on what the run recorded until the fork (in the order it was
+    written), then see the rest as it comes (an anomaly found while catching up, before
+    any fault of the variant, would be logged at the fork's time)."""
 
     at_s: float
     injections: tuple[Injection, ...]
     out_dir: str
     stop_s: float | None = None
+    detect: bool = False
 
 
 @dataclass(frozen=True)
@@ -271,12 +276,15 @@ async def _run(exp: SineExperiment, out_dir: str | Path,
         return await Client.open(emu.endpoint.connect_in_memory(maxsize=256), name="recorder",
                                  queue_packets=4096)
 
-    watch = watch_events = watch_end = None
-    if detect:
+    def live_detectors():
         from virtualstar.anomalies.live import LiveAnomalies
 
         live = LiveAnomalies(exp.names, exp.record_hz, lambda a: recorder.anomaly_found(a))
-        watch, watch_events, watch_end = live.feed, live.feed_events, live.finish
+        return live.feed, live.feed_events, live.finish
+
+    watch = watch_events = watch_end = None
+    if detect:
+        watch, watch_events, watch_end = live_detectors()
     recorder = Recorder(connect, exp.names, exp.record_hz, writer, watch=watch,
                         watch_events=watch_events, watch_end=watch_end,
                         source=f"in-process mount emulator, sine experiment on {exp.axis}")
@@ -317,6 +325,12 @@ async def _run(exp: SineExperiment, out_dir: str | Path,
                     store = out / "store"
                     if b.stop_s is not None:
                         total_ticks = (round(b.stop_s * 1e6) + START_DELAY_US) // 100
+                    if b.detect and not detect:
+                        watch, watch_events, watch_end = live_detectors()
+                        # the recorder's own events aside: a watcher sees the device's
+                        writer.replay(watch, lambda events, feed=watch_events: feed(
+                            [e for e in events if e.source != "recorder"]))
+                        recorder.watch(watch, watch_events, watch_end)
                     n = min(BLOCK_TICKS, total_ticks - done)
             while pending and pending[0].at_us(t0_us) <= emb.mount_time_us:
                 j = pending.pop(0)

@@ -234,6 +234,16 @@ class Recorder:
         """Ask `run` to finish after the packets already received."""
         self._stop.set()
 
+    def watch(self, watch: Callable[[SampleBlock], None],
+              watch_events: Callable[[list[Event]], None] | None = None,
+              watch_end: Callable[[], None] | None = None) -> None:
+        """From now on hand every block written to `watch`, and so on (as the constructor's
+        arguments): live detection switched on while recording. What was written before
+        is the caller's to hand over (a forked variant's held recording, say)."""
+        self.sink.writer = _Watched(self.writer, watch)
+        self._watch_events = watch_events
+        self._watch_end = watch_end
+
     # -- events --------------------------------------------------------------------------
     def _now_us(self) -> int:
         """Mount time of the recorder's own events: the newest sample, else the host clock."""
