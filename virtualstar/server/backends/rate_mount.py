@@ -458,9 +458,9 @@ class RateMountLink(ConnectionWaits):
     def _busy(self) -> bool:
         """Whether fresh reports matter now: a call in progress (a goto waits on its slew's
         end), the mount moving at commanded rates or slewing, or a followed path that moves
-        soon or is not yet held (`poll_pace`). The rate loop's
-        corrections of a star held by the mount's own tracking (hundredths of an arcsecond
-        a second, errors of hundredths of an arcsecond) are not motion."""
+        soon or is not yet held (`poll_pace`). The rate loop's corrections of a star held by
+        the mount's own tracking (hundredths of an arcsecond a second, errors of hundredths
+        of an arcsecond) are not motion."""
         rep = self._report
         if self._lock.locked() or rep is None:
             return True
