@@ -68,6 +68,8 @@ ASK_QUIET_S = 0.5  # the INDI observer asks for the place again after this long 
 # read costs the simulator two requests (at its old pace, 0.05 s between reads, the observer
 # made a third of the simulator's requests; the VSS's own polling makes the rest)
 OBSERVE_PERIOD_S = 0.2
+REST_COUNT_S = 3.0  # the Alpaca pass: the VSS's requests are counted this long at rest
+REST_GUARD_S = 60.0  # hang guard of the wait for the VSS to read at its rest pace
 
 
 def now_us() -> int:
@@ -91,6 +93,17 @@ def free_port() -> int:
     port = s.getsockname()[1]
     s.close()
     return port
+
+
+def wait_listening(port: int, what: str) -> None:
+    """Wait until something listens on loopback `port` (RuntimeError after START_TIMEOUT_S)."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.1)
+    raise RuntimeError(f"{what} did not listen on {port}")
 
 
 class Simulator:
@@ -123,7 +136,10 @@ class Simulator:
             # connections held 300 s) but without a log line per request: a tenth of the
             # CPU of each of the ~60 requests a second the VSS and the observer make
             env = dict(os.environ, ASTRA_SIMULATORS_CONFIG=str(self.alpaca_config()))
-            cmd = [sys.executable, "-m", "uvicorn", "alpaca_simulators.main:app", "--host",
+            # (alpaca_sim_serve.py: uvicorn's own command, the camera's image library loaded
+            # only if a camera image is made)
+            cmd = [sys.executable, str(Path(__file__).with_name("alpaca_sim_serve.py")),
+                   "alpaca_simulators.main:app", "--host",
                    "127.0.0.1", "--port", str(self.port), "--timeout-keep-alive", "300",
                    "--no-access-log"]
         else:
@@ -147,13 +163,7 @@ class Simulator:
         return path
 
     def wait_listening(self) -> None:
-        deadline = time.monotonic() + START_TIMEOUT_S
-        while time.monotonic() < deadline:
-            with socket.socket() as s:
-                if s.connect_ex(("127.0.0.1", self.port)) == 0:
-                    return
-            time.sleep(0.1)
-        raise RuntimeError(f"the {self.kind} simulator did not listen on {self.port}")
+        wait_listening(self.port, f"the {self.kind} simulator")
 
     def kill(self) -> None:
         if self.proc is not None:
@@ -167,6 +177,76 @@ class Simulator:
                 self.proc.wait(10)
             except subprocess.TimeoutExpired:
                 self.kill()
+
+
+class RequestCounter:
+    """A TCP relay between the VSS and the Alpaca simulator that writes down every request
+    the VSS makes (time, member), read from the bytes on the wire: how often the VSS asks,
+    counted outside the VSS. A process of its own (this script with ``--relay``)."""
+
+    def __init__(self, sim: Simulator) -> None:
+        self.port = free_port()
+        self.path = sim.out_dir / "vss-requests.txt"
+        self.path.touch()
+        self.proc = subprocess.Popen(
+            [sys.executable, __file__, "--relay", str(self.port), str(sim.port),
+             str(self.path)], stdout=sim.log, stderr=sim.log)
+
+    @property
+    def url(self) -> str:
+        return f"alpaca://127.0.0.1:{self.port}/0"
+
+    def wait_listening(self) -> None:
+        wait_listening(self.port, "the request counter")
+
+    def requests(self) -> list[tuple[float, str]]:
+        lines = self.path.read_text().split("\n")[:-1]
+        return [(float(t), member) for t, member in (line.split() for line in lines)]
+
+    def close(self) -> None:
+        stop_process(self.proc)
+
+
+def relay(port: int, upstream: int, path: Path) -> None:
+    """The request counter's process: relay loopback `port` to `upstream`, and append
+    "t_s member" for every Alpaca request line that passes towards the simulator."""
+    import re
+
+    line = re.compile(rb"(?:GET|PUT) /api/v1/telescope/\d+/(\w+)")
+
+    async def pump(reader, writer, out=None) -> None:
+        tail = b""
+        try:
+            while data := await reader.read(65536):
+                if out is not None:
+                    # a request line split between two reads is found in the joined tail
+                    text = tail + data
+                    for m in line.finditer(text):
+                        if m.end() > len(tail):
+                            out.write(f"{time.time():.6f} {m.group(1).decode()}\n")
+                    tail = text[-64:]
+                writer.write(data)
+                await writer.drain()
+        except (ConnectionError, OSError):
+            pass
+        finally:
+            writer.close()
+
+    async def main() -> None:
+        with open(path, "a", buffering=1) as out:
+            async def serve(reader, writer) -> None:
+                try:
+                    up_r, up_w = await asyncio.open_connection("127.0.0.1", upstream)
+                except OSError:
+                    writer.close()
+                    return
+                await asyncio.gather(pump(reader, up_w, out), pump(up_r, writer))
+
+            server = await asyncio.start_server(serve, "127.0.0.1", port)
+            async with server:
+                await server.serve_forever()
+
+    asyncio.run(main())
 
 
 class Observer:
@@ -383,7 +463,8 @@ class Rig:
     """A simulator, the VSS driving it (`--mount alpaca://…|indi://…`) and the observer."""
 
     async def open(self, kind: str, site, out_dir: Path, sim: Simulator | None = None,
-                   obs: Observer | None = None, **build) -> Rig:
+                   obs: Observer | None = None, mount_url: str | None = None,
+                   **build) -> Rig:
         """Start what is not started yet: `sim` may be launched and `obs` observing
         already (their processes start while the caller works out the site)."""
         from virtualstar.server import build_server
@@ -394,7 +475,7 @@ class Rig:
         self.sim = sim
         self.obs = obs or Observer(sim)  # it reads (retrying) once the simulator serves
         sim.wait_listening()
-        self.vss = build_server(mount_url=self.sim.url, site=site, **build)
+        self.vss = build_server(mount_url=mount_url or self.sim.url, site=site, **build)
         self.url = await self.vss.start("ws://127.0.0.1:0")
         self.t = self.vss.telescope
         await self.t.link.wait_connected(START_TIMEOUT_S)
@@ -420,12 +501,16 @@ async def scenario(kind: str, part: str, out_dir: Path) -> dict:
     rig.sim = sim = Simulator(kind, out_dir)
     sim.launch()
     rig.obs = obs = Observer(sim)
+    counter = RequestCounter(sim) if (kind, part) == ("alpaca", "pass") else None
     try:
         # the pass part at night: no Sun zone between the mount and the pass (a detour
         # would only lengthen the test; the sky part proves the routes)
         site, eop = daytime_site(-37.5 if part in ("sky", "route") else 180.0)
         doc["site"] = site_doc(site)
-        await rig.open(kind, site, out_dir, sim=sim, obs=obs, signals_url="ws://127.0.0.1:0")
+        if counter is not None:
+            counter.wait_listening()
+        await rig.open(kind, site, out_dir, sim=sim, obs=obs, signals_url="ws://127.0.0.1:0",
+                       mount_url=counter and counter.url)
         t, obs, sim, url = rig.t, rig.obs, rig.sim, rig.url
         doc["connected"] = json.loads(json.dumps((await t.status())["backend"], default=str))
         sun_azel = sun_azel_now(site, eop)
@@ -436,7 +521,7 @@ async def scenario(kind: str, part: str, out_dir: Path) -> dict:
         elif part == "route":
             await route_part(doc, t, sun_azel, obs, t0)
         elif part == "pass":
-            await pass_part(doc, t, site, sun_azel, obs, t0)
+            await pass_part(doc, t, site, sun_azel, obs, t0, counter)
         else:
             rig.obs = await kill_part(doc, t, sim, obs, t0)
         doc["final_backend"] = json.loads(json.dumps((await t.status())["backend"], default=str))
@@ -444,6 +529,8 @@ async def scenario(kind: str, part: str, out_dir: Path) -> dict:
         doc["errors"].append(traceback.format_exc())
     finally:
         await rig.close()
+        if counter is not None:
+            counter.close()
     doc["steps_s"]["end"] = time.monotonic() - t0
     return doc
 
@@ -570,8 +657,9 @@ def route_ends(sun_azel) -> tuple[tuple[float, float], tuple[float, float]]:
     return ((sun_azel[0] - off) % 360.0, el), ((sun_azel[0] + off) % 360.0, el)
 
 
-async def pass_part(doc, t, site, sun_azel, obs, t0) -> None:
-    """An ISS-like pass stopped mid-pass."""
+async def pass_part(doc, t, site, sun_azel, obs, t0, counter=None) -> None:
+    """An ISS-like pass stopped mid-pass (with `counter`: the VSS's requests counted while
+    it follows and at rest after the stop)."""
     from virtualstar.astro import Satellite
 
     # 5. a satellite pass (ISS-like, culminating away from the Sun), stopped mid-pass,
@@ -601,11 +689,28 @@ async def pass_part(doc, t, site, sun_azel, obs, t0) -> None:
     doc["stop_sent_s"] = stop_at
     # the mount must stay at rest: the observer keeps reading, 4 s and at least 6 places
     rest_from = obs.mark()
+    rest = asyncio.ensure_future(count_at_rest(t, counter)) if counter else None
     await asyncio.sleep(4.0)
     await obs.wait_places(rest_from + 6, 60.0)
+    if rest is not None:
+        doc["requests"] = {"rest": await rest, "all": counter.requests(),
+                           "rest_poll_s": t.link.pace.rest_s, "poll_s": t.link.pace.fast_s}
     doc["pass_op"] = op_doc(op)
     doc["pass_samples"] = obs.since(k)
     doc["steps_s"]["pass"] = time.monotonic() - t0
+
+
+async def count_at_rest(t, counter: RequestCounter) -> list[float]:
+    """Once the VSS says it reads at its rest pace (status), the window [from, to] (s) of
+    `REST_COUNT_S` in which the counter's requests are judged."""
+    deadline = time.monotonic() + REST_GUARD_S
+    while t.link.describe()["poll_period_s"] != t.link.pace.rest_s:
+        if time.monotonic() > deadline:
+            return []
+        await asyncio.sleep(0.05)
+    start = time.time()
+    await asyncio.sleep(REST_COUNT_S)
+    return [start, time.time()]
 
 
 async def kill_part(doc, t, sim, obs, t0):
@@ -761,6 +866,9 @@ def log_vss_to(path: Path) -> None:
 def main() -> None:
     if sys.argv[1] == "--observe":
         observe(sys.argv[2], int(sys.argv[3]), Path(sys.argv[4]))
+        return
+    if sys.argv[1] == "--relay":
+        relay(int(sys.argv[2]), int(sys.argv[3]), Path(sys.argv[4]))
         return
     kind, part, out_dir = sys.argv[1], sys.argv[2], Path(sys.argv[3])
     out_dir.mkdir(parents=True, exist_ok=True)

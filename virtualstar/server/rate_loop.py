@@ -249,6 +249,8 @@ class RateFollower:
         self._rates = (0.0, 0.0)
         self._predictor: RatePredictor | None = None  # created at the first report (its period)
         self._side: float | None = None  # the sign of the hour angle at the join (German)
+        # the path's native samples at the newest mount times asked (`_sample_at`)
+        self._samples: dict[int, Points] = {}
         caps = link.capabilities
         self.max_rate = math.radians(caps.max_rate_deg_s or 1.0)
         # rates closer than this to those in force are not sent: a star is left to the
@@ -266,8 +268,20 @@ class RateFollower:
 
     def _demand(self, t_us: int) -> tuple[float, float]:
         """The path's native place at a mount time (the link's per-report error)."""
-        p = self.frame.sample(self.path, np.array([max(t_us, self.join_us)], np.int64))
+        p = self._sample_at(max(t_us, self.join_us))
         return float(p.az_rad[0]), float(p.el_rad[0])
+
+    def _sample_at(self, t_us: int) -> Points:
+        """The path's native sample at one mount time, kept for the next few calls: the
+        link takes each report's error on arrival (`_demand`) and the loop records the same
+        report (`_record`), one astrometric conversion for both. A report's time is past,
+        and an offset applies from when it is given on, so a kept sample stays true."""
+        p = self._samples.get(t_us)
+        if p is None:
+            p = self._samples[t_us] = self.frame.sample(self.path, np.array([t_us], np.int64))
+            if len(self._samples) > 4:
+                del self._samples[next(iter(self._samples))]
+        return p
 
     async def _run(self) -> None:
         if not getattr(self.link, "signs_measured", True):
@@ -365,7 +379,7 @@ class RateFollower:
         await self._set((float(rate[0]), float(rate[1])))
 
     def _record(self, a1: float, a2: float, t_rep: int) -> None:
-        d = self.frame.sample(self.path, np.array([t_rep], np.int64))
+        d = self._sample_at(t_rep)
         err1, err2 = self.frame.sky_error_arcsec(float(d.az_rad[0]) - a1,
                                                  float(d.el_rad[0]) - a2, a2)
         self.errors.add(np.array([t_rep], np.int64), np.array([err1 / max(math.cos(a2), 1e-9)]),

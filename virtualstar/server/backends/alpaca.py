@@ -90,6 +90,10 @@ class AlpacaDriver:
     """One ASCOM Alpaca telescope, polled over HTTP."""
 
     poll_s = 0.04  # the driver is read this often (with the request time: ~20 reports/s)
+    # while latency matters (a goto, rates, a moving path: poll_pace.py), else 4 times a
+    # second: at rest (parked, holding, tracking a star by itself) a report ≤ 0.25 s old
+    # serves the status and the safety checks, at a fifth of the requests
+    rest_poll_s = 0.25
 
     def __init__(self, url: str, *, timeout_s: float = 2.0) -> None:
         host, port, device = parse_alpaca_url(url)

@@ -54,6 +54,7 @@ from ..link_interface import ConnectionWaits, MountCapabilities
 from ..mapping import STATE_NAMES, RoleMapping
 from ..operations import current_operation
 from .driver_waits import GotoBudget, SlewRateMeter, axis_travel_deg, within
+from .poll_pace import DEMAND_LOOKAHEAD_S, PollPace
 from .tick_grid import TickGrid
 
 __all__ = ["Driver", "DriverInfo", "DriverReport", "RateLinkConfig", "RateMountLink"]
@@ -77,6 +78,12 @@ _ROLES = ("az_position", "el_position", "axis1_position", "axis2_position", "rep
 _FUNCTIONS = ("power_on", "power_off", "stop", "slew", "goto_place", "goto_native", "set_rates",
               "traj_reset", "reset_faults")
 
+DEMAND_STILL_ARCSEC = 1.0  # a followed path that moves less than this within
+# `DEMAND_LOOKAHEAD_S` is still (a star on an equatorial mount): it leaves the reads at rest
+RATE_AT_REST_ARCSEC_S = 1.0  # commanded rates below this move the place < 0.25″ in a rest
+# period: a star's fine corrections, not a motion that needs fast reads
+ERROR_AT_REST_ARCSEC = 1.0  # a followed path held within this needs no fast reads
+DEMAND_CHECK_S = 1.0  # how often (wall s) whether the followed path moves is worked out
 PUSH_SILENCE_ARCSEC = 1.0  # a silent pushing driver's last place counts as current while the
 # commanded rates could have moved it less than this since it was pushed
 
@@ -117,6 +124,7 @@ class Driver(Protocol):
 
     url: str
     poll_s: float  # 0: the driver pushes its reports (`wait_report`), else poll this often
+    # (a polled driver may say `rest_poll_s`: how often it is read at rest, `poll_pace`)
 
     async def open(self, site: Site) -> DriverInfo: ...
 
@@ -233,6 +241,13 @@ class RateMountLink(ConnectionWaits):
         self._rest: tuple[int, float, float] | None = None  # (t_us, az, el) of a still report
         self._fresh: deque[bool] = deque(maxlen=40)  # did each read of a moving mount move?
         self._at_rest = False
+        # a polled driver is read at its `poll_s` while latency matters, else at its
+        # `rest_poll_s` (poll_pace.py); a command wakes the poller at once
+        self.pace = PollPace(driver.poll_s, getattr(driver, "rest_poll_s", 0.0) or driver.poll_s)
+        self._wake = asyncio.Event()
+        self._read_fast = True  # the pause before the newest read was the fast one
+        self._pause_s = driver.poll_s  # the pause chosen last (`_pause`)
+        self._demand_seen: tuple[object, float, bool] = (None, 0.0, False)
         self.last_error_arcsec: float | None = None  # set by the rate loop (status)
         # how each driver axis moves the place of date: measured by the rate loop's first
         # commands (`rate_loop.RateFollower`), kept for the connection
@@ -271,7 +286,10 @@ class RateMountLink(ConnectionWaits):
             "capabilities": self.capabilities.as_dict(),
             "report_period_s": period,
             "report_rate_hz": None if not period else 1.0 / period,
-            "poll_period_s": self.driver.poll_s or None,
+            "poll_period_s": self._pause_s or None,  # the pause the poller is in
+            "poll_fast_period_s": self.driver.poll_s or None,
+            "poll_rest_period_s": self.pace.rest_s if self.driver.poll_s else None,
+            "reads": self.stats.reads,
             "fresh_reads": self.fresh_reads(),
             "request_latency_s": (statistics.median(self.stats.latency_s)
                                   if self.stats.latency_s else None),
@@ -423,7 +441,60 @@ class RateMountLink(ConnectionWaits):
             last_ok = time.monotonic()
             await self._take(got)
             if self.driver.poll_s:
-                await asyncio.sleep(self.driver.poll_s)
+                await self._pause()
+
+    async def _pause(self) -> None:
+        """Wait before the next read: the fast period while busy (`_busy`) or lately so,
+        else the rest period, cut short by a command (`call` sets `_wake`)."""
+        period = self._pause_s = self.pace.period_s(time.monotonic(), self._busy())
+        self._read_fast = period <= self.pace.fast_s
+        if self._read_fast:
+            await asyncio.sleep(period)
+            return
+        self._wake.clear()
+        with contextlib.suppress(TimeoutError):
+            await within(self._wake.wait(), period)
+
+    def _busy(self) -> bool:
+        """Whether fresh reports matter now: a call in progress (a goto waits on its slew's
+        end), the mount moving at commanded rates or slewing, or a followed path that moves
+        soon or is not yet held (`poll_pace`). The rate loop's corrections of a star held by
+        the mount's own tracking (hundredths of an arcsecond a second, errors of hundredths
+        of an arcsecond) are not motion."""
+        rep = self._report
+        if self._lock.locked() or rep is None:
+            return True
+        if math.hypot(*self._rates_rad_s) * ARCSEC_PER_RAD > RATE_AT_REST_ARCSEC_S:
+            return True
+        # an Alpaca driver flags Slewing while any MoveAxis rate is on, however small: a
+        # slew is a goto only when no rates are commanded. (Whether the mount is seen at
+        # rest is not asked: a stop is a command, read fast for the hold after it, and a
+        # mount held with tracking off moves 15″/s in right ascension, so a read a loaded
+        # host delayed by 70 ms no longer looks at rest; that judgement goes on at the
+        # rest pace.)
+        if rep.flags.slewing and self._rates_rad_s == (0.0, 0.0):
+            return True
+        if self.demand is None:
+            return False
+        return (self.last_error_arcsec or 0.0) > ERROR_AT_REST_ARCSEC or self._demand_moves()
+
+    def _demand_moves(self) -> bool:
+        """Whether the followed path's native place moves by more than `DEMAND_STILL_ARCSEC`
+        within `DEMAND_LOOKAHEAD_S` (a satellite, its join near, an offset being taken
+        up), worked out at most every `DEMAND_CHECK_S`."""
+        demand, checked, moves = self._demand_seen
+        now = time.monotonic()
+        if demand is self.demand and now - checked < DEMAND_CHECK_S:
+            return moves
+        t = _now_us()
+        try:
+            a1, a2 = self.demand(t)
+            b1, b2 = self.demand(t + int(DEMAND_LOOKAHEAD_S * 1e6))
+            moves = float(erfa.seps(a1, a2, b1, b2)) * ARCSEC_PER_RAD > DEMAND_STILL_ARCSEC
+        except Exception:  # noqa: BLE001 - a path that cannot say: treat it as moving
+            moves = True
+        self._demand_seen = (self.demand, now, moves)
+        return moves
 
     async def _take(self, got: tuple[DriverReport, int, int]) -> None:
         rep, before, after = got
@@ -433,7 +504,10 @@ class RateMountLink(ConnectionWaits):
         old = self._report
         moved = old is None or (ra, dec) != (old.ra_rad, old.dec_rad)
         moving = self._rates_rad_s != (0.0, 0.0) or rep.slewing
-        if moving:
+        # the driver's period and freshness are measured from fast-paced reads only (a
+        # place that moved between reads at rest moved over the rest period, `poll_pace`)
+        paced = self._read_fast or not self.driver.poll_s
+        if moving and paced:
             self._fresh.append(moved)
         if moved:
             if old is None or self.fresh_reads() or rep.received_us is not None:
@@ -442,7 +516,7 @@ class RateMountLink(ConnectionWaits):
             else:
                 # a new place appeared between the previous reading and this one
                 t_us, spread = (old.read_us + mid) // 2, (mid - old.read_us) // 2
-            if old is not None and old.t_us < t_us:
+            if old is not None and old.t_us < t_us and paced:
                 self.stats.periods_s.append((t_us - old.t_us) / 1e6)
             self._report = _Report(ra, dec, t_us, mid, rep, spread, t_us)
             self.stats.reports += 1
@@ -635,6 +709,10 @@ class RateMountLink(ConnectionWaits):
     async def call(self, role: str, *args: Any) -> Any:
         self.calls.append(MountCall(next(self._call_seq), role, current_operation.get()))
         self._require()
+        if role != "set_rates" or math.hypot(*args[:2]) * ARCSEC_PER_RAD > RATE_AT_REST_ARCSEC_S:
+            # reads fast from now on, at once (a star's fine corrections excepted: `_busy`)
+            self.pace.commanded(time.monotonic())
+            self._wake.set()
         fn = getattr(self, f"_do_{role}", None)
         if fn is None:
             raise MountRejected(f"the {self.backend} mount cannot do {role!r}: it has no "
