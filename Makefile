@@ -8,9 +8,13 @@ STAMP := $(VENV)/.installed
 
 # The suite runs in TEST_WORKERS processes (pytest-xdist), each test module kept in one worker
 # so its module fixtures start once; `make test TEST_WORKERS=0` runs it in one process.
+# Five on two cores: a fifth of the suite's worker time waits on real time (simulators, browsers,
+# servers' throttles), and a fifth worker fills those gaps (benchmarks/bench_suite.py, 2026-11-27,
+# quiet: 4 workers 278 s, 5 workers 254 s for +2 % CPU; beside two burners 360 s and 340 s; six
+# gained 8 s more quiet but overloaded the real-time INDI pass enough to miss its join).
 # Modules are handed out in collection order, the longest first (tests/session_order.py): xdist's
 # default would sort them by their number of tests, which put the few long real-time tests last.
-TEST_WORKERS ?= 4
+TEST_WORKERS ?= 5
 PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope --no-loadscope-reorder
 
 # The suite starts hundreds of Python processes (xdist workers, `vs` servers and CLIs, devices):
