@@ -247,6 +247,7 @@ def test_the_astronomy_package_names_every_public_name_and_loads_it_when_used():
         assert getattr(importlib.import_module(f"virtualstar.astro.{astro._MODULE_OF[name]}"),
                        name) is value, name
     assert set(astro.__all__) <= set(dir(astro))
+    assert set(astro._MODULE_OF) == set(astro.__all__)  # the two lists of names kept alike
     with pytest.raises(AttributeError, match="no_such_name"):
         astro.no_such_name  # noqa: B018
 
