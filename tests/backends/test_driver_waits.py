@@ -436,3 +436,54 @@ def test_a_goto_flagged_late_is_waited_for_until_the_mount_reports_its_place(eop
     assert driver.calls.count("goto") == 1 and "abort" not in driver.calls
     assert abs(math.degrees(rep.ra_rad) / 15.0 - 7.0) < 1e-6
     assert abs(math.degrees(rep.dec_rad) - 20.0) < 1e-6
+
+
+# ---------------------------------------------------------------------- stop is final
+class SlowRatesDriver(SimGotoDriver):
+    """A driver that takes a MoveAxis off the wire at once but applies it only when `held`
+    is released (alpaca-simulators runs each request in a thread pool)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.held: asyncio.Future | None = None
+
+    async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
+        if self.held is not None and (ra_deg_s, dec_deg_s) != (0.0, 0.0):
+            self.calls.append("rates sent")
+            await asyncio.shield(self.held)  # applied by the driver even if the VSS gives up
+        await super().set_rates(ra_deg_s, dec_deg_s)
+
+
+def test_a_stop_during_a_rate_command_reaches_the_driver_after_it_and_the_mount_rests(eop):
+    """The rate loop is cancelled by a stop while its MoveAxis is on the wire: the stop's
+    commands wait for that one's answer, so the driver ends with zero rates (before, the
+    abandoned command overtook the stop's zeros and the mount ran away at its rate)."""
+    async def main():
+        driver = SlowRatesDriver()
+        link = _link(driver, eop)
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        driver.calls.clear()
+        driver.held = asyncio.get_running_loop().create_future()
+        loop_call = asyncio.ensure_future(link.call("set_rates", 1e-3, 5e-4))
+        while "rates sent" not in driver.calls:
+            await asyncio.sleep(0)
+        loop_call.cancel()  # what a stop does to the rate loop
+        stopping = asyncio.ensure_future(link.call("stop"))
+        for _ in range(20):
+            await asyncio.sleep(0)
+        waited_for_the_command = "abort" not in driver.calls
+        driver.held.set_result(None)
+        await asyncio.wait_for(stopping, HANG_GUARD_S)
+        with pytest.raises(asyncio.CancelledError):
+            await loop_call
+        await link.stop()
+        return driver, waited_for_the_command
+
+    driver, waited = asyncio.run(main())
+    assert waited, driver.calls
+    assert driver.rates == (0.0, 0.0), driver.calls
+    applied = [c for c in driver.calls if c.startswith("rates ") and c != "rates sent"]
+    assert applied[0] != "rates 0 0" and applied[-1] == "rates 0 0", driver.calls
+    assert driver.calls.index("abort") > driver.calls.index(applied[0]), driver.calls

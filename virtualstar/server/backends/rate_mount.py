@@ -721,7 +721,18 @@ class RateMountLink(ConnectionWaits):
             try:
                 if role in GOTO_ROLES:  # bounded by their goto budget, then a fault
                     return await fn(*args)
-                return await within(fn(*args), self.config.timeout_s * 30)
+                # A command on the wire is seen through even when its caller is cancelled
+                # (a stop cancels the rate loop mid-MoveAxis): released at once, the lock
+                # let the stop's zero rates reach the driver first, and the abandoned rate
+                # applied after them, a runaway after `stop` (seen on alpaca-simulators,
+                # whose requests run in a thread pool). The lock is held until it is answered.
+                sent = asyncio.ensure_future(within(fn(*args), self.config.timeout_s * 30))
+                try:
+                    return await asyncio.shield(sent)
+                except asyncio.CancelledError:
+                    with contextlib.suppress(Exception):
+                        await asyncio.shield(sent)
+                    raise
             except (OSError, TimeoutError) as exc:
                 self.last_error = f"{role}: {exc or type(exc).__name__}"
                 err = MountUnavailable(f"the {self.backend} driver did not answer {role}: "
