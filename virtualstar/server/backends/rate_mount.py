@@ -88,6 +88,12 @@ PUSH_SILENCE_ARCSEC = 1.0  # a silent pushing driver's last place counts as curr
 # commanded rates could have moved it less than this since it was pushed
 
 
+def _moves_the_place(rates_rad_s) -> bool:
+    """Whether commanded rates (rad/s) are a motion that needs fast reads, not a star's fine
+    corrections (`RATE_AT_REST_ARCSEC_S`)."""
+    return math.hypot(*rates_rad_s) * ARCSEC_PER_RAD > RATE_AT_REST_ARCSEC_S
+
+
 @dataclass(frozen=True)
 class DriverReport:
     """One reading of the driver: the place of date (hours, degrees) and its flags."""
@@ -464,7 +470,7 @@ class RateMountLink(ConnectionWaits):
         rep = self._report
         if self._lock.locked() or rep is None:
             return True
-        if math.hypot(*self._rates_rad_s) * ARCSEC_PER_RAD > RATE_AT_REST_ARCSEC_S:
+        if _moves_the_place(self._rates_rad_s):
             return True
         # an Alpaca driver flags Slewing while any MoveAxis rate is on, however small: a
         # slew is a goto only when no rates are commanded. (Whether the mount is seen at
@@ -709,7 +715,7 @@ class RateMountLink(ConnectionWaits):
     async def call(self, role: str, *args: Any) -> Any:
         self.calls.append(MountCall(next(self._call_seq), role, current_operation.get()))
         self._require()
-        if role != "set_rates" or math.hypot(*args[:2]) * ARCSEC_PER_RAD > RATE_AT_REST_ARCSEC_S:
+        if role != "set_rates" or _moves_the_place(args[:2]):
             # reads fast from now on, at once (a star's fine corrections excepted: `_busy`)
             self.pace.commanded(time.monotonic())
             self._wake.set()
