@@ -116,9 +116,27 @@ def test_the_slew_lands_on_astropys_place_of_the_jnow_coordinates(seen):
     assert seen["track_state"] == "On"
 
 
-def test_guide_pulse_abort_and_park_states(seen):
+def test_an_abort_right_behind_a_goto_is_final_the_goto_never_lands(seen):
+    from sky_truth import sky_sep_arcsec
+
+    assert seen["abort_state"] == "Alert"
+    after, later = seen["after_abort"], seen["after_abort_later"]
+    op = after["op"]
+    if op["id"] != after["before_op"]:  # the goto reached the VSS before the stop
+        assert op["phase"] == "aborted"
+    else:  # the driver dropped it: the last operation is the one before, ended
+        assert op["phase"] in ("done", "aborted")
+    # at rest (10 mount seconds later, the same place) and far from the goto's target
+    assert later["t_us"] - after["t_us"] >= 10_000_000
+    moved = sky_sep_arcsec(after["observed"]["az_deg"], after["observed"]["el_deg"],
+                           later["observed"]["az_deg"], later["observed"]["el_deg"])
+    assert float(moved) < 1.0
+    assert float(sky_sep_arcsec(later["observed"]["az_deg"], later["observed"]["el_deg"],
+                                300.0, 30.0)) > 20 * 3600
+
+
+def test_guide_pulse_and_park_states(seen):
     assert seen["guide_states"][0] == "Busy" and seen["guide_states"][-1] == "Ok"
-    assert seen["abort_state"] == "Alert" and seen["after_abort"] == "aborted"
     assert seen["park_states"][0] == "Busy" and seen["park_end"] == "Ok"
     assert seen["parked"] == "On"
     assert seen["goto_while_parked"] == "Alert"

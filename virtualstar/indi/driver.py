@@ -18,6 +18,7 @@ never overwrites Busy.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import logging
 import math
 import os
@@ -43,11 +44,23 @@ __all__ = ["IndiTelescope", "main"]
 
 log = logging.getLogger("virtualstar.indi")
 
+#: How many TELESCOPE_ABORT_MOTIONs had arrived when the request being served arrived
+#: (None: not a client's request, e.g. the status poll). Tasks a handler spawns inherit it.
+_ABORTS_BEFORE: contextvars.ContextVar[int | None] = contextvars.ContextVar(
+    "aborts_before", default=None)
+
+
+class AbortedBeforeSent(ValueError):
+    """A request that would move the mount arrived before an abort still being served."""
+
 DEVICE = "VirtualStar"
 POLL_S = 1.0
 MOTION_RATE_DEG_S = 1.0  # TELESCOPE_MOTION_* hand-pad rate
 GUIDE_RATE_ARCSEC_S = 0.5 * SIDEREAL_RATE_ARCSEC_S  # ASCOM's and INDI's usual default
 MOTION_KINDS = frozenset({"slew", "track", "park", "move", "pointing_sample"})
+#: The VSS commands that set the mount moving: none is sent for a request that arrived
+#: before a TELESCOPE_ABORT_MOTION (an abort is final for everything sent before it).
+MOVING_COMMANDS = frozenset({"slew", "track", "park", "move", "guide", "offset"})
 SITE_TOLERANCE_DEG = 0.01  # a client's location within this of the VSS's site is the same
 TIME_TOLERANCE_S = 60.0  # a client's UTC within this of the mount clock is the same
 MAIN, MOTION, SITE, SAT = "Main Control", "Motion Control", "Site Management", "Satellite"
@@ -139,6 +152,9 @@ class IndiTelescope:
         self.last_op_id: int | None = None  # the VSS operation the last poll saw
         self.alert_op: dict[str, int | None] = {}  # property → operation its Alert was about
         self.tasks: set[asyncio.Task] = set()
+        # aborts counted as they arrive (before they are served), so that a goto queued or
+        # half-handled ahead of an abort can never reach the VSS after the abort's stop
+        self.aborts_received = 0
 
     # ------------------------------------------------------------------ output
     def send(self, name: str, message: str | None = None) -> None:
@@ -162,8 +178,20 @@ class IndiTelescope:
             log.error("internal error: %r", task.exception())
 
     # ------------------------------------------------------------------ input
-    async def handle(self, req: Request) -> None:
-        """Answer one request; whatever goes wrong, the property says so (Alert)."""
+    def received(self, req: Request) -> int:
+        """Count `req` in as it arrives; return the aborts received before it (or with it,
+        for an abort). Call in arrival order, before any request is served."""
+        if req.device in (None, DEVICE) and req.name == "TELESCOPE_ABORT_MOTION" \
+                and req.tag != "getProperties":
+            self.aborts_received += 1
+        return self.aborts_received
+
+    async def handle(self, req: Request, aborts_before: int | None = None) -> None:
+        """Answer one request; whatever goes wrong, the property says so (Alert).
+
+        `aborts_before` (from `received`): the request does not move the mount if an abort
+        arrived after it."""
+        _ABORTS_BEFORE.set(aborts_before)
         if req.tag == "getProperties":
             if req.device in (None, DEVICE):
                 for v in self.props.values():
@@ -230,7 +258,16 @@ class IndiTelescope:
     async def request(self, cmd: str, params: dict[str, Any] | None = None,
                       timeout_s: float | None = 30.0) -> Any:
         assert self.vss is not None
+        self.refuse_if_aborted(cmd)
         return await self.vss.request(cmd, params or {}, timeout_s)
+
+    def refuse_if_aborted(self, cmd: str) -> None:
+        """Raise AbortedBeforeSent if `cmd` moves the mount and an abort arrived after the
+        request being served (checked again just before sending: handlers await)."""
+        before = _ABORTS_BEFORE.get()
+        if cmd in MOVING_COMMANDS and before is not None and before < self.aborts_received:
+            raise AbortedBeforeSent(f"aborted: TELESCOPE_ABORT_MOTION arrived after this "
+                                    f"request, so its {cmd} was not sent")
 
     async def mount_status(self) -> dict[str, Any]:
         st = await self.request("status")
@@ -253,6 +290,7 @@ class IndiTelescope:
 
         A newer command on the same property supersedes this one: its answer is dropped.
         """
+        self.refuse_if_aborted(cmd)
         self.generation += 1
         mine = self.generation
         self.set_state(prop_name, BUSY)
@@ -261,7 +299,7 @@ class IndiTelescope:
         async def run() -> None:
             try:
                 await self.request(cmd, params, None)
-            except (VssRequestError, ServerUnavailable) as exc:
+            except (VssRequestError, ServerUnavailable, AbortedBeforeSent) as exc:
                 if self.busy.get(prop_name) == mine:
                     code = f" [VSS {exc.code}]" if isinstance(exc, VssRequestError) else ""
                     self.set_state(prop_name, ALERT, f"{getattr(exc, 'message', exc)}{code}")
@@ -581,11 +619,11 @@ async def run(url: str, password: str | None) -> None:
 
     scope = IndiTelescope(out, url, password)
     parser = Reader()
-    queue: asyncio.Queue[Request] = asyncio.Queue()
+    queue: asyncio.Queue[tuple[Request, int]] = asyncio.Queue()
 
     async def worker() -> None:  # requests in the order they came ...
         while True:
-            await scope.handle(await queue.get())
+            await scope.handle(*await queue.get())
 
     async def poller() -> None:
         while True:
@@ -605,10 +643,13 @@ async def run(url: str, password: str | None) -> None:
                 parser = Reader()
                 continue
             for req in requests:
+                aborts = scope.received(req)
                 if req.name == "TELESCOPE_ABORT_MOTION":
-                    scope.spawn(scope.handle(req))  # ... but an abort never waits its turn
+                    # ... but an abort never waits its turn (and what came before it
+                    # will not move the mount: `received` counted it first)
+                    scope.spawn(scope.handle(req, aborts))
                 else:
-                    queue.put_nowait(req)
+                    queue.put_nowait((req, aborts))
     finally:
         for task in tasks:
             task.cancel()
