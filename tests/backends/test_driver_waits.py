@@ -487,3 +487,58 @@ def test_a_stop_during_a_rate_command_reaches_the_driver_after_it_and_the_mount_
     applied = [c for c in driver.calls if c.startswith("rates ") and c != "rates sent"]
     assert applied[0] != "rates 0 0" and applied[-1] == "rates 0 0", driver.calls
     assert driver.calls.index("abort") > driver.calls.index(applied[0]), driver.calls
+
+
+class SlowGotoDriver(SimGotoDriver):
+    """A driver that takes a goto off the wire at once but applies it only when `held` is
+    released (a request in alpaca-simulators' thread pool)."""
+
+    def __init__(self) -> None:
+        super().__init__(rate_deg_s=2.0)
+        self.held: asyncio.Future | None = None
+
+    async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
+        if self.held is not None:
+            self.calls.append("goto sent")
+            await asyncio.shield(self.held)  # applied by the driver even if the VSS gives up
+        await super().goto_radec(ra_h, dec_deg)
+
+
+def test_a_stop_during_a_goto_command_reaches_the_driver_after_it_and_the_mount_rests(eop):
+    """A slew is cancelled by a stop while its goto is on the wire: the stop's abort waits
+    for that goto's answer, so the driver's last word is the abort and the mount does not
+    slew on to the goto's place (before, the abort could overtake the abandoned goto)."""
+    async def main():
+        driver = SlowGotoDriver()
+        link = _link(driver, eop)
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        driver.calls.clear()
+        driver.held = asyncio.get_running_loop().create_future()
+        slew = asyncio.ensure_future(link.call("goto_native", math.radians(9.0 * 15),
+                                               math.radians(40.0)))
+        while "goto sent" not in driver.calls:
+            await asyncio.sleep(0)
+        slew.cancel()  # what a stop does to the operation's task
+        stopping = asyncio.ensure_future(link.call("stop"))
+        for _ in range(20):
+            await asyncio.sleep(0)
+        waited_for_the_goto = "abort" not in driver.calls
+        driver.held.set_result(None)
+        await asyncio.wait_for(stopping, HANG_GUARD_S)
+        with pytest.raises(asyncio.CancelledError):
+            await slew
+        at_stop = (driver.ra_h, driver.dec_deg)
+        await asyncio.sleep(0.3)  # 0.6° of slew at the driver's 2°/s, were it still going
+        driver._advance()
+        moved_deg = math.hypot((driver.ra_h - at_stop[0]) * 15.0, driver.dec_deg - at_stop[1])
+        await link.stop()
+        return driver, waited_for_the_goto, moved_deg
+
+    driver, waited, moved_deg = asyncio.run(main())
+    assert waited, driver.calls
+    assert driver.calls.index("goto") < driver.calls.index("abort"), driver.calls
+    assert driver.target is None and not driver.slewing, driver.calls
+    assert driver.rates == (0.0, 0.0) and not driver.tracking
+    assert moved_deg < 0.01  # at rest: not tracking, so RA drifts at the sidereal rate only

@@ -38,9 +38,9 @@ import math
 import statistics
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import erfa
 import numpy as np
@@ -58,6 +58,8 @@ from .poll_pace import DEMAND_LOOKAHEAD_S, PollPace
 from .tick_grid import TickGrid
 
 __all__ = ["Driver", "DriverInfo", "DriverReport", "RateLinkConfig", "RateMountLink"]
+
+T = TypeVar("T")
 
 log = logging.getLogger("virtualstar.server.mount")
 
@@ -86,6 +88,32 @@ ERROR_AT_REST_ARCSEC = 1.0  # a followed path held within this needs no fast rea
 DEMAND_CHECK_S = 1.0  # how often (wall s) whether the followed path moves is worked out
 PUSH_SILENCE_ARCSEC = 1.0  # a silent pushing driver's last place counts as current while the
 # commanded rates could have moved it less than this since it was pushed
+
+
+async def _seen_through(command: Awaitable[T]) -> T:
+    """Await a driver command; cancelled meanwhile, still wait for its answer, then re-raise.
+
+    A command on the wire is applied by the driver whether or not we wait (alpaca-simulators
+    runs each request in a thread pool): released at once, the link's lock let a stop's
+    commands reach the driver first and the abandoned command (a MoveAxis of the rate loop,
+    a goto of a slew the stop cancelled) was applied after them, a runaway after `stop`.
+    Held until answered, the lock makes the stop's commands the driver's last. A second
+    cancel gives up the wait; the command's outcome is still collected (`_collect`).
+    """
+    sent = asyncio.ensure_future(command)
+    sent.add_done_callback(_collect)
+    try:
+        return await asyncio.shield(sent)
+    except asyncio.CancelledError:
+        with contextlib.suppress(Exception):
+            await asyncio.shield(sent)
+        raise
+
+
+def _collect(task: asyncio.Future) -> None:
+    """Retrieve a finished command's exception, so that one nobody awaited is not reported."""
+    if not task.cancelled():
+        task.exception()
 
 
 def _moves_the_place(rates_rad_s) -> bool:
@@ -727,18 +755,8 @@ class RateMountLink(ConnectionWaits):
             try:
                 if role in GOTO_ROLES:  # bounded by their goto budget, then a fault
                     return await fn(*args)
-                # A command on the wire is seen through even when its caller is cancelled
-                # (a stop cancels the rate loop mid-MoveAxis): released at once, the lock
-                # let the stop's zero rates reach the driver first, and the abandoned rate
-                # applied after them, a runaway after `stop` (seen on alpaca-simulators,
-                # whose requests run in a thread pool). The lock is held until it is answered.
-                sent = asyncio.ensure_future(within(fn(*args), self.config.timeout_s * 30))
-                try:
-                    return await asyncio.shield(sent)
-                except asyncio.CancelledError:
-                    with contextlib.suppress(Exception):
-                        await asyncio.shield(sent)
-                    raise
+                # the whole command is seen through (its each driver call is, in `_send`)
+                return await _seen_through(within(fn(*args), self.config.timeout_s * 30))
             except (OSError, TimeoutError) as exc:
                 self.last_error = f"{role}: {exc or type(exc).__name__}"
                 err = MountUnavailable(f"the {self.backend} driver did not answer {role}: "
@@ -748,7 +766,7 @@ class RateMountLink(ConnectionWaits):
                 raise err from None
 
     async def _send(self, coro) -> None:
-        await within(coro, self.config.timeout_s)
+        await _seen_through(within(coro, self.config.timeout_s))
 
     async def _halt_driver(self) -> None:
         """Abort a goto, zero the rates, tracking off (a parked mount refuses them: it is at rest)."""
