@@ -454,32 +454,42 @@ class SlowRatesDriver(SimGotoDriver):
         await super().set_rates(ra_deg_s, dec_deg_s)
 
 
+async def _stop_while_held(driver, eop, role: str, *args, sent: str):
+    """Start `role` on a link, cancel it (as a stop does to its operation) once the driver
+    has taken its command off the wire (`sent` in its calls) but not applied it (`held`),
+    then stop; release the command once the stop has had time to overtake it. Return the
+    link (stopped) and whether the stop's abort waited for the held command."""
+    link = _link(driver, eop)
+    link.start()
+    await link.wait_connected(10)
+    await link.wait_report(0, 5)
+    driver.calls.clear()
+    driver.held = asyncio.get_running_loop().create_future()
+    command = asyncio.ensure_future(link.call(role, *args))
+    while sent not in driver.calls:
+        await asyncio.sleep(0)
+    command.cancel()
+    stopping = asyncio.ensure_future(link.call("stop"))
+    for _ in range(20):
+        await asyncio.sleep(0)
+    waited = "abort" not in driver.calls
+    driver.held.set_result(None)
+    await asyncio.wait_for(stopping, HANG_GUARD_S)
+    with pytest.raises(asyncio.CancelledError):
+        await command
+    return link, waited
+
+
 def test_a_stop_during_a_rate_command_reaches_the_driver_after_it_and_the_mount_rests(eop):
     """The rate loop is cancelled by a stop while its MoveAxis is on the wire: the stop's
     commands wait for that one's answer, so the driver ends with zero rates (before, the
     abandoned command overtook the stop's zeros and the mount ran away at its rate)."""
     async def main():
         driver = SlowRatesDriver()
-        link = _link(driver, eop)
-        link.start()
-        await link.wait_connected(10)
-        await link.wait_report(0, 5)
-        driver.calls.clear()
-        driver.held = asyncio.get_running_loop().create_future()
-        loop_call = asyncio.ensure_future(link.call("set_rates", 1e-3, 5e-4))
-        while "rates sent" not in driver.calls:
-            await asyncio.sleep(0)
-        loop_call.cancel()  # what a stop does to the rate loop
-        stopping = asyncio.ensure_future(link.call("stop"))
-        for _ in range(20):
-            await asyncio.sleep(0)
-        waited_for_the_command = "abort" not in driver.calls
-        driver.held.set_result(None)
-        await asyncio.wait_for(stopping, HANG_GUARD_S)
-        with pytest.raises(asyncio.CancelledError):
-            await loop_call
+        link, waited = await _stop_while_held(driver, eop, "set_rates", 1e-3, 5e-4,
+                                              sent="rates sent")
         await link.stop()
-        return driver, waited_for_the_command
+        return driver, waited
 
     driver, waited = asyncio.run(main())
     assert waited, driver.calls
@@ -510,31 +520,14 @@ def test_a_stop_during_a_goto_command_reaches_the_driver_after_it_and_the_mount_
     slew on to the goto's place (before, the abort could overtake the abandoned goto)."""
     async def main():
         driver = SlowGotoDriver()
-        link = _link(driver, eop)
-        link.start()
-        await link.wait_connected(10)
-        await link.wait_report(0, 5)
-        driver.calls.clear()
-        driver.held = asyncio.get_running_loop().create_future()
-        slew = asyncio.ensure_future(link.call("goto_native", math.radians(9.0 * 15),
-                                               math.radians(40.0)))
-        while "goto sent" not in driver.calls:
-            await asyncio.sleep(0)
-        slew.cancel()  # what a stop does to the operation's task
-        stopping = asyncio.ensure_future(link.call("stop"))
-        for _ in range(20):
-            await asyncio.sleep(0)
-        waited_for_the_goto = "abort" not in driver.calls
-        driver.held.set_result(None)
-        await asyncio.wait_for(stopping, HANG_GUARD_S)
-        with pytest.raises(asyncio.CancelledError):
-            await slew
+        link, waited = await _stop_while_held(driver, eop, "goto_native", math.radians(9.0 * 15),
+                                              math.radians(40.0), sent="goto sent")
         at_stop = (driver.ra_h, driver.dec_deg)
         await asyncio.sleep(0.3)  # 0.6° of slew at the driver's 2°/s, were it still going
         driver._advance()
         moved_deg = math.hypot((driver.ra_h - at_stop[0]) * 15.0, driver.dec_deg - at_stop[1])
         await link.stop()
-        return driver, waited_for_the_goto, moved_deg
+        return driver, waited, moved_deg
 
     driver, waited, moved_deg = asyncio.run(main())
     assert waited, driver.calls
