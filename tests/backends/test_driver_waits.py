@@ -28,7 +28,7 @@ from virtualstar.server.backends.rate_mount import (
     RateLinkConfig,
     RateMountLink,
 )
-from virtualstar.server.exceptions import MountFault
+from virtualstar.server.exceptions import MountFault, MountUnavailable
 
 HANG_GUARD_S = 60.0  # a hang guard, not a speed bound: the bounds under test are seconds
 
@@ -535,3 +535,57 @@ def test_a_stop_during_a_goto_command_reaches_the_driver_after_it_and_the_mount_
     assert driver.target is None and not driver.slewing, driver.calls
     assert driver.rates == (0.0, 0.0) and not driver.tracking
     assert moved_deg < 0.01  # at rest: not tracking, so RA drifts at the sidereal rate only
+
+
+class SilentDuringGotoDriver(SimGotoDriver):
+    """A goto driver that stops answering reads once `silent` is set (a network that
+    failed mid-slew), and whose first abort takes `slow_abort_s` to be answered (a
+    driver, or a link, as slow to take the lost link's halt as the network that failed)."""
+
+    def __init__(self) -> None:
+        super().__init__(stuck=True)
+        self.silent = False
+        self.slow_abort_s = 0.0
+
+    async def read(self) -> DriverReport:
+        if self.silent:
+            raise OSError("no route to host")
+        return await super().read()
+
+    async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
+        await super().goto_radec(ra_h, dec_deg)
+        self.silent = True
+
+    async def abort(self) -> None:
+        if self.slow_abort_s:
+            self.calls.append("abort sent")
+            slow, self.slow_abort_s = self.slow_abort_s, 0.0
+            await asyncio.sleep(slow)
+        await super().abort()
+
+
+def test_once_the_mount_is_declared_lost_a_goto_in_progress_sends_nothing_more(eop):
+    """The driver goes silent after a goto; the link declares it lost and halts it (abort,
+    zero rates, tracking off). A goto still waiting for its landing runs out of budget
+    during that halt: it must not send its second attempt (before, the link counted as
+    connected until its halt was answered, and that goto went out after the halt's abort)."""
+    async def main():
+        driver = SilentDuringGotoDriver()
+        link = _link(driver, eop, goto_budget=GotoBudget(margin_s=0.6, report_periods=0),
+                     stale_s=0.2, rest_wait_s=0.5)
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        driver.calls.clear()
+        driver.slow_abort_s = 1.0  # the next abort, the lost link's halt: the goto's budget ends in it
+        with pytest.raises(MountUnavailable):
+            await asyncio.wait_for(link.call("goto_native", math.radians(6.2 * 15),
+                                             math.radians(12.0)), HANG_GUARD_S)
+        await link.stop()
+        return driver
+
+    driver = asyncio.run(main())
+    assert "abort sent" in driver.calls, driver.calls
+    halt = driver.calls.index("abort sent")
+    assert driver.calls.count("goto") == 1, driver.calls
+    assert driver.calls.index("goto") < halt, driver.calls

@@ -410,10 +410,13 @@ class RateMountLink(ConnectionWaits):
                     await poller
             reason = self.last_error or "connection lost"
             self.fault_text = f"the driver stopped answering ({reason})"
+            # not connected from now on, before the halt: a procedure still running (a goto
+            # whose budget runs out while the halt is on the wire) stops at its next
+            # `_require` instead of sending its next command after the halt's abort
+            self._connected.clear()
             # tell it to stop, should it still listen (a rate once sent keeps the mount moving)
             with contextlib.suppress(Exception):
                 await within(self._halt_driver(), self.config.timeout_s)
-            self._connected.clear()
             await self._notify()
             with contextlib.suppress(Exception):
                 await self.driver.close()
