@@ -100,6 +100,17 @@ class StateLog:
                 return False
             time.sleep(0.02)
 
+    def first_of(self, vector: str, states: tuple[str, ...], since: int,
+                 timeout_s: float) -> str | None:
+        """The first of `states` that `vector` announced after the mark `since` (None if
+        none within the timeout)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            seen = [st for st in self.states(vector, since) if st in states]
+            if seen or time.monotonic() > deadline:
+                return seen[0] if seen else None
+            time.sleep(0.02)
+
     def from_first(self, vector: str, state: str, since: int) -> list[str]:
         """The states announced after `since`, from the first `state` on."""
         states = self.states(vector, since)
@@ -308,7 +319,10 @@ def main() -> None:
         log.send(("HORIZONTAL_COORD", {"AZ": "300", "ALT": "30"}),
                  ("TELESCOPE_ABORT_MOTION", {"ABORT": "On"}))
         log.wait("TELESCOPE_ABORT_MOTION", "Ok", mark, 30)
-        seen["abort_state"] = wait_state("HORIZONTAL_COORD", ("Alert", "Ok"), 30)
+        # the goto's own answer, announced after the mark (a poll of the property could
+        # still show the Ok of the step before, if the driver had not yet dropped the goto)
+        ended = log.first_of("HORIZONTAL_COORD", ("Alert", "Ok"), mark, 60)
+        seen["abort_state"] = ended
         st = status()
         seen["after_abort"] = {"op": st["operation"], "before_op": before_op,
                                "t_us": st["mount_time_us"], "observed": st["observed"]}
