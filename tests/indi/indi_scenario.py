@@ -100,15 +100,22 @@ class StateLog:
                 return False
             time.sleep(0.02)
 
-    def first_of(self, vector: str, states: tuple[str, ...], since: int,
-                 timeout_s: float) -> str | None:
-        """The first of `states` that `vector` announced after the mark `since` (None if
-        none within the timeout)."""
+    def answer(self, vector: str, since: int, timeout_s: float) -> str | None:
+        """The answer to a command on `vector` sent after the mark `since`: Alert if refused
+        at once, else the Alert or Ok that ends its Busy (None if none within the timeout).
+        Leading Oks are the status poll repeating the state before the command."""
         deadline = time.monotonic() + timeout_s
         while True:
-            seen = [st for st in self.states(vector, since) if st in states]
-            if seen or time.monotonic() > deadline:
-                return seen[0] if seen else None
+            states = self.states(vector, since)
+            while states and states[0] == "Ok":
+                states.pop(0)
+            if states and states[0] == "Alert":
+                return "Alert"
+            ends = [st for st in states[1:] if st in ("Alert", "Ok")]
+            if ends:
+                return ends[0]
+            if time.monotonic() > deadline:
+                return None
             time.sleep(0.02)
 
     def from_first(self, vector: str, state: str, since: int) -> list[str]:
@@ -319,10 +326,9 @@ def main() -> None:
         log.send(("HORIZONTAL_COORD", {"AZ": "300", "ALT": "30"}),
                  ("TELESCOPE_ABORT_MOTION", {"ABORT": "On"}))
         log.wait("TELESCOPE_ABORT_MOTION", "Ok", mark, 30)
-        # the goto's own answer, announced after the mark (a poll of the property could
-        # still show the Ok of the step before, if the driver had not yet dropped the goto)
-        ended = log.first_of("HORIZONTAL_COORD", ("Alert", "Ok"), mark, 60)
-        seen["abort_state"] = ended
+        # the goto's own answer from the state log (a poll of the property could still show
+        # the Ok of the step before, if the driver had not yet dropped the goto)
+        seen["abort_state"] = log.answer("HORIZONTAL_COORD", mark, 60)
         st = status()
         seen["after_abort"] = {"op": st["operation"], "before_op": before_op,
                                "t_us": st["mount_time_us"], "observed": st["observed"]}
