@@ -95,6 +95,7 @@ class IndiDriver:
         self._answer = False  # the newest place answered a fresh read (not a tick's push)
         self.fresh_reads = 0  # fresh reads asked, and answered
         self.fresh_answers = 0
+        self._defines = 0  # Defines of EQUATORIAL_EOD_COORD received (answers to getProperties)
 
     # ------------------------------------------------------------------ connection
     async def open(self, site: Site) -> DriverInfo:
@@ -106,6 +107,9 @@ class IndiDriver:
             async def rxevent(self, event) -> None:
                 if getattr(event, "devicename", None) != driver.device:
                     return
+                if getattr(event, "vectorname", None) == "EQUATORIAL_EOD_COORD" and \
+                        getattr(event, "eventtype", "") == "Define":
+                    driver._defines += 1
                 if getattr(event, "vectorname", None) == "EQUATORIAL_EOD_COORD" and \
                         getattr(event, "eventtype", "") in ("Set", "Define"):
                     # a Define answers a fresh read (getProperties), a Set is a tick's push
@@ -121,6 +125,12 @@ class IndiDriver:
         await self._wait(lambda: self._vector("EQUATORIAL_EOD_COORD") is not None
                          and self._vector("TELESCOPE_TRACK_RATE") is not None,
                          "its coordinates and track rate")
+        # everything the device defined on connecting has arrived once it answers a request
+        # sent after it (its output is one ordered stream): TELESCOPE_PIER_SIDE, which says a
+        # German mount, may be defined after the coordinates and the track rate
+        asked = self._defines
+        await self._client.send_getProperties(self.device, "EQUATORIAL_EOD_COORD")
+        await self._wait(lambda: self._defines > asked, "an answer to getProperties")
         if self._place is None:
             self._take_place(_now_us())
         rate = self._vector("TELESCOPE_TRACK_RATE")
