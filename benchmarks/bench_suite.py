@@ -171,21 +171,22 @@ def _print_windows(workers: dict[str, dict], t0: float, end: float, step_s: floa
     """Per stretch of the run, the cores its running modules kept busy (each module's CPU
     spread evenly over its wall time), and what ran: a stretch well below the core count is
     one where too many modules wait on real time together (tests/session_order.py)."""
-    running = []  # (start, end, CPU s, module) relative to t0
+    running = []  # (start, end, cores used, module), times relative to t0
     for w in workers.values():
         for name, (start, stop) in w["spans"].items():
             own, children = w["modules"][name][:2]
-            running.append((start - t0, stop - t0, own + children, name.removeprefix("tests/")))
+            running.append((start - t0, stop - t0, (own + children) / max(stop - start, 1e-3),
+                            name.removeprefix("tests/")))
     print(f"busy cores per {step_s:.0f} s (estimated from each module's CPU over its wall), "
           "below 1.5: the modules running")
     t = 0.0
     while t < end - t0:
         busy, names = 0.0, []
-        for start, stop, cpu, name in running:
+        for start, stop, cores, name in running:
             overlap = min(stop, t + step_s) - max(start, t)
             if overlap > 0:
-                busy += cpu / max(stop - start, 1e-3) * overlap / step_s
-                names.append(f"{name} ({cpu / max(stop - start, 1e-3):.2f})")
+                busy += cores * overlap / step_s
+                names.append(f"{name} ({cores:.2f})")
         print(f"  {t:4.0f}-{t + step_s:4.0f} s: {busy:4.2f}" + (f"  {', '.join(names)}"
                                                           if busy < 1.5 else ""))
         t += step_s

@@ -758,8 +758,8 @@ class RateMountLink(ConnectionWaits):
             try:
                 if role in GOTO_ROLES:  # bounded by their goto budget, then a fault
                     return await fn(*args)
-                # the whole command is seen through (its each driver call is, in `_send`)
-                return await _seen_through(within(fn(*args), self.config.timeout_s * 30))
+                # each driver command in it is seen through if the caller is cancelled (`_send`)
+                return await within(fn(*args), self.config.timeout_s * 30)
             except (OSError, TimeoutError) as exc:
                 self.last_error = f"{role}: {exc or type(exc).__name__}"
                 err = MountUnavailable(f"the {self.backend} driver did not answer {role}: "
