@@ -589,3 +589,61 @@ def test_once_the_mount_is_declared_lost_a_goto_in_progress_sends_nothing_more(e
     halt = driver.calls.index("abort sent")
     assert driver.calls.count("goto") == 1, driver.calls
     assert driver.calls.index("goto") < halt, driver.calls
+
+
+class SilentWhileRatesHeldDriver(SimGotoDriver):
+    """A driver that takes a MoveAxis off the wire, then stops answering reads (a network
+    that fails that moment) and applies the MoveAxis only once `held` is released: after
+    the lost link's halt, as a request queued in alpaca-simulators' thread pool would be."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.silent = False
+        self.held: asyncio.Future | None = None
+
+    async def read(self) -> DriverReport:
+        if self.silent:
+            raise OSError("no route to host")
+        return await super().read()
+
+    async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
+        if self.held is not None and (ra_deg_s, dec_deg_s) != (0.0, 0.0):
+            self.calls.append("rates sent")
+            self.silent = True
+            await asyncio.shield(self.held)
+        await super().set_rates(ra_deg_s, dec_deg_s)
+
+
+def test_a_rate_command_on_the_wire_when_the_mount_is_lost_is_followed_by_a_halt(eop):
+    """The link is declared lost while a MoveAxis is on the wire; its halt goes out at once,
+    and the MoveAxis is applied after it. Once that command is answered the link halts the
+    mount again, so the driver's last word is zero rates (before, the lost link's halt ran
+    beside the command, and a mount that still took commands ran on at the rate)."""
+    async def main():
+        driver = SilentWhileRatesHeldDriver()
+        link = _link(driver, eop, stale_s=0.2, timeout_s=2.0)
+        lost = asyncio.Event()
+        link.on_event = lambda kind, data: lost.set() if kind == "mount_disconnected" else None
+        link.start()
+        await link.wait_connected(10)
+        await link.wait_report(0, 5)
+        driver.calls.clear()
+        driver.held = asyncio.get_running_loop().create_future()
+        command = asyncio.ensure_future(link.call("set_rates", 1e-3, 5e-4))
+        async with asyncio.timeout(HANG_GUARD_S):
+            while "abort" not in driver.calls:  # lost: the first halt is under way
+                await asyncio.sleep(0.01)
+        driver.held.set_result(None)
+        async with asyncio.timeout(HANG_GUARD_S):
+            await asyncio.gather(command, return_exceptions=True)
+            await lost.wait()  # said once the lost link has halted the mount
+        await link.stop()
+        return driver, link
+
+    driver, link = asyncio.run(main())
+    applied = [c for c in driver.calls if c.startswith("rates ") and c != "rates sent"]
+    moving = driver.calls.index(next(c for c in applied if c != "rates 0 0"))
+    assert driver.calls.index("abort") < moving, driver.calls  # the first halt came first
+    assert "abort" in driver.calls[moving:], driver.calls
+    assert applied[-1] == "rates 0 0" and driver.rates == (0.0, 0.0), driver.calls
+    assert not driver.tracking and link._rates_rad_s == (0.0, 0.0)

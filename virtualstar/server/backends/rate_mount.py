@@ -417,6 +417,14 @@ class RateMountLink(ConnectionWaits):
             # tell it to stop, should it still listen (a rate once sent keeps the mount moving)
             with contextlib.suppress(Exception):
                 await within(self._halt_driver(), self.config.timeout_s)
+            if self._lock.locked():
+                # a command was on the wire (its caller holds the lock until it is answered:
+                # `_send`), or queued behind it: a driver that still takes commands may apply
+                # it after that halt. Once they are answered, halt again, last.
+                with contextlib.suppress(Exception):
+                    async with asyncio.timeout(3 * self.config.timeout_s):
+                        async with self._lock:
+                            await self._halt_driver()
             await self._notify()
             with contextlib.suppress(Exception):
                 await self.driver.close()
