@@ -11,6 +11,7 @@ API call that follows the run.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 from collections.abc import Awaitable
 from dataclasses import dataclass
@@ -122,7 +123,10 @@ class ThreadedRecording:
     def stop(self) -> dict[str, Any]:
         """Finish the recording (what was streamed is stored); return its summary."""
         if self._loop is not None and self._thread.is_alive():
-            self._loop.call_soon_threadsafe(self.recorder.stop)
+            # the thread may be closing its loop this moment (a recording that failed to
+            # start, or ended early): then it ends without being told
+            with contextlib.suppress(RuntimeError):
+                self._loop.call_soon_threadsafe(self.recorder.stop)
         self._thread.join()
         doc = self.recording.summary(self.recorder)
         if self._error is not None:
