@@ -55,6 +55,7 @@ class SimGotoDriver:
         self.rates = (0.0, 0.0)
         self.calls: list[str] = []
         self.gate: asyncio.Future | None = None  # a read waits on it when set
+        self.silent = False  # reads fail (a network gone) while set
         self._t = time.monotonic()
 
     def _advance(self) -> None:
@@ -87,6 +88,8 @@ class SimGotoDriver:
         pass
 
     async def read(self) -> DriverReport:
+        if self.silent:
+            raise OSError("no route to host")
         if self.gate is not None:
             await self.gate
         await asyncio.sleep(0)
@@ -544,13 +547,7 @@ class SilentDuringGotoDriver(SimGotoDriver):
 
     def __init__(self) -> None:
         super().__init__(stuck=True)
-        self.silent = False
         self.slow_abort_s = 0.0
-
-    async def read(self) -> DriverReport:
-        if self.silent:
-            raise OSError("no route to host")
-        return await super().read()
 
     async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
         await super().goto_radec(ra_h, dec_deg)
@@ -591,26 +588,14 @@ def test_once_the_mount_is_declared_lost_a_goto_in_progress_sends_nothing_more(e
     assert driver.calls.index("goto") < halt, driver.calls
 
 
-class SilentWhileRatesHeldDriver(SimGotoDriver):
-    """A driver that takes a MoveAxis off the wire, then stops answering reads (a network
-    that fails that moment) and applies the MoveAxis only once `held` is released: after
+class SilentWhileRatesHeldDriver(SlowRatesDriver):
+    """A SlowRatesDriver whose reads fail from the moment it takes a MoveAxis off the wire
+    (a network that fails then): it applies the MoveAxis once `held` is released, after
     the lost link's halt, as a request queued in alpaca-simulators' thread pool would be."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.silent = False
-        self.held: asyncio.Future | None = None
-
-    async def read(self) -> DriverReport:
-        if self.silent:
-            raise OSError("no route to host")
-        return await super().read()
 
     async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
         if self.held is not None and (ra_deg_s, dec_deg_s) != (0.0, 0.0):
-            self.calls.append("rates sent")
             self.silent = True
-            await asyncio.shield(self.held)
         await super().set_rates(ra_deg_s, dec_deg_s)
 
 
