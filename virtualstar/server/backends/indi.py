@@ -108,12 +108,11 @@ class IndiDriver:
                 if getattr(event, "devicename", None) != driver.device:
                     return
                 if getattr(event, "vectorname", None) == "EQUATORIAL_EOD_COORD" and \
-                        getattr(event, "eventtype", "") == "Define":
-                    driver._defines += 1
-                if getattr(event, "vectorname", None) == "EQUATORIAL_EOD_COORD" and \
                         getattr(event, "eventtype", "") in ("Set", "Define"):
                     # a Define answers a fresh read (getProperties), a Set is a tick's push
-                    driver._take_place(_now_us(), answer=event.eventtype == "Define")
+                    answer = event.eventtype == "Define"
+                    driver._defines += answer
+                    driver._take_place(_now_us(), answer=answer)
 
         self._client = Client(indihost=self.host, indiport=self.port)
         self._client.debug_verbosity(0)
