@@ -85,38 +85,39 @@ class StateLog:
         with self.lock:
             return [st for name, st in self.events[since:] if name == vector]
 
+    def _until(self, vector: str, since: int, timeout_s: float, judge):
+        """Poll `vector`'s states since the mark `since` until `judge` of them is not None;
+        return that (None when the timeout ran out)."""
+        deadline = time.monotonic() + timeout_s
+        while (found := judge(self.states(vector, since))) is None:
+            if time.monotonic() > deadline:
+                return None
+            time.sleep(0.02)
+        return found
+
     def wait(self, vector: str, state: str, since: int, timeout_s: float = 120.0,
              after: str | None = None) -> bool:
         """True once `vector` has announced `state` after the mark `since` (and, with `after`,
         after its first announcement of that state: Ok after Busy, not a poll's Ok before)."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            states = self.states(vector, since)
+        def seen(states: list[str]) -> bool | None:
             if after is not None:
                 states = states[states.index(after) + 1:] if after in states else []
-            if state in states:
-                return True
-            if time.monotonic() > deadline:
-                return False
-            time.sleep(0.02)
+            return True if state in states else None
+
+        return self._until(vector, since, timeout_s, seen) is True
 
     def answer(self, vector: str, since: int, timeout_s: float) -> str | None:
         """The answer to a command on `vector` sent after the mark `since`: Alert if refused
         at once, else the Alert or Ok that ends its Busy (None if none within the timeout).
         Leading Oks are the status poll repeating the state before the command."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            states = self.states(vector, since)
+        def ended(states: list[str]) -> str | None:
             while states and states[0] == "Ok":
                 states.pop(0)
             if states and states[0] == "Alert":
                 return "Alert"
-            ends = [st for st in states[1:] if st in ("Alert", "Ok")]
-            if ends:
-                return ends[0]
-            if time.monotonic() > deadline:
-                return None
-            time.sleep(0.02)
+            return next((st for st in states[1:] if st in ("Alert", "Ok")), None)
+
+        return self._until(vector, since, timeout_s, ended)
 
     def from_first(self, vector: str, state: str, since: int) -> list[str]:
         """The states announced after `since`, from the first `state` on."""
