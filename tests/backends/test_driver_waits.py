@@ -56,6 +56,7 @@ class SimGotoDriver:
         self.calls: list[str] = []
         self.gate: asyncio.Future | None = None  # a read waits on it when set
         self.silent = False  # reads fail (a network gone) while set
+        self.held: asyncio.Future | None = None  # a held command is applied once it is done
         self._t = time.monotonic()
 
     def _advance(self) -> None:
@@ -121,6 +122,13 @@ class SimGotoDriver:
         self.calls.append("abort")
         self.target = None
         self.slewing = self.stuck_after_abort
+
+    async def _hold(self, sent: str) -> None:
+        """A command taken off the wire (`sent` in the calls) waits for `held`, if set, before
+        it is applied: applied by the driver even if the VSS gives up on it."""
+        if self.held is not None:
+            self.calls.append(sent)
+            await asyncio.shield(self.held)
 
     async def park(self) -> None:
         pass
@@ -446,14 +454,9 @@ class SlowRatesDriver(SimGotoDriver):
     """A driver that takes a MoveAxis off the wire at once but applies it only when `held`
     is released (alpaca-simulators runs each request in a thread pool)."""
 
-    def __init__(self) -> None:
-        super().__init__()
-        self.held: asyncio.Future | None = None
-
     async def set_rates(self, ra_deg_s: float, dec_deg_s: float) -> None:
-        if self.held is not None and (ra_deg_s, dec_deg_s) != (0.0, 0.0):
-            self.calls.append("rates sent")
-            await asyncio.shield(self.held)  # applied by the driver even if the VSS gives up
+        if (ra_deg_s, dec_deg_s) != (0.0, 0.0):
+            await self._hold("rates sent")
         await super().set_rates(ra_deg_s, dec_deg_s)
 
 
@@ -508,12 +511,9 @@ class SlowGotoDriver(SimGotoDriver):
 
     def __init__(self) -> None:
         super().__init__(rate_deg_s=2.0)
-        self.held: asyncio.Future | None = None
 
     async def goto_radec(self, ra_h: float, dec_deg: float) -> None:
-        if self.held is not None:
-            self.calls.append("goto sent")
-            await asyncio.shield(self.held)  # applied by the driver even if the VSS gives up
+        await self._hold("goto sent")
         await super().goto_radec(ra_h, dec_deg)
 
 
