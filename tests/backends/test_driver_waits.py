@@ -13,6 +13,7 @@ import math
 import re
 import time
 
+import erfa
 import pytest
 
 from virtualstar.astro import EarthOrientation, Site
@@ -410,8 +411,8 @@ def test_a_waypoint_goto_the_driver_drops_is_sent_again_then_a_fault(eop, droppe
             outcome = str(exc)
         rep = link._report
         a, e = link._observed(rep.ra_rad, rep.dec_rad, rep.read_us)
-        off = math.degrees(math.hypot((a - math.radians(az_deg)) * math.cos(e),
-                                      e - math.radians(el_deg)))
+        # the target's azimuth may pass 360° (+10° from where the mount stands)
+        off = math.degrees(erfa.seps(a, e, math.radians(az_deg), math.radians(el_deg)))
         state = link.state_name()
         await link.stop()
         return driver, outcome, off, state
