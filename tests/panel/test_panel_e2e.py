@@ -37,6 +37,9 @@ EL_FORMULA = "p0 - 0.2 * (1 - cos(2 * pi * 0.5 * t))"
 
 
 DURATION_S, STEP_S, RAMP_S = 3.0, 0.02, 1.0
+# the page reads the mount time, samples the formulas, pushes and starts the trajectory within
+# this lead: a busy host's browser once took 0.56 s, and the mount then began 60 ms into the ramp
+LEAD_S = 1.5
 
 
 def ramped(f, t, p0):
@@ -105,6 +108,7 @@ async def _run(emulator_url: str, panel_url: str, result_path) -> tuple[dict, di
                  "AZ_FORMULA": AZ_FORMULA, "EL_FORMULA": EL_FORMULA,
                  "TRAJ_DURATION_S": str(DURATION_S), "TRAJ_STEP_S": str(STEP_S),
                  "TRAJ_RAMP_S": str(RAMP_S),
+                 "TRAJ_LEAD_S": str(LEAD_S),
                  "CHROMIUM_PATH": str(CHROMIUM)})
         out, _ = await asyncio.wait_for(proc.communicate(), timeout=75)
         result = json.loads(result_path.read_text()) if result_path.exists() else {}

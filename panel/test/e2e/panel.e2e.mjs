@@ -122,7 +122,7 @@ try {
   await page.fill('input[name="traj-expr-el_rad"]', env.EL_FORMULA);
   await page.fill('input[name=traj-duration]', env.TRAJ_DURATION_S);
   await page.fill('input[name=traj-step]', env.TRAJ_STEP_S);
-  await page.fill('input[name=traj-lead]', '0.5');
+  await page.fill('input[name=traj-lead]', env.TRAJ_LEAD_S);
   await page.fill('input[name=traj-ramp]', env.TRAJ_RAMP_S);
   await page.click('button.preview-trajectory');
   await page.waitForSelector('[data-testid=traj-preview] canvas');
