@@ -163,7 +163,12 @@ def test_a_killed_recorder_loses_nothing_it_held_longer_than_a_flush(tmp_path, r
         # a new recording into the same store works
         again = _start_recorder(device.url, store, rate_hz)
         _wait_until(device.streaming, "the second recorder's stream")
-        device.advance_s(3)
+        again_last_t_us = device.advance_s(3)
+        # the stop comes once the samples are in: a Ctrl-C stops at once, and samples still
+        # in flight to a loaded recorder are not part of its recording
+        _wait_until(lambda: (_durable_last_t_us(store) or 0) >= again_last_t_us - 1e6 / rate_hz,
+                    "the second recording's journal to hold its last tick",
+                    lambda: _why_not(again, device, store, again_last_t_us))
         again.send_signal(signal.SIGINT)
         _, err = again.communicate(timeout=60)
         assert again.returncode == 0, err
