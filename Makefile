@@ -8,16 +8,14 @@ STAMP := $(VENV)/.installed
 
 # The suite runs in TEST_WORKERS processes (pytest-xdist), each test module kept in one worker
 # so its module fixtures start once; `make test TEST_WORKERS=0` runs it in one process.
-# Six on two cores: a fifth of the suite's worker time waits on real time (simulators, browsers,
-# servers' throttles), and the extra workers fill those gaps (benchmarks/bench_suite.py,
-# 2026-11-27, quiet: 4 workers 278 s, 5 workers 254 s for +2 % CPU; beside two burners 360 s and
-# 340 s. 2026-11-27 evening, the slower host: 5 workers 250 s at 1.18x the packed time, 6 workers
-# 246 s at 1.13x, 7 workers 265 s for +8 % CPU; beside two burners 5 workers 364 s, 6 workers
-# 350 s. An earlier six-worker run once overloaded the real-time INDI pass enough to miss its
-# join; runs since have not).
+# Five on two cores: a fifth of the suite's worker time waits on real time (simulators, browsers,
+# servers' throttles), and a fifth worker fills those gaps (benchmarks/bench_suite.py, 2026-11-27,
+# quiet: 4 workers 278 s, 5 workers 254 s for +2 % CPU; beside two burners 360 s and 340 s; six
+# gained 8 s more quiet but overloaded the real-time INDI pass enough to miss its join; two
+# back-to-back pairs on a slower host that evening: five 250 s and 285 s, six 246 s and 305 s).
 # Modules are handed out in collection order, the longest first (tests/session_order.py): xdist's
 # default would sort them by their number of tests, which put the few long real-time tests last.
-TEST_WORKERS ?= 6
+TEST_WORKERS ?= 5
 PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope --no-loadscope-reorder
 
 # The suite starts hundreds of Python processes (xdist workers, `vs` servers and CLIs, devices):

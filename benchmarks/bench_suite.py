@@ -45,7 +45,7 @@ def _suite_env() -> dict[str, str]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--workers", type=int, default=6, help="pytest-xdist workers (make test: 6)")
+    ap.add_argument("--workers", type=int, default=5, help="pytest-xdist workers (make test: 5)")
     ap.add_argument("--burners", type=int, default=0,
                     help="processes burning a core each beside the suite (test-under-load: 2)")
     ap.add_argument("--modules", type=int, default=0, metavar="N",
