@@ -600,13 +600,30 @@ class SilentWhileRatesHeldDriver(SlowRatesDriver):
         await super().set_rates(ra_deg_s, dec_deg_s)
 
 
-def test_a_rate_command_on_the_wire_when_the_mount_is_lost_is_followed_by_a_halt(eop):
+class TrackingOffAfterTheCommandDriver(SilentWhileRatesHeldDriver):
+    """A SilentWhileRatesHeldDriver whose "tracking off" is applied only once `answered` is
+    done: the held MoveAxis is then applied and answered while the lost link's first halt is
+    still on the wire (a loaded host once did this)."""
+
+    answered: asyncio.Future | None = None
+
+    async def set_tracking(self, on: bool) -> None:
+        if not on and self.answered is not None:
+            await asyncio.shield(self.answered)
+        await super().set_tracking(on)
+
+
+@pytest.mark.parametrize("answered", ["after the first halt", "during the first halt"])
+def test_a_rate_command_on_the_wire_when_the_mount_is_lost_is_followed_by_a_halt(eop,
+                                                                                 answered):
     """The link is declared lost while a MoveAxis is on the wire; its halt goes out at once,
     and the MoveAxis is applied after it. Once that command is answered the link halts the
     mount again, so the driver's last word is zero rates (before, the lost link's halt ran
-    beside the command, and a mount that still took commands ran on at the rate)."""
+    beside the command, and a mount that still took commands ran on at the rate; then, a
+    command answered before the first halt's end was taken for none)."""
     async def main():
-        driver = SilentWhileRatesHeldDriver()
+        driver = (SilentWhileRatesHeldDriver() if answered == "after the first halt"
+                  else TrackingOffAfterTheCommandDriver())
         link = _link(driver, eop, stale_s=0.2, timeout_s=2.0)
         lost = asyncio.Event()
         link.on_event = lambda kind, data: lost.set() if kind == "mount_disconnected" else None
@@ -616,6 +633,7 @@ def test_a_rate_command_on_the_wire_when_the_mount_is_lost_is_followed_by_a_halt
         driver.calls.clear()
         driver.held = asyncio.get_running_loop().create_future()
         command = asyncio.ensure_future(link.call("set_rates", 1e-3, 5e-4))
+        driver.answered = command
         async with asyncio.timeout(HANG_GUARD_S):
             while "abort" not in driver.calls:  # lost: the first halt is under way
                 await asyncio.sleep(0.01)

@@ -414,13 +414,15 @@ class RateMountLink(ConnectionWaits):
             # whose budget runs out while the halt is on the wire) stops at its next
             # `_require` instead of sending its next command after the halt's abort
             self._connected.clear()
+            # a command on the wire (its caller holds the lock until it is answered: `_send`),
+            # or queued behind it, may be applied by a driver that still takes commands after
+            # the halt below, or between its steps, and may be answered before that halt ends
+            commanding = self._lock.locked()
             # tell it to stop, should it still listen (a rate once sent keeps the mount moving)
             with contextlib.suppress(Exception):
                 await within(self._halt_driver(), self.config.timeout_s)
-            if self._lock.locked():
-                # a command was on the wire (its caller holds the lock until it is answered:
-                # `_send`), or queued behind it: a driver that still takes commands may apply
-                # it after that halt. Once they are answered, halt again, last.
+            if commanding or self._lock.locked():
+                # once those commands are answered, halt again, last
                 with contextlib.suppress(Exception):
                     async with asyncio.timeout(3 * self.config.timeout_s):
                         async with self._lock:
