@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from virtualstar.recorder.exceptions import QueryError
-from virtualstar.recorder.parquet_store import utc_text
+from virtualstar.recorder.timeparse import utc_text
 
 from .phases import MotionPhase
 

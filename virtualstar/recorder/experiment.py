@@ -36,7 +36,6 @@ from astcom_client import Client, Endpoint, EndpointConfig
 
 from .exceptions import ExperimentError
 from .parquet_store import ParquetStoreReader, ParquetStoreWriter
-from .plots import plot_envelope, plot_window
 from .subscriber import Recorder, RecordingSummary
 
 __all__ = ["Injection", "SineBranch", "SineExperiment", "SineResult", "commanded_position",
@@ -403,6 +402,8 @@ async def _run(exp: SineExperiment, out_dir: str | Path,
 def write_plots(store: str | Path, out_dir: str | Path, *, title: str = "",
                 window_s: float = 2.0, buckets: int = 2000) -> list[Path]:
     """Write fig6_overview.png (whole store, envelope) and fig7_first_2s.png into `out_dir`."""
+    from .plots import plot_envelope, plot_window  # matplotlib: only where a plot is drawn
+
     reader = ParquetStoreReader(store)
     signals = reader.signals()
     t0, t1 = reader.time_range()

@@ -34,7 +34,6 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
 from .background import BackgroundWriter, new_session_id
@@ -494,6 +493,8 @@ class ParquetStoreReader:
                      to_t_us: int) -> pa.Table:
         """Read [from, to) of `files`: all at once, or, when a file turns out damaged,
         row group by row group, skipping (and naming) the ones that cannot be read."""
+        import pyarrow.dataset as ds  # (and pandas): only where a store is queried
+
         flt = (ds.field("t_us") >= from_t_us) & (ds.field("t_us") < to_t_us)
         try:
             dataset = ds.dataset([str(f) for f in files], schema=self.schema, format="parquet")
@@ -550,6 +551,8 @@ class ParquetStoreReader:
             return rebucket(envelope(np.empty(0, np.int64), {n: np.empty(0) for n in names},
                                      OVERVIEW_BUCKET_US), bucket_us)
         lo = from_t_us // OVERVIEW_BUCKET_US * OVERVIEW_BUCKET_US
+        import pyarrow.dataset as ds
+
         try:
             ov = ds.dataset([str(f) for f in ov_files], format="parquet")
             table = ov.to_table(columns=cols, filter=(ds.field("t_us") >= lo)
