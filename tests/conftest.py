@@ -26,6 +26,7 @@ from pathlib import Path
 # own setting stays.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import forkserver  # noqa: E402
 from session_order import longest_first  # noqa: E402
 
 _OWNER_VAR = "VIRTUALSTAR_TEST_CACHE_OWNER"  # the pid of the process that made the directory
@@ -36,10 +37,11 @@ else:
     os.environ["VIRTUALSTAR_CACHE_DIR"] = _CACHE  # before any test (or subprocess) reads it
     os.environ[_OWNER_VAR] = str(os.getpid())
 _warmup: subprocess.Popen | None = None
+_forkserver: subprocess.Popen | None = None
 
 
 def pytest_configure(config) -> None:
-    global _warmup
+    global _warmup, _forkserver
     from astropy.utils import iers
 
     iers.conf.auto_download = False
@@ -47,6 +49,16 @@ def pytest_configure(config) -> None:
         return  # an xdist worker: the process that started it started the warm-up
     _warmup = subprocess.Popen(
         [sys.executable, str(Path(__file__).with_name("session_warmup.py"))],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    # the session's fork server (tests/forkserver.py), found by the workers through the
+    # environment they inherit; until it serves, forkserver.popen starts fresh interpreters
+    # (as it always does with VIRTUALSTAR_TEST_FORKSERVER=off)
+    if os.environ.get(forkserver.SOCKET_ENV_VAR) == "off":
+        return
+    socket_path = os.path.join(_CACHE, "forkserver.sock")
+    os.environ[forkserver.SOCKET_ENV_VAR] = socket_path
+    _forkserver = subprocess.Popen(
+        [sys.executable, str(Path(__file__).with_name("forkserver.py")), socket_path],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
@@ -56,9 +68,10 @@ def pytest_collection_modifyitems(session, config, items) -> None:
 
 
 def pytest_unconfigure(config) -> None:
-    if _warmup is not None:
-        if _warmup.poll() is None:
-            _warmup.kill()
-        _warmup.wait()
+    for helper in (_warmup, _forkserver):
+        if helper is not None:
+            if helper.poll() is None:
+                helper.kill()
+            helper.wait()
     if os.environ.get(_OWNER_VAR) == str(os.getpid()):
         shutil.rmtree(_CACHE, ignore_errors=True)

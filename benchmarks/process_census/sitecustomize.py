@@ -44,6 +44,12 @@ if _LOG:
 
     _t0 = time.monotonic()
 
+    def _born() -> None:  # a child of tests/forkserver.py lives from its fork
+        global _t0
+        _t0 = time.monotonic()
+
+    os.register_at_fork(after_in_child=_born)
+
     def _write() -> None:
         use = resource.getrusage(resource.RUSAGE_SELF)
         worker = os.environ.get("PYTEST_XDIST_WORKER", "")

@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import forkserver
 import pytest
 from typer.testing import CliRunner
 
@@ -29,7 +30,7 @@ def test_vs_alpaca_with_the_emulator_serves_a_telescope_alpyca_can_drive():
 
     port = free_port()
     vs = str(Path(sys.executable).with_name("vs"))
-    proc = subprocess.Popen([vs, "alpaca", "--emulator",
+    proc = forkserver.popen([vs, "alpaca", "--emulator",
                              "--listen", f"127.0.0.1:{port}", "--discovery-port", "0"],
                             stderr=subprocess.PIPE, text=True)
     try:

@@ -25,6 +25,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
+import forkserver
+
 OPERATOR, OBSERVER = "hostile-op-secret", "hostile-obs-secret"
 VEGA_NIGHT = "2024-05-18T21:00:00Z"  # Vega high above the default site (Poznań)
 
@@ -186,7 +188,7 @@ def vs_server(tmp: Path, *args: str, passwords: bool = True) -> Iterator[ServerP
     err_path = tmp / f"vss-stderr-{url.rsplit(':', 1)[1]}.txt"
     env = {k: v for k, v in os.environ.items() if k not in ("ASTCOM_PASSWORD",)}
     with err_path.open("w") as err:
-        proc = subprocess.Popen(
+        proc = forkserver.popen(
             [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
              "--emulator", "--endpoint-port", "0", *secrets, *args, "--listen", url],
             stdout=subprocess.PIPE, stderr=err, text=True,

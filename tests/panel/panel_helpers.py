@@ -16,6 +16,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import forkserver
+
 ROOT = Path(__file__).resolve().parents[2]
 PANEL_DIR = ROOT / "panel"
 ARTIFACTS = ROOT / "artifacts" / "panel"
@@ -28,7 +30,7 @@ class LiveProcess:
     """A child process that prints its ws:// URL on a line; its output is kept for failures."""
 
     def __init__(self, args: list[str], *, n_urls: int = 1, timeout_s: float = 60.0) -> None:
-        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        self.proc = forkserver.popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                      text=True, cwd=ROOT)
         self.lines: list[str] = []
         self.urls = self._wait_urls(n_urls, timeout_s)

@@ -33,6 +33,7 @@ import sys
 import threading
 import time
 
+import forkserver
 import pytest
 from panel_helpers import ARTIFACTS, CHROMIUM, ensure_browser_ready, free_port, run_asking_script
 
@@ -59,7 +60,7 @@ class EmbeddedServer:
         self.output: list[str] = []
 
     def start(self) -> None:
-        self.proc = subprocess.Popen(
+        self.proc = forkserver.popen(
             [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
              "--emulator", "--speed", "20", "--start", START, "--password", MOUNT_PASSWORD,
              "--operator-password", OPERATOR_PASSWORD, "--observer-password", OBSERVER_PASSWORD,

@@ -18,6 +18,7 @@ import threading
 import time
 from pathlib import Path
 
+import forkserver
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -109,7 +110,7 @@ async def _endpoint_stats(endpoint: Endpoint) -> dict:
 
 
 def _start_recorder(url: str, store: Path, rate_hz: float) -> subprocess.Popen:
-    return subprocess.Popen(
+    return forkserver.popen(
         [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "record", url,
          "counter", "wave.sine", "--rate", f"{rate_hz:g}", "--store", f"parquet:{store}"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -221,7 +222,7 @@ def test_a_killed_recorder_into_an_unreachable_influxdb_loses_nothing_it_spooled
     args = [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "record",
             device.url, "counter", "wave.sine", "--rate", "1000",
             "--store", f"influx:{influx.url}/crashdb", "--spool", str(spool)]
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = forkserver.popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         _wait_until(device.streaming, "the recorder's stream")
         last_t_us = device.advance_s(8)
@@ -233,7 +234,7 @@ def test_a_killed_recorder_into_an_unreachable_influxdb_loses_nothing_it_spooled
         assert [p.name for p in spool.iterdir()] == [spool_key(influx.url, "crashdb")]
 
         influx.start()
-        again = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        again = forkserver.popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         _wait_until(device.streaming, "the second recorder's stream")
         device.advance_s(2)
         again.send_signal(signal.SIGINT)

@@ -25,6 +25,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
+import forkserver
 import numpy as np
 
 from astcom_client import Client
@@ -273,7 +274,7 @@ def vs_server_process(*args: str):
         url = f"ws://127.0.0.1:{s.getsockname()[1]}"
     if "--emulator" in args and "--endpoint-port" not in args:
         args = (*args, "--endpoint-port", "0")  # its ASTCom endpoint on a free port too
-    proc = subprocess.Popen(
+    proc = forkserver.popen(
         [sys.executable, "-c", "from virtualstar.cli.main import main; main()", "server",
          *args, "--listen", url],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

@@ -1,0 +1,121 @@
+"""The session's fork server (tests/forkserver.py) runs what subprocess.Popen would have run.
+
+Each test runs the same program both ways and compares what the child saw and did: the
+fresh interpreter is the truth.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import forkserver
+import pytest
+
+# What a child reports of itself: its arguments, environment, directory, import path, standard
+# streams, signal handlers and main module; then it exits with the status it was given.
+PROBE = """
+import json, os, signal, sys, threading
+print(json.dumps({
+    "argv": sys.argv, "orig_argv": sys.orig_argv, "marker": os.environ.get("FORKSERVER_PROBE"), "cwd": os.getcwd(),
+    "path0": sys.path[0], "stdin": sys.stdin.read(), "name": __name__,
+    "stdout_line_buffering": sys.stdout.line_buffering,
+    "stdout_write_through": sys.stdout.write_through,
+    "stderr_line_buffering": sys.stderr.line_buffering,
+    "sigint": signal.getsignal(signal.SIGINT) is signal.default_int_handler,
+    "sigterm": signal.getsignal(signal.SIGTERM) == signal.SIG_DFL,
+    "threads": threading.active_count(),
+}))
+print("to stderr", file=sys.stderr)
+sys.exit(int(sys.argv[1]))
+"""
+
+
+@pytest.fixture(scope="module")
+def server_path() -> str:
+    path = os.environ.get(forkserver.SOCKET_ENV_VAR)
+    if path == "off":
+        pytest.skip(f"{forkserver.SOCKET_ENV_VAR}=off: this session runs without a fork server")
+    if not path:
+        pytest.fail("tests/conftest.py did not start the session's fork server")
+    deadline = time.monotonic() + 120  # it imports for a few seconds as the session starts
+    while not os.path.exists(path):
+        if time.monotonic() > deadline:
+            pytest.fail(f"the fork server never served at {path}")
+        time.sleep(0.1)
+    return path
+
+
+def _both(args: list[str], **kwargs) -> tuple[subprocess.Popen, subprocess.Popen]:
+    return forkserver.popen(args, **kwargs), subprocess.Popen(args, **kwargs)
+
+
+@pytest.mark.parametrize("unbuffered", [{}, {"PYTHONUNBUFFERED": "1"}])
+def test_a_forked_child_sees_and_does_what_a_fresh_interpreter_would(server_path, tmp_path,
+                                                                     unbuffered):
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    env.update({"FORKSERVER_PROBE": "zeta ✓", **unbuffered})
+    results = []
+    for proc in _both([sys.executable, "-c", PROBE, "7", "two words"], stdin=subprocess.PIPE,
+                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                      cwd=tmp_path):
+        out, err = proc.communicate("piped in", timeout=60)
+        results.append((json.loads(out), err, proc.returncode))
+    forked, fresh = results
+    assert forked == fresh
+    assert forked[0]["argv"] == ["-c", "7", "two words"] and forked[2] == 7
+    assert forked[0]["threads"] == 1
+
+
+def test_popen_forks_only_when_the_fork_server_serves_that_environment(server_path):
+    args = [sys.executable, "-c", "pass"]
+    forked = forkserver.popen(args)
+    assert isinstance(forked, forkserver.ForkedPopen)
+    # a variable Python reads as it starts: a fork would not honour it
+    fresh = forkserver.popen(args, env={**os.environ, "PYTHONHASHSEED": "123"})
+    # and options a fork cannot honour
+    own_session = forkserver.popen(args, start_new_session=True)
+    assert not isinstance(fresh, forkserver.ForkedPopen)
+    assert not isinstance(own_session, forkserver.ForkedPopen)
+    assert [p.wait(60) for p in (forked, fresh, own_session)] == [0, 0, 0]
+
+
+def test_a_console_script_runs_forked_as_it_runs_fresh(server_path):
+    vs = str(Path(sys.executable).with_name("vs"))
+    outs = []
+    for proc in _both([vs, "where", "--help"], stdout=subprocess.PIPE, text=True,
+                      env={**os.environ, "COLUMNS": "100"}):
+        outs.append((proc.communicate(timeout=60)[0], proc.returncode))
+    assert outs[0] == outs[1] and outs[0][1] == 0 and "Usage: vs where" in outs[0][0]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL, signal.SIGINT])
+def test_a_signal_ends_a_forked_child_as_it_ends_a_fresh_one(server_path, sig):
+    # the child says it is ready, then sleeps; SIGINT raises KeyboardInterrupt in it
+    code = "import sys, time\nprint('ready', flush=True)\ntime.sleep(60)"
+    results = []
+    for proc in _both([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                      stderr=subprocess.PIPE, text=True):
+        assert proc.stdout.readline() == "ready\n"
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+        results.append((proc.returncode, err.strip().splitlines()[-1:] if err else []))
+    assert results[0] == results[1]
+    assert results[0][0] == -sig  # (Python ends itself with SIGINT after a KeyboardInterrupt)
+
+
+def test_waiting_for_a_forked_child_times_out_and_the_child_can_be_killed(server_path):
+    proc = forkserver.popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    assert isinstance(proc, forkserver.ForkedPopen)
+    with pytest.raises(subprocess.TimeoutExpired):
+        proc.wait(timeout=0.2)
+    assert proc.poll() is None
+    proc.kill()
+    assert proc.wait(timeout=60) == -signal.SIGKILL
+    proc.send_signal(signal.SIGTERM)  # after the child is gone: nothing happens, no error
+    assert proc.poll() == -signal.SIGKILL
