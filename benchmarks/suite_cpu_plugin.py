@@ -1,7 +1,8 @@
 """A pytest plugin for benchmarks/bench_suite.py: the CPU each test module used, per process.
 
 Each process that runs tests (pytest, or each pytest-xdist worker) adds, per module, its own
-CPU and that of the children it reaped (servers, CLIs, browsers a test waited for) between
+CPU and that of the children it reaped (servers, CLIs, browsers a test waited for; and those
+tests/forkserver.py forked for it, which the fork server reaps) between
 the start and the end of each test, and the wall time; at the end it writes
 `$SUITE_CPU_DIR/<worker>.json`. Children still running when a test ends (a module's server
 stopped in its teardown) count in the test that reaps them.
@@ -14,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import resource
+import sys
 import time
 from pathlib import Path
 
@@ -28,7 +30,10 @@ _process_start = time.time()
 def _cpu_s() -> tuple[float, float]:
     own = resource.getrusage(resource.RUSAGE_SELF)
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
+    # the children tests/forkserver.py forked for this process are the fork server's, which
+    # tells their CPU as each is waited for
+    forked = getattr(sys.modules.get("forkserver"), "reaped_cpu_s", 0.0)
+    return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime + forked
 
 
 def pytest_runtest_protocol(item, nextitem) -> None:

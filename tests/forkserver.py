@@ -19,7 +19,8 @@ NUMBA_*, OPENBLAS_*, locale, HOME, XDG_* ...: FORK_SENSITIVE). Tests of how a co
 
 The child's pid is its own; the test signals and waits for it through a pidfd, so that a pid
 the server has reaped is never signalled. The server reaps a child only when its test asks
-for the exit status (or has gone away).
+for the exit status (or has gone away), and answers with the CPU the child used, which
+`reaped_cpu_s` adds up as the kernel adds up a process's reaped children.
 
     python tests/forkserver.py SOCKET_PATH     (tests/conftest.py starts it)
 """
@@ -44,6 +45,10 @@ FORK_SENSITIVE_PREFIXES = ("PYTHON", "NUMBA_", "OPENBLAS_", "OMP_", "MKL_", "NUM
 FORK_SENSITIVE = {"HOME", "LANG", "LANGUAGE", "TZ", "VIRTUALSTAR_CACHE_DIR"}
 RUNTIME_ONLY = {"PYTHONUNBUFFERED", "PYTHONFAULTHANDLER"}  # the child applies them itself
 _MAX_REQUEST = 1 << 20
+# The CPU of this process's forked children that have been waited for (with the children they
+# waited for): what getrusage(RUSAGE_CHILDREN) would have counted had this process started
+# them itself (benchmarks/suite_cpu_plugin.py adds it).
+reaped_cpu_s = 0.0
 
 
 # -- the client side (a pytest worker) ----------------------------------------------------------
@@ -111,7 +116,10 @@ class ForkedPopen(subprocess.Popen):
                 return
             try:
                 self._conn.sendall(b"wait\n")
-                self._handle_exitstatus(json.loads(_read_line(self._conn))["status"])
+                reply = json.loads(_read_line(self._conn))
+                global reaped_cpu_s
+                reaped_cpu_s += reply["cpu_s"]
+                self._handle_exitstatus(reply["status"])
             finally:
                 self._conn.close()
                 self._conn = None
@@ -232,9 +240,10 @@ def _serve(path: str) -> dict:
             else:
                 pid = children.pop(sock)
                 if sock.recv(16).startswith(b"wait"):
-                    _, status = os.waitpid(pid, 0)
+                    _, status, use = os.wait4(pid, 0)
+                    reply = {"status": status, "cpu_s": use.ru_utime + use.ru_stime}
                     with contextlib.suppress(OSError):  # the test went away meanwhile
-                        sock.sendall(json.dumps({"status": status}).encode() + b"\n")
+                        sock.sendall(json.dumps(reply).encode() + b"\n")
                 else:
                     orphans.append(pid)
                 sock.close()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -119,3 +120,21 @@ def test_waiting_for_a_forked_child_times_out_and_the_child_can_be_killed(server
     assert proc.wait(timeout=60) == -signal.SIGKILL
     proc.send_signal(signal.SIGTERM)  # after the child is gone: nothing happens, no error
     assert proc.poll() == -signal.SIGKILL
+
+
+def test_a_forked_childs_cpu_is_counted_once_it_is_waited_for_as_a_reaped_childs_is(server_path):
+    burn = ("import time\nt = time.process_time()\nwhile time.process_time() - t < 0.3:\n"
+            "    pass")
+    forked = forkserver.popen([sys.executable, "-c", burn])
+    assert isinstance(forked, forkserver.ForkedPopen)
+    before = forkserver.reaped_cpu_s
+    assert forked.wait(timeout=60) == 0
+    burned_s = forkserver.reaped_cpu_s - before
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    fresh = subprocess.Popen([sys.executable, "-c", burn])
+    assert fresh.wait(timeout=60) == 0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    fresh_s = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
+    # both count the loop's 0.3 s, and a little more: a fresh interpreter's start-up, a forked
+    # one's teardown of the modules it inherited
+    assert 0.3 <= fresh_s < 1.3 and 0.3 <= burned_s < fresh_s + 1.0, (burned_s, fresh_s)
