@@ -7,7 +7,9 @@ One run of the suite exactly as `make test` runs it (`pytest -q -n WORKERS --dis
 reference, measured in the same run, is the CPU the suite's processes used (the kernel's
 figure for this process's children: pytest, its workers, the servers, browsers and compilers
 they start) divided by the cores left to it: the wall time a perfectly packed run would take.
-The difference is what waiting (real-time tests, a worker's last long module) costs.
+The difference is what waiting (real-time tests, a worker's last long module) costs. Before and
+after the run it times a host probe (a fresh interpreter importing the server, and a pure-Python
+loop): this VM's speed for the suite has varied by 1.7× over hours, and runs compare only beside it.
 
 With `--modules N` it also prints the N modules that used the most CPU (own + the children
 they waited for; benchmarks/suite_cpu_plugin.py), with their wall time: where to cut.
@@ -25,6 +27,7 @@ import argparse
 import json
 import os
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -72,6 +75,7 @@ def main() -> int:
             [str(ROOT / "benchmarks" / "process_census"), *filter(None, [env.get("PYTHONPATH")])])
     cores = os.cpu_count() or 1
     load_before = os.getloadavg()[0]
+    probe_before = _host_probe(env)
     burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
                for _ in range(args.burners)]
     try:
@@ -94,9 +98,13 @@ def main() -> int:
     # read: their CPU is not in cpu_s
     share = cores * args.workers / (args.workers + args.burners) if args.burners else cores
     share = min(share, cores)
+    probe_after = _host_probe(env)
     summary = [line for line in proc.stdout.splitlines() if re.search(r"\d+ (passed|failed)", line)]
     print(f"machine: {cores} cores, 1-min load before the run {load_before:.2f}, "
           f"{args.burners} burner(s)")
+    print(f"host probe before / after the run (median of 3, CPU s): importing the server "
+          f"{probe_before[0]:.2f} / {probe_after[0]:.2f}, a pure-Python loop "
+          f"{probe_before[1]:.2f} / {probe_after[1]:.2f}")
     print(f"suite: {summary[-1] if summary else proc.stdout[-500:]}")
     for line in proc.stdout.splitlines():
         if line.startswith(("FAILED", "ERROR")):
@@ -120,6 +128,31 @@ def main() -> int:
         if re.match(r"\d+\.\d+s (setup|call|teardown) ", line):
             print(f"  {line}")
     return proc.returncode
+
+
+# A fresh interpreter imports the server (about a thousand modules: what every worker, server
+# and CLI of the suite does first), then runs a loop that touches no new memory. The suite's
+# CPU follows the first: on this VM the same suite has used 330 s and 580 s of CPU hours apart
+# while the loop timed the same, so runs on different days compare only beside this figure.
+_PROBE = """
+import time
+t = time.process_time()
+import virtualstar.server.server
+imported = time.process_time() - t
+t = time.process_time()
+x = 0
+for i in range(5_000_000):
+    x += i
+print(imported, time.process_time() - t)
+"""
+
+
+def _host_probe(env: dict[str, str]) -> tuple[float, float]:
+    """Median CPU seconds of the probe's import and loop over three fresh interpreters."""
+    runs = sorted(tuple(map(float, subprocess.run(
+        [sys.executable, "-c", _PROBE], cwd=ROOT, env=env, capture_output=True, text=True,
+        check=True).stdout.split())) for _ in range(3))
+    return statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
 
 
 def _print_modules(directory: Path, n: int) -> None:
