@@ -1,5 +1,6 @@
 """Settings for every test: offline astropy, a private cache directory, a warm-up of what every
-session needs once (tests/session_warmup.py), and the longest modules first.
+session needs once (tests/session_warmup.py), the session's fork server for the `vs`, emulator
+and device processes the tests start (tests/forkserver.py), and the longest modules first.
 
 astropy never downloads (the IERS tables come from astropy-iers-data); virtualstar's cache
 of the Earth-orientation table (virtualstar.astro.earth_orientation) goes to a directory of

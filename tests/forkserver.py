@@ -1,6 +1,6 @@
 """Start the suite's `vs`, emulator and device processes as forks of one pre-imported Python.
 
-A `vs server --emulator` spends about 1.6 s of CPU importing the server, the astronomy and the
+A `vs server --emulator` spends 1.1–1.6 s of CPU importing the server, the astronomy and the
 emulator before it serves, and the suite starts about twenty of them (benchmarks/bench_suite.py
 --processes). The session's fork server (started by tests/conftest.py, one per session) has
 imported them once; `popen(args, ...)` asks it to fork a child that runs exactly what
