@@ -22,6 +22,9 @@ the server has reaped is never signalled. The server reaps a child only when its
 for the exit status (or has gone away), and answers with the CPU the child used, which
 `reaped_cpu_s` adds up as the kernel adds up a process's reaped children.
 
+The socket lies in the session's private cache directory (tempfile.mkdtemp: mode 0700), so
+only the user running the tests can ask it for anything; a request it cannot parse is closed.
+
     python tests/forkserver.py SOCKET_PATH     (tests/conftest.py starts it)
 """
 
