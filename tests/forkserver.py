@@ -31,6 +31,7 @@ only the user running the tests can ask it for anything; a request it cannot par
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import select
@@ -172,18 +173,16 @@ def popen(args: list, **kwargs) -> subprocess.Popen:
         return subprocess.Popen(args, **kwargs)
     try:
         return ForkedPopen(args, server_path=path, **kwargs)
-    except (ConnectionError, FileNotFoundError, ConnectionRefusedError):
+    except (ConnectionError, FileNotFoundError):
         return subprocess.Popen(args, **kwargs)  # the server has gone (the session ends)
 
 
-_server_envs: dict[str, dict[str, str]] = {}
-
-
+@functools.cache
 def _server_env(path: str) -> dict[str, str]:
-    if path not in _server_envs:
-        with open(path + ".env") as f:
-            _server_envs[path] = json.load(f)
-    return _server_envs[path]
+    """The fork-sensitive environment the server at `path` imported in (it writes it there
+    before it serves)."""
+    with open(path + ".env") as f:
+        return json.load(f)
 
 
 # -- the server side ----------------------------------------------------------------------------
