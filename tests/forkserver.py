@@ -23,7 +23,8 @@ for the exit status (or has gone away), and answers with the CPU the child used,
 `reaped_cpu_s` adds up as the kernel adds up a process's reaped children.
 
 The socket lies in the session's private cache directory (tempfile.mkdtemp: mode 0700), so
-only the user running the tests can ask it for anything; a request it cannot parse is closed.
+only the user running the tests can ask it for anything; a request that is not a well-formed
+Python command of this environment is closed unanswered, and the server goes on serving.
 
     python tests/forkserver.py SOCKET_PATH     (tests/conftest.py starts it)
 """
@@ -237,11 +238,16 @@ def _serve(path: str) -> dict:
                     return request
                 for fd in request["fds"]:
                     os.close(fd)
-                conn.sendall(json.dumps({"pid": pid}).encode() + b"\n")
                 children[conn] = pid
+                with contextlib.suppress(OSError):  # a test gone already: its EOF says so
+                    conn.sendall(json.dumps({"pid": pid}).encode() + b"\n")
             else:
                 pid = children.pop(sock)
-                if sock.recv(16).startswith(b"wait"):
+                try:
+                    asked = sock.recv(16).startswith(b"wait")
+                except OSError:
+                    asked = False
+                if asked:
                     _, status, use = os.wait4(pid, 0)
                     reply = {"status": status, "cpu_s": use.ru_utime + use.ru_stime}
                     with contextlib.suppress(OSError):  # the test went away meanwhile
@@ -262,14 +268,25 @@ def _receive_request(conn: socket.socket) -> dict | None:
                 raise ConnectionError
             data += part
         request = json.loads(data[4:])
-    except (OSError, ValueError, ConnectionError):
-        return None
-    if len(fds) != 3:
+    except (OSError, ValueError):
+        request = None
+    if len(fds) != 3 or not _well_formed(request):
         for fd in fds:
             os.close(fd)
         return None
     request["fds"] = fds
     return request
+
+
+def _well_formed(request) -> bool:
+    """A request names a Python command of this environment (as popen checks), its
+    environment and its working directory, all as text."""
+    return (isinstance(request, dict) and isinstance(request.get("argv"), list)
+            and all(isinstance(a, str) for a in request["argv"])
+            and isinstance(request.get("env"), dict)
+            and all(isinstance(k, str) and isinstance(v, str)
+                    for k, v in request["env"].items())
+            and isinstance(request.get("cwd"), str) and _python_command(request["argv"]))
 
 
 def _become(request: dict) -> None:

@@ -138,3 +138,23 @@ def test_a_forked_childs_cpu_is_counted_once_it_is_waited_for_as_a_reaped_childs
     # both count the loop's 0.3 s, and a little more: a fresh interpreter's start-up, a forked
     # one's teardown of the modules it inherited
     assert 0.3 <= fresh_s < 1.3 and 0.3 <= burned_s < fresh_s + 1.0, (burned_s, fresh_s)
+
+
+@pytest.mark.parametrize("request_bytes", [
+    b"", b"\x00\x00\x00\x05junk!", b'\x00\x00\x00\x02[]',
+    b'\x00\x00\x00\x3a{"argv": ["/bin/sh", "-c", "true"], "env": {}, "cwd": "/"}',
+])
+def test_a_request_the_fork_server_cannot_use_is_closed_and_it_goes_on_serving(server_path,
+                                                                                request_bytes):
+    import socket
+
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as conn:
+        conn.settimeout(60)
+        conn.connect(server_path)
+        if request_bytes:  # (else: a client that connects and says nothing)
+            socket.send_fds(conn, [request_bytes], [0, 1, 2])
+        conn.shutdown(socket.SHUT_WR)
+        assert conn.recv(100) == b""  # closed, no pid
+    proc = forkserver.popen([sys.executable, "-c", "pass"])
+    assert isinstance(proc, forkserver.ForkedPopen)
+    assert proc.wait(timeout=60) == 0
