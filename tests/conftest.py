@@ -1,6 +1,7 @@
 """Settings for every test: offline astropy, a private cache directory, a warm-up of what every
-session needs once (tests/session_warmup.py), the session's fork server for the `vs`, emulator
-and device processes the tests start (tests/forkserver.py), and the longest modules first.
+session needs once (tests/session_warmup.py), the session's fork server for the pytest-xdist
+workers and the `vs`, emulator and device processes the tests start (tests/forkserver.py), and
+the longest modules first.
 
 astropy never downloads (the IERS tables come from astropy-iers-data); virtualstar's cache
 of the Earth-orientation table (virtualstar.astro.earth_orientation) goes to a directory of
@@ -16,6 +17,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 # OpenBLAS's threads, one per core, before numpy loads it here or in any process the suite
@@ -37,6 +39,9 @@ else:
     _CACHE = tempfile.mkdtemp(prefix="virtualstar-test-cache-")
     os.environ["VIRTUALSTAR_CACHE_DIR"] = _CACHE  # before any test (or subprocess) reads it
     os.environ[_OWNER_VAR] = str(os.getpid())
+# how long the workers wait for the fork server to serve before they start fresh instead (it
+# takes 1–3 s of CPU; a loaded host may take several times that)
+FORKSERVER_START_S = 60.0
 _warmup: subprocess.Popen | None = None
 _forkserver: subprocess.Popen | None = None
 
@@ -61,6 +66,28 @@ def pytest_configure(config) -> None:
     _forkserver = subprocess.Popen(
         [sys.executable, str(Path(__file__).with_name("forkserver.py")), socket_path],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    _fork_the_workers(_forkserver, socket_path)
+
+
+def _fork_the_workers(server: subprocess.Popen, socket_path: str) -> None:
+    """Start pytest-xdist's workers as forks of the fork server too: they would otherwise each
+    import pytest, astropy, scipy and our packages again as they start and collect
+    (forkserver.FOR_WORKERS). execnet starts a worker as `python -u -c BOOTSTRAP` with piped
+    standard input and output (execnet.gateway_io.Popen2IOMaster); this starts that same
+    command through forkserver.popen, once the server serves (it imports for a second or two
+    as the session starts, while the warm-up runs), or fresh as before if it never does."""
+    from execnet import gateway_io
+
+    def start(io: gateway_io.Popen2IOMaster, args: list[str], execmodel) -> None:
+        deadline = time.monotonic() + FORKSERVER_START_S
+        while (not os.path.exists(socket_path) and server.poll() is None
+               and time.monotonic() < deadline):
+            time.sleep(0.02)
+        io.popen = forkserver.popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        super(gateway_io.Popen2IOMaster, io).__init__(io.popen.stdin, io.popen.stdout,
+                                                      execmodel=execmodel)
+
+    gateway_io.Popen2IOMaster.__init__ = start
 
 
 def pytest_collection_modifyitems(session, config, items) -> None:

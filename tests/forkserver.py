@@ -1,14 +1,17 @@
-"""Start the suite's `vs`, emulator and device processes as forks of one pre-imported Python.
+"""Start the suite's workers and its `vs`, emulator and device processes as forks of one
+pre-imported Python.
 
 A `vs server --emulator` spends 1.1–1.6 s of CPU importing the server, the astronomy and the
 emulator before it serves, and the suite starts about twenty of them (benchmarks/bench_suite.py
 --processes). The session's fork server (started by tests/conftest.py, one per session) has
-imported them once; `popen(args, ...)` asks it to fork a child that runs exactly what
-`subprocess.Popen(args, ...)` would have run: the same `python -c CODE`, `python -m MODULE`
-or console script with the same arguments, environment, working directory and pipes, from a
-fresh `__main__`, with the default signal handlers, and exiting as that process would
-(atexit, its exit status, death by a signal). What differs is only that the modules were
-imported before the child existed.
+imported them once (and what the pytest-xdist workers import as they start and collect:
+tests/conftest.py starts the workers through it too); `popen(args, ...)` asks it to fork a
+child that runs exactly what `subprocess.Popen(args, ...)` would have run: the same
+`python [-u] -c CODE`, `python [-u] -m MODULE` or console script with the same arguments,
+environment, working directory and pipes, from a fresh `__main__`, with the default signal
+handlers, and exiting as that process would (atexit, its exit status, death by a signal).
+What differs is only that the modules were imported (and numba's registries and astropy's
+IERS-A table loaded) before the child existed.
 
 `popen` falls back to `subprocess.Popen` (a fresh interpreter) whenever that could differ:
 no fork server in this session, options a fork cannot honour (a new session or process
@@ -49,6 +52,7 @@ FORK_SENSITIVE_PREFIXES = ("PYTHON", "NUMBA_", "OPENBLAS_", "OMP_", "MKL_", "NUM
                            "MPL", "XDG_", "LD_", "MALLOC_", "LC_")
 FORK_SENSITIVE = {"HOME", "LANG", "LANGUAGE", "TZ", "VIRTUALSTAR_CACHE_DIR"}
 RUNTIME_ONLY = {"PYTHONUNBUFFERED", "PYTHONFAULTHANDLER"}  # the child applies them itself
+HONOURED_OPTIONS = {"-u"}  # interpreter options the child applies itself (unbuffered streams)
 _MAX_REQUEST = 1 << 20
 # The CPU of this process's forked children that have been waited for (with the children they
 # waited for): what getrusage(RUSAGE_CHILDREN) would have counted had this process started
@@ -71,12 +75,22 @@ def _python_command(args: list[str]) -> bool:
         return False
     first = os.fspath(args[0])
     if first == sys.executable:
-        return len(args) >= 3 and args[1] in ("-c", "-m")
+        _, rest = _options(args)
+        return len(rest) >= 3 and rest[1] in ("-c", "-m")
     bindir = os.path.dirname(sys.executable)
     if os.path.dirname(first) != bindir or not os.path.isfile(first):
         return False
     with open(first, "rb") as f:
         return f.readline().rstrip() == b"#!" + os.fsencode(sys.executable)
+
+
+def _options(args: list[str]) -> tuple[list[str], list[str]]:
+    """Split `python [OPTIONS] ...` into the options a fork honours (-u, as pytest-xdist starts
+    its workers) and the interpreter followed by the rest."""
+    k = 1
+    while k < len(args) and args[k] in HONOURED_OPTIONS:
+        k += 1
+    return list(args[1:k]), [args[0], *args[k:]]
 
 
 class ForkedPopen(subprocess.Popen):
@@ -191,7 +205,34 @@ def _server_env(path: str) -> dict[str, str]:
 PRE_IMPORTED = ("virtualstar.cli.main", "virtualstar.cli.server", "virtualstar.cli.status",
                 "virtualstar.server.server", "virtualstar.launcher", "virtualstar.astro",
                 "mount_emulator.emulator", "mount_emulator.cli", "astcom_client.example_device",
+                "astcom_client.cli",
                 "typer._adapters")  # (typer imports that one when it parses a command line)
+# ... and what the pytest-xdist workers import as they start and collect, which they would
+# otherwise each import again (~2 s of CPU apiece): pytest, and the libraries the test modules
+# import at their top. Not pytest's plugins (xdist, pytest-timeout, anyio, hypothesis): pytest
+# rewrites their asserts as it loads them, which it cannot do to a module imported before it
+# started. Not pyarrow, pandas, polars or duckdb: importing them starts threads (the recorder's
+# tests import them where they need them).
+FOR_WORKERS = ("pytest", "execnet", "astropy.coordinates", "astropy.table", "astropy.io.ascii",
+               "astropy.utils.iers", "scipy.optimize", "scipy.interpolate", "skyfield.api",
+               "alpaca.telescope", "aiohttp", "pointing_model.cli", "virtualstar.alpaca.server",
+               "virtualstar.indi.driver", "virtualstar.planning.planner", "virtualstar.anomalies",
+               "virtualstar.panel.server", "guide_camera.device")
+
+
+def _load_once() -> None:
+    """What each child would otherwise do the first time it needs it: load numba's typing and
+    lowering registries (as the first compiled function called or loaded from numba's cache
+    does: 0.2 s of CPU in every emulator), and read astropy's bundled IERS-A table (as the
+    first transformation that needs the Earth's orientation does: 0.4 s in most workers),
+    offline as the tests read it (tests/conftest.py)."""
+    from astropy.utils import iers
+    from numba.core.registry import cpu_target
+
+    cpu_target.target_context.refresh()
+    cpu_target.typing_context.refresh()
+    with iers.conf.set_temp("auto_download", False):
+        iers.IERS_Auto.open()
 
 
 def _serve(path: str) -> dict:
@@ -199,8 +240,12 @@ def _serve(path: str) -> dict:
     import gc
     import importlib
 
-    for name in PRE_IMPORTED:
+    # import as `python -c` would, not from this script's folder: tests/guide_camera would
+    # otherwise shadow the guide_camera package (as a namespace package) in every child
+    sys.path[0] = ""
+    for name in (*PRE_IMPORTED, *FOR_WORKERS):
         importlib.import_module(name)
+    _load_once()
     if len(os.listdir("/proc/self/task")) != 1:
         # a thread would not exist in a forked child, and one holding a lock would freeze it
         sys.exit("fork server: an import started a thread; not serving (tests start fresh "
@@ -304,7 +349,8 @@ def _become(request: dict) -> None:
     for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGCHLD, signal.SIGALRM):
         signal.signal(sig, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    unbuffered = bool(os.environ.get("PYTHONUNBUFFERED"))
+    options, _ = _options(request["argv"]) if request["argv"][0] == sys.executable else ([], [])
+    unbuffered = bool(os.environ.get("PYTHONUNBUFFERED")) or "-u" in options
 
     def stream(fd: int, mode: str, errors: str) -> io.TextIOWrapper:
         raw = io.FileIO(fd, mode, closefd=False)
@@ -333,6 +379,8 @@ def _run(argv: list[str]) -> None:
     import runpy
 
     sys.orig_argv = list(argv)  # as the interpreter the test asked for would hold it
+    if argv[0] == sys.executable:
+        _, argv = _options(argv)  # (_become applied them)
     if argv[0] == sys.executable and argv[1] == "-c":
         sys.argv = ["-c", *argv[3:]]
         sys.path[0] = ""

@@ -56,20 +56,25 @@ def _both(args: list[str], **kwargs) -> tuple[subprocess.Popen, subprocess.Popen
     return forkserver.popen(args, **kwargs), subprocess.Popen(args, **kwargs)
 
 
-@pytest.mark.parametrize("unbuffered", [{}, {"PYTHONUNBUFFERED": "1"}])
+@pytest.mark.parametrize(("unbuffered", "options"), [({}, []), ({"PYTHONUNBUFFERED": "1"}, []),
+                                                     ({}, ["-u"])])  # -u: xdist's workers
 def test_a_forked_child_sees_and_does_what_a_fresh_interpreter_would(server_path, tmp_path,
-                                                                     unbuffered):
+                                                                     unbuffered, options):
     env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
     env.update({"FORKSERVER_PROBE": "zeta ✓", **unbuffered})
     results = []
-    for proc in _both([sys.executable, "-c", PROBE, "7", "two words"], stdin=subprocess.PIPE,
-                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                      cwd=tmp_path):
+    procs = _both([sys.executable, *options, "-c", PROBE, "7", "two words"],
+                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                  text=True, env=env, cwd=tmp_path)
+    assert isinstance(procs[0], forkserver.ForkedPopen)
+    for proc in procs:
         out, err = proc.communicate("piped in", timeout=60)
         results.append((json.loads(out), err, proc.returncode))
     forked, fresh = results
     assert forked == fresh
     assert forked[0]["argv"] == ["-c", "7", "two words"] and forked[2] == 7
+    assert forked[0]["orig_argv"][1:len(options) + 1] == options
+    assert forked[0]["stdout_write_through"] == bool(unbuffered or options)
     assert forked[0]["threads"] == 1
 
 
@@ -158,3 +163,12 @@ def test_a_request_the_fork_server_cannot_use_is_closed_and_it_goes_on_serving(s
     proc = forkserver.popen([sys.executable, "-c", "pass"])
     assert isinstance(proc, forkserver.ForkedPopen)
     assert proc.wait(timeout=60) == 0
+
+
+def test_the_xdist_workers_are_forks_of_the_fork_server(server_path):
+    # tests/conftest.py starts pytest-xdist's workers through forkserver.popen
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        pytest.skip("not run by a pytest-xdist worker (make test runs them)")
+    parent = Path(f"/proc/{os.getppid()}/cmdline").read_bytes().split(b"\0")
+    assert any(arg.endswith(b"forkserver.py") for arg in parent), parent
+    assert sys.orig_argv[1:3] == ["-u", "-c"]  # as execnet starts a worker

@@ -28,6 +28,7 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
+import forkserver
 import pytest
 from astcom_helpers import PASSWORDS, served
 
@@ -307,7 +308,7 @@ async def relayed_device(args: list[str], build: str = "asan", relay_args: tuple
     require_built(build)
     with pty_pair() as (dev_end, relay_end):
         proc = DeviceProcess(["--serial", dev_end, *args], build=build)
-        relay = subprocess.Popen([sys.executable, "-m", "astcom_client.cli", "relay", "--serial",
+        relay = forkserver.popen([sys.executable, "-m", "astcom_client.cli", "relay", "--serial",
                                   relay_end, "--listen", "ws://127.0.0.1:0", *relay_args],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:

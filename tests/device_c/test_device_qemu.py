@@ -16,6 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import forkserver
 import numpy as np
 
 from astcom_client import AstcomError, Client
@@ -65,7 +66,7 @@ async def _session(monitor: str) -> dict:
         pty = re.search(r"(/dev/pts/\d+)", line)
         assert pty, f"QEMU did not give its serial port a pty: {line}"
         # an emulated MCU on a loaded host may stall for seconds: a patient relay
-        relay = subprocess.Popen([sys.executable, "-m", "astcom_client.cli", "relay", "--serial",
+        relay = forkserver.popen([sys.executable, "-m", "astcom_client.cli", "relay", "--serial",
                                   pty[1], "--listen", "ws://127.0.0.1:0", "--link-timeout", "30"],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = await asyncio.to_thread(relay.stdout.readline)
