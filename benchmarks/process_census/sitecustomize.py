@@ -52,9 +52,11 @@ if _LOG:
 
     def _write() -> None:
         use = resource.getrusage(resource.RUSAGE_SELF)
-        worker = os.environ.get("PYTEST_XDIST_WORKER", "")
-        kind = "pytest worker" if worker and "execnet" in sys.modules and \
-            _kind(sys.argv).startswith("python -c") else _kind(sys.argv)
+        # a worker is execnet's bootstrap (`python -u -c BOOTSTRAP`); the processes a worker
+        # starts inherit PYTEST_XDIST_WORKER, and forked ones execnet too (tests/forkserver.py)
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "") and "-c" in sys.orig_argv and \
+            "exec(eval(sys.stdin.readline()))" in sys.orig_argv[sys.orig_argv.index("-c") + 1]
+        kind = "pytest worker" if worker else _kind(sys.argv)
         line = json.dumps({"kind": kind, "cpu_s": round(use.ru_utime + use.ru_stime, 3),
                            "life_s": round(time.monotonic() - _t0, 3), "pid": os.getpid()})
         try:
