@@ -30,9 +30,12 @@ $(PY):
 SETUP_SCRIPTS := $(sort $(wildcard setup/*.sh))
 SETUP_LIBS := $(wildcard setup/lib/*.bash)
 
+# --no-compile: pip would byte-compile every file of every package (about half of the
+# install); Python compiles what a run imports the first time it imports it instead (a clean
+# clone's `make test`, 2026-11-28: 3 min 59 s in all instead of 4 min 16 s, pytest unchanged).
 $(STAMP): pyproject.toml $(SETUP_SCRIPTS) $(SETUP_LIBS) | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet --no-compile -e '.[test]'
 	for s in $(SETUP_SCRIPTS); do echo "== $$s"; bash $$s || exit 1; done
 	touch $(STAMP)
 
