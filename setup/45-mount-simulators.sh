@@ -17,7 +17,7 @@ UVICORN_FAST=("httptools==0.9.0" "uvloop==0.23.0")
 if "$PY" -c "import alpaca_simulators, httptools, uvloop" 2>/dev/null; then
     echo "alpaca-simulators already installed"
 else
-    "$PY" -m pip install --quiet "$ALPACA_SIMULATORS" "${UVICORN_FAST[@]}"
+    "$PY" -m pip install --quiet --no-compile "$ALPACA_SIMULATORS" "${UVICORN_FAST[@]}"  # (see Makefile)
     echo "alpaca-simulators installed ($ALPACA_SIMULATORS ${UVICORN_FAST[*]})"
 fi
 
