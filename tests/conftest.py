@@ -17,7 +17,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 # OpenBLAS's threads, one per core, before numpy loads it here or in any process the suite
@@ -79,10 +78,7 @@ def _fork_the_workers(server: subprocess.Popen, socket_path: str) -> None:
     from execnet import gateway_io
 
     def start(io: gateway_io.Popen2IOMaster, args: list[str], execmodel) -> None:
-        deadline = time.monotonic() + FORKSERVER_START_S
-        while (not os.path.exists(socket_path) and server.poll() is None
-               and time.monotonic() < deadline):
-            time.sleep(0.02)
+        forkserver.wait_serving(socket_path, FORKSERVER_START_S, server)
         io.popen = forkserver.popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         super(gateway_io.Popen2IOMaster, io).__init__(io.popen.stdin, io.popen.stdout,
                                                       execmodel=execmodel)

@@ -44,6 +44,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 
 SOCKET_ENV_VAR = "VIRTUALSTAR_TEST_FORKSERVER"
 # Environment variables that Python or a library imported by the fork server reads while
@@ -173,6 +174,17 @@ def _read_line(conn: socket.socket) -> bytes:
             raise ConnectionError("the fork server closed the connection")
         data += part
     return data
+
+
+def wait_serving(path: str, timeout_s: float, server: subprocess.Popen | None = None) -> bool:
+    """Wait until the fork server at `path` serves (it imports for a second or more as the
+    session starts); False if it has not after `timeout_s`, or if `server` has exited."""
+    deadline = time.monotonic() + timeout_s
+    while not os.path.exists(path):
+        if time.monotonic() > deadline or (server is not None and server.poll() is not None):
+            return False
+        time.sleep(0.02)
+    return True
 
 
 def popen(args: list, **kwargs) -> subprocess.Popen:

@@ -12,7 +12,6 @@ import resource
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import forkserver
@@ -44,11 +43,8 @@ def server_path() -> str:
         pytest.skip(f"{forkserver.SOCKET_ENV_VAR}=off: this session runs without a fork server")
     if not path:
         pytest.fail("tests/conftest.py did not start the session's fork server")
-    deadline = time.monotonic() + 120  # it imports for a few seconds as the session starts
-    while not os.path.exists(path):
-        if time.monotonic() > deadline:
-            pytest.fail(f"the fork server never served at {path}")
-        time.sleep(0.1)
+    if not forkserver.wait_serving(path, 120):  # it imports as the session starts
+        pytest.fail(f"the fork server never served at {path}")
     return path
 
 
