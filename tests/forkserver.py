@@ -69,9 +69,9 @@ def _fork_sensitive(env: dict[str, str]) -> dict[str, str]:
 
 
 def _python_command(args: list[str]) -> bool:
-    """True for `python -c CODE ...`, `python -m MODULE ...` and this environment's console
-    scripts (vs, mount-emulator, astcom ...), which are Python files in the interpreter's
-    folder."""
+    """True for `python [-u] -c CODE ...`, `python [-u] -m MODULE ...` and this environment's
+    console scripts (vs, mount-emulator, astcom ...), which are Python files in the
+    interpreter's folder."""
     if not args:
         return False
     first = os.fspath(args[0])
@@ -87,7 +87,9 @@ def _python_command(args: list[str]) -> bool:
 
 def _options(args: list[str]) -> tuple[list[str], list[str]]:
     """Split `python [OPTIONS] ...` into the options a fork honours (-u, as pytest-xdist starts
-    its workers) and the interpreter followed by the rest."""
+    its workers) and the interpreter followed by the rest; a console script has none."""
+    if os.fspath(args[0]) != sys.executable:
+        return [], list(args)
     k = 1
     while k < len(args) and args[k] in HONOURED_OPTIONS:
         k += 1
@@ -361,7 +363,7 @@ def _become(request: dict) -> None:
     for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGCHLD, signal.SIGALRM):
         signal.signal(sig, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    options, _ = _options(request["argv"]) if request["argv"][0] == sys.executable else ([], [])
+    options, _ = _options(request["argv"])
     unbuffered = bool(os.environ.get("PYTHONUNBUFFERED")) or "-u" in options
 
     def stream(fd: int, mode: str, errors: str) -> io.TextIOWrapper:
@@ -391,8 +393,7 @@ def _run(argv: list[str]) -> None:
     import runpy
 
     sys.orig_argv = list(argv)  # as the interpreter the test asked for would hold it
-    if argv[0] == sys.executable:
-        _, argv = _options(argv)  # (_become applied them)
+    _, argv = _options(argv)  # (_become applied them)
     if argv[0] == sys.executable and argv[1] == "-c":
         sys.argv = ["-c", *argv[3:]]
         sys.path[0] = ""
